@@ -1,0 +1,95 @@
+//! Command-line front end: one file per subcommand.
+
+mod modal;
+mod simulate;
+
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+/// tacit: find what a linear structural model misses in a vibration test.
+#[derive(Debug, Parser)]
+#[command(name = "tacit", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Natural frequencies and mode shapes of a model.
+    Modal(modal::Args),
+    /// Simulate a model under an input and write a record (with its truth).
+    Simulate(simulate::Args),
+}
+
+/// Run the parsed command.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Modal(a) => modal::run(a),
+        Command::Simulate(a) => simulate::run(a),
+    }
+}
+
+/// Parse a comma-separated list of DOFs (from 1), e.g. `1,5,6` or `1-8`.
+pub fn parse_dofs(s: &str) -> Result<Vec<usize>, String> {
+    let mut out = Vec::new();
+    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        if let Some((a, b)) = part.split_once('-') {
+            let a: usize = a
+                .trim()
+                .parse()
+                .map_err(|_| format!("bad DOF range '{part}'"))?;
+            let b: usize = b
+                .trim()
+                .parse()
+                .map_err(|_| format!("bad DOF range '{part}'"))?;
+            if a < 1 || b < a {
+                return Err(format!("bad DOF range '{part}'"));
+            }
+            out.extend(a..=b);
+        } else {
+            let d: usize = part.parse().map_err(|_| format!("bad DOF '{part}'"))?;
+            if d < 1 {
+                return Err("DOFs are numbered from 1".into());
+            }
+            out.push(d);
+        }
+    }
+    if out.is_empty() {
+        return Err("empty DOF list".into());
+    }
+    Ok(out)
+}
+
+/// Check every DOF of a list is in the model.
+pub fn check_dofs(dofs: &[usize], ndof: usize, what: &str) -> anyhow::Result<()> {
+    for &d in dofs {
+        if d < 1 || d > ndof {
+            anyhow::bail!("{what}: DOF {d} is outside the model (1..={ndof})");
+        }
+    }
+    Ok(())
+}
+
+/// Parse `a,b` into a pair of floats.
+pub fn parse_pair(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(',')
+        .ok_or_else(|| format!("expected two numbers 'a,b', got '{s}'"))?;
+    let a: f64 = a.trim().parse().map_err(|_| format!("bad number '{a}'"))?;
+    let b: f64 = b.trim().parse().map_err(|_| format!("bad number '{b}'"))?;
+    Ok((a, b))
+}
+
+/// Path helper used by several commands.
+pub fn with_suffix(path: &std::path::Path, suffix: &str) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let ext = path
+        .extension()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!("{stem}{suffix}.{ext}"))
+}

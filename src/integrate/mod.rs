@@ -1,0 +1,10 @@
+//! Time integration of `M ü + C u̇ + K u + f_int(u, u̇) = f_ext(t)`.
+//!
+//! [`newmark`]: Newmark average acceleration (γ = 1/2, β = 1/4) or HHT-α,
+//! with Newton iterations on the nonlinear elements, a fixed number of
+//! sub-steps per sample and the external force linearly interpolated
+//! between samples.
+
+pub mod newmark;
+
+pub use newmark::{Integrator, SimSettings, SimStatus, Simulation};

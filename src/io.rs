@@ -1,0 +1,59 @@
+//! Output helpers: atomic writes (temporary file, then rename) so a failed
+//! run never leaves a half-written file behind.
+
+use crate::error::{Result, TacitError};
+use std::path::{Path, PathBuf};
+
+/// Write `path` through `writer`, which receives a temporary path in the
+/// same directory; on success the temporary file is renamed onto `path`, on
+/// failure it is removed.
+pub fn write_atomic<F>(path: &Path, writer: F) -> Result<()>
+where
+    F: FnOnce(&Path) -> Result<()>,
+{
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if !dir.is_dir() {
+        return Err(TacitError::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "directory does not exist"),
+        ));
+    }
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    let tmp = dir.join(format!(".{}.{}.tmp", name, std::process::id()));
+    let res = writer(&tmp);
+    match res {
+        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            TacitError::io(path, e)
+        }),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
+    }
+}
+
+/// Write a string atomically.
+pub fn write_string(path: &Path, text: &str) -> Result<()> {
+    write_atomic(path, |tmp| {
+        std::fs::write(tmp, text).map_err(|e| TacitError::io(tmp, e))
+    })
+}
+
+/// Write a value as pretty JSON atomically.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| TacitError::Setting(format!("JSON encoding of {}: {e}", path.display())))?;
+    write_string(path, &text)
+}
+
+/// Create an output directory (and parents).
+pub fn ensure_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| TacitError::io(dir, e))
+}

@@ -1,0 +1,20 @@
+//! tacit: find what a linear structural model misses in a nonlinear
+//! vibration test, reconstruct the missing internal forces, trace them to a
+//! physical effect, add it to the model and fit it.
+//!
+//! Source: F. M. Hemez and S. W. Doebling, "Test-analysis correlation and
+//! finite element model updating for nonlinear, transient dynamics" (LANL).
+#![warn(missing_docs)]
+
+pub mod error;
+pub mod integrate;
+pub mod io;
+pub mod metrics;
+pub mod modal;
+pub mod model;
+pub mod plot;
+pub mod record;
+pub mod signal;
+pub mod simulate;
+
+pub use error::{Result, TacitError};

@@ -1,0 +1,271 @@
+//! Nonlinear elements and their internal forces and tangents.
+//!
+//! - Penalty contact between DOFs i→j: penetration `p = (u_i − u_j) − gap`;
+//!   when `p > 0` the force `k_c p` pushes i and j apart
+//!   (`f_int,i += k_c p`, `f_int,j −= k_c p`). With one DOF, a stop against
+//!   ground: `p = u_i − gap`.
+//! - Coulomb friction at a DOF against ground (the rod), regularised:
+//!   `f_int = F tanh(v / v_r)`.
+//! - Cubic spring between two DOFs or to ground: `f = k_3 δ³`, `δ = u_i − u_j`.
+
+use serde::{Deserialize, Serialize};
+
+fn default_vreg() -> f64 {
+    1e-3
+}
+
+/// Penalty contact.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Contact {
+    /// `[i, j]`: contact when `u_i − u_j > gap`; `[i]`: when `u_i > gap`.
+    pub dofs: Vec<usize>,
+    /// Gap, m (>= 0).
+    pub gap: f64,
+    /// Penalty stiffness, N/m (> 0).
+    pub stiffness: f64,
+}
+
+/// Regularised Coulomb friction at one DOF.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Friction {
+    /// DOF (from 1).
+    pub dof: usize,
+    /// Friction force level, N (>= 0).
+    pub level: f64,
+    /// Regularisation velocity, m/s (> 0; default 1e-3).
+    #[serde(default = "default_vreg")]
+    pub velocity: f64,
+}
+
+/// Cubic spring.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Cubic {
+    /// `[i, j]` or `[i]` (to ground).
+    pub dofs: Vec<usize>,
+    /// Cubic coefficient, N/m³.
+    pub k3: f64,
+}
+
+/// One nonlinear element in compiled, 0-based form for the integrator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Element {
+    /// Contact i→j (j = None: ground stop).
+    Contact {
+        /// First DOF.
+        i: usize,
+        /// Second DOF.
+        j: Option<usize>,
+        /// Gap, m.
+        gap: f64,
+        /// Stiffness, N/m.
+        k: f64,
+    },
+    /// Friction at a DOF.
+    Friction {
+        /// DOF.
+        d: usize,
+        /// Level, N.
+        level: f64,
+        /// Regularisation velocity, m/s.
+        vreg: f64,
+    },
+    /// Cubic spring.
+    Cubic {
+        /// First DOF.
+        i: usize,
+        /// Second DOF.
+        j: Option<usize>,
+        /// Coefficient, N/m³.
+        k3: f64,
+    },
+}
+
+/// Gather the model's elements into compiled form.
+pub fn compile(model: &super::Model) -> Vec<Element> {
+    let mut out = Vec::new();
+    for c in &model.contacts {
+        out.push(Element::Contact {
+            i: c.dofs[0] - 1,
+            j: c.dofs.get(1).map(|j| j - 1),
+            gap: c.gap,
+            k: c.stiffness,
+        });
+    }
+    for f in &model.frictions {
+        out.push(Element::Friction {
+            d: f.dof - 1,
+            level: f.level,
+            vreg: f.velocity,
+        });
+    }
+    for c in &model.cubics {
+        out.push(Element::Cubic {
+            i: c.dofs[0] - 1,
+            j: c.dofs.get(1).map(|j| j - 1),
+            k3: c.k3,
+        });
+    }
+    out
+}
+
+#[inline]
+fn rel(u: &[f64], i: usize, j: Option<usize>) -> f64 {
+    match j {
+        Some(j) => u[i] - u[j],
+        None => u[i],
+    }
+}
+
+/// Add a scalar pair force `s` (on i: +s, on j: −s) into `f`.
+#[inline]
+fn scatter(f: &mut [f64], i: usize, j: Option<usize>, s: f64) {
+    f[i] += s;
+    if let Some(j) = j {
+        f[j] -= s;
+    }
+}
+
+/// Add `c (e_i − e_j)(e_i − e_j)ᵀ` into a column-major n×n matrix.
+#[inline]
+fn scatter_tangent(t: &mut [f64], n: usize, i: usize, j: Option<usize>, c: f64) {
+    t[i * n + i] += c;
+    if let Some(j) = j {
+        t[j * n + j] += c;
+        t[i * n + j] -= c;
+        t[j * n + i] -= c;
+    }
+}
+
+impl Element {
+    /// Add this element's internal force at (u, v) into `f`.
+    #[inline]
+    pub fn add_force(&self, u: &[f64], v: &[f64], f: &mut [f64]) {
+        match *self {
+            Element::Contact { i, j, gap, k } => {
+                let p = rel(u, i, j) - gap;
+                if p > 0.0 {
+                    scatter(f, i, j, k * p);
+                }
+            }
+            Element::Friction { d, level, vreg } => f[d] += level * (v[d] / vreg).tanh(),
+            Element::Cubic { i, j, k3 } => {
+                let x = rel(u, i, j);
+                scatter(f, i, j, k3 * x * x * x);
+            }
+        }
+    }
+
+    /// Add `cu ∂f/∂u + cv ∂f/∂v` into the column-major n×n matrix `t`.
+    #[inline]
+    pub fn add_tangent(&self, u: &[f64], v: &[f64], cu: f64, cv: f64, t: &mut [f64], n: usize) {
+        match *self {
+            Element::Contact { i, j, gap, k } => {
+                if rel(u, i, j) - gap > 0.0 {
+                    scatter_tangent(t, n, i, j, cu * k);
+                }
+            }
+            Element::Friction { d, level, vreg } => {
+                let th = (v[d] / vreg).tanh();
+                t[d * n + d] += cv * level / vreg * (1.0 - th * th);
+            }
+            Element::Cubic { i, j, k3 } => {
+                let x = rel(u, i, j);
+                scatter_tangent(t, n, i, j, cu * 3.0 * k3 * x * x);
+            }
+        }
+    }
+}
+
+/// Total internal force of a set of elements.
+pub fn internal_force(elements: &[Element], u: &[f64], v: &[f64], f: &mut [f64]) {
+    f.iter_mut().for_each(|x| *x = 0.0);
+    for e in elements {
+        e.add_force(u, v, f);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tangents_match_central_differences() {
+        let els = [
+            Element::Contact {
+                i: 0,
+                j: Some(1),
+                gap: 1e-3,
+                k: 2e6,
+            },
+            Element::Friction {
+                d: 1,
+                level: 0.3,
+                vreg: 1e-2,
+            },
+            Element::Cubic {
+                i: 2,
+                j: Some(1),
+                k3: 1e9,
+            },
+            Element::Cubic {
+                i: 0,
+                j: None,
+                k3: -3e8,
+            },
+        ];
+        let n = 3;
+        let u = [3e-3, 1e-3, -2e-3];
+        let v = [0.1, 4e-3, -0.2];
+        let mut t = vec![0.0; n * n];
+        for e in &els {
+            e.add_tangent(&u, &v, 1.0, 0.0, &mut t, n);
+        }
+        let h = 1e-8;
+        for c in 0..n {
+            let (mut up, mut um) = (u, u);
+            up[c] += h;
+            um[c] -= h;
+            let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
+            internal_force(&els, &up, &v, &mut fp);
+            internal_force(&els, &um, &v, &mut fm);
+            for r in 0..n {
+                let fd = (fp[r] - fm[r]) / (2.0 * h);
+                approx::assert_relative_eq!(t[c * n + r], fd, max_relative = 1e-5, epsilon = 1e-3);
+            }
+        }
+        let mut tv = vec![0.0; n * n];
+        for e in &els {
+            e.add_tangent(&u, &v, 0.0, 1.0, &mut tv, n);
+        }
+        let (mut vp, mut vm) = (v, v);
+        vp[1] += 1e-7;
+        vm[1] -= 1e-7;
+        let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
+        internal_force(&els, &u, &vp, &mut fp);
+        internal_force(&els, &u, &vm, &mut fm);
+        approx::assert_relative_eq!(tv[n + 1], (fp[1] - fm[1]) / 2e-7, max_relative = 1e-5);
+    }
+
+    #[test]
+    fn contact_pushes_apart() {
+        let e = Element::Contact {
+            i: 4,
+            j: Some(5),
+            gap: 0.381e-3,
+            k: 2e6,
+        };
+        let mut u = [0.0; 8];
+        u[4] = 0.5e-3;
+        let mut f = [0.0; 8];
+        e.add_force(&u, &[0.0; 8], &mut f);
+        approx::assert_relative_eq!(f[4], 2e6 * (0.5e-3 - 0.381e-3));
+        approx::assert_relative_eq!(f[5], -f[4]);
+        let mut f2 = [0.0; 8];
+        u[4] = 0.3e-3;
+        e.add_force(&u, &[0.0; 8], &mut f2);
+        assert_eq!(f2, [0.0; 8]);
+    }
+}

@@ -1,0 +1,379 @@
+//! Structural models: lumped masses, linear springs, damping and nonlinear
+//! elements, read from TOML files (layout in `docs/formats.md`).
+//!
+//! Equation of motion, with the internal force of the nonlinear elements on
+//! the left-hand side (the sign convention of the reference record):
+//!
+//! $$ M \ddot u + C \dot u + K u + f_{int}(u, \dot u) = f_{ext}(t) $$
+//!
+//! DOFs are numbered from 1 in files, reports and on the command line, and
+//! from 0 inside the numerical core.
+
+pub mod elements;
+
+use crate::error::{Result, TacitError};
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+pub use elements::{Contact, Cubic, Friction};
+
+/// A linear spring between two DOFs, or from a DOF to ground.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Spring {
+    /// `[i, j]` (between DOFs i and j) or `[i]` (DOF i to ground); from 1.
+    pub dofs: Vec<usize>,
+    /// Stiffness, N/m (> 0).
+    pub stiffness: f64,
+    /// Optional label, e.g. "k5".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+}
+
+impl Spring {
+    /// The two DOFs, 0-based; `None` for ground.
+    pub fn ends(&self) -> (usize, Option<usize>) {
+        (self.dofs[0] - 1, self.dofs.get(1).map(|j| j - 1))
+    }
+    /// Label: `name` or `k<index+1>`.
+    pub fn label(&self, index: usize) -> String {
+        self.name
+            .clone()
+            .unwrap_or_else(|| format!("k{}", index + 1))
+    }
+}
+
+/// Damping model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum Damping {
+    /// No damping.
+    None,
+    /// Modal damping: `ratio` applies to every flexible mode, or `ratios`
+    /// gives one value per flexible mode in ascending frequency (missing
+    /// modes take the last value). Rigid-body modes are left undamped.
+    Modal {
+        /// One ratio for every flexible mode.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        ratio: Option<f64>,
+        /// Ratios per flexible mode.
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        ratios: Vec<f64>,
+    },
+    /// Rayleigh damping `C = alpha M + beta K`.
+    Rayleigh {
+        /// Mass-proportional coefficient, 1/s.
+        alpha: f64,
+        /// Stiffness-proportional coefficient, s.
+        beta: f64,
+    },
+}
+
+impl Default for Damping {
+    fn default() -> Self {
+        Damping::None
+    }
+}
+
+/// A structural model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Model {
+    /// Short name.
+    #[serde(default)]
+    pub name: String,
+    /// Free text.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub description: String,
+    /// Mass of each DOF, kg (> 0). The number of DOFs is `masses.len()`.
+    pub masses: Vec<f64>,
+    /// Linear springs.
+    #[serde(default, rename = "spring", skip_serializing_if = "Vec::is_empty")]
+    pub springs: Vec<Spring>,
+    /// Damping.
+    #[serde(default)]
+    pub damping: Damping,
+    /// Penalty contacts.
+    #[serde(default, rename = "contact", skip_serializing_if = "Vec::is_empty")]
+    pub contacts: Vec<Contact>,
+    /// Coulomb friction elements.
+    #[serde(default, rename = "friction", skip_serializing_if = "Vec::is_empty")]
+    pub frictions: Vec<Friction>,
+    /// Cubic springs.
+    #[serde(default, rename = "cubic", skip_serializing_if = "Vec::is_empty")]
+    pub cubics: Vec<Cubic>,
+}
+
+impl Model {
+    /// Number of DOFs.
+    pub fn ndof(&self) -> usize {
+        self.masses.len()
+    }
+
+    /// Read and validate a model file.
+    pub fn from_file(path: &Path) -> Result<Model> {
+        let text = std::fs::read_to_string(path).map_err(|e| TacitError::io(path, e))?;
+        Model::from_toml_str(&text, &path.display().to_string())
+    }
+
+    /// Parse and validate TOML text; `source_name` is used in errors.
+    pub fn from_toml_str(text: &str, source_name: &str) -> Result<Model> {
+        let model: Model = toml::from_str(text)
+            .map_err(|e| TacitError::model(source_name, e.to_string().trim_end().to_string()))?;
+        model.validate(source_name)?;
+        Ok(model)
+    }
+
+    /// Serialize to TOML text.
+    pub fn to_toml_string(&self) -> String {
+        toml::to_string(self).unwrap_or_else(|e| format!("# model could not be serialized: {e}\n"))
+    }
+
+    /// True when the model has nonlinear elements.
+    pub fn is_nonlinear(&self) -> bool {
+        !(self.contacts.is_empty() && self.frictions.is_empty() && self.cubics.is_empty())
+    }
+
+    /// A copy without nonlinear elements.
+    pub fn linear_part(&self) -> Model {
+        Model {
+            contacts: vec![],
+            frictions: vec![],
+            cubics: vec![],
+            ..self.clone()
+        }
+    }
+
+    /// Check every value; errors name the key (`spring[2].dofs`, ...).
+    pub fn validate(&self, src: &str) -> Result<()> {
+        let err = |m: String| Err(TacitError::model(src, m));
+        let n = self.ndof();
+        if n == 0 {
+            return err("masses: the model needs at least one DOF".into());
+        }
+        for (i, &m) in self.masses.iter().enumerate() {
+            if !(m.is_finite() && m > 0.0) {
+                return err(format!(
+                    "masses[{i}] (DOF {}) = {m}: a mass must be > 0",
+                    i + 1
+                ));
+            }
+        }
+        let check_dofs = |key: String, dofs: &[usize], allow_ground: bool| -> Result<()> {
+            let ok_len = if allow_ground {
+                dofs.len() == 1 || dofs.len() == 2
+            } else {
+                dofs.len() == 2
+            };
+            if !ok_len {
+                let want = if allow_ground {
+                    "[i, j] or [i]"
+                } else {
+                    "[i, j]"
+                };
+                return Err(TacitError::model(
+                    src,
+                    format!("{key}.dofs = {dofs:?}: expected {want}"),
+                ));
+            }
+            for &d in dofs {
+                if d < 1 || d > n {
+                    return Err(TacitError::model(
+                        src,
+                        format!("{key}.dofs = {dofs:?}: DOF {d} is out of range 1..={n}"),
+                    ));
+                }
+            }
+            if dofs.len() == 2 && dofs[0] == dofs[1] {
+                return Err(TacitError::model(
+                    src,
+                    format!("{key}.dofs = {dofs:?}: the two DOFs must differ"),
+                ));
+            }
+            Ok(())
+        };
+        for (i, s) in self.springs.iter().enumerate() {
+            check_dofs(format!("spring[{i}]"), &s.dofs, true)?;
+            if !(s.stiffness.is_finite() && s.stiffness > 0.0) {
+                return err(format!(
+                    "spring[{i}].stiffness = {}: must be > 0",
+                    s.stiffness
+                ));
+            }
+        }
+        for (i, c) in self.contacts.iter().enumerate() {
+            check_dofs(format!("contact[{i}]"), &c.dofs, true)?;
+            if !(c.gap.is_finite() && c.gap >= 0.0) {
+                return err(format!("contact[{i}].gap = {}: must be >= 0", c.gap));
+            }
+            if !(c.stiffness.is_finite() && c.stiffness > 0.0) {
+                return err(format!(
+                    "contact[{i}].stiffness = {}: must be > 0",
+                    c.stiffness
+                ));
+            }
+        }
+        for (i, f) in self.frictions.iter().enumerate() {
+            if f.dof < 1 || f.dof > n {
+                return err(format!(
+                    "friction[{i}].dof = {}: out of range 1..={n}",
+                    f.dof
+                ));
+            }
+            if !(f.level.is_finite() && f.level >= 0.0) {
+                return err(format!("friction[{i}].level = {}: must be >= 0", f.level));
+            }
+            if !(f.velocity.is_finite() && f.velocity > 0.0) {
+                return err(format!(
+                    "friction[{i}].velocity = {}: must be > 0",
+                    f.velocity
+                ));
+            }
+        }
+        for (i, c) in self.cubics.iter().enumerate() {
+            check_dofs(format!("cubic[{i}]"), &c.dofs, true)?;
+            if !c.k3.is_finite() {
+                return err(format!("cubic[{i}].k3 = {}: must be finite", c.k3));
+            }
+        }
+        match &self.damping {
+            Damping::None => {}
+            Damping::Modal { ratio, ratios } => {
+                if ratio.is_some() == !ratios.is_empty() {
+                    return err("damping: give exactly one of `ratio` or `ratios`".into());
+                }
+                for (i, z) in ratio.iter().chain(ratios).enumerate() {
+                    if !(z.is_finite() && *z >= 0.0 && *z < 1.0) {
+                        return err(format!("damping.ratios[{i}] = {z}: must be in [0, 1)"));
+                    }
+                }
+            }
+            Damping::Rayleigh { alpha, beta } => {
+                if !(alpha.is_finite() && *alpha >= 0.0 && beta.is_finite() && *beta >= 0.0) {
+                    return err(format!(
+                        "damping: rayleigh alpha = {alpha}, beta = {beta}: must be >= 0"
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Mass matrix (diagonal, lumped).
+    pub fn mass_matrix(&self) -> DMatrix<f64> {
+        DMatrix::from_diagonal(&nalgebra::DVector::from_vec(self.masses.clone()))
+    }
+
+    /// Linear stiffness matrix.
+    pub fn stiffness_matrix(&self) -> DMatrix<f64> {
+        let n = self.ndof();
+        let mut k = DMatrix::zeros(n, n);
+        for s in &self.springs {
+            add_spring(&mut k, s.ends(), s.stiffness);
+        }
+        k
+    }
+
+    /// Damping matrix from the damping model. Modal damping:
+    /// `C = M Φ diag(2 ζ_r ω_r) Φᵀ M` with mass-normalized Φ; rigid-body
+    /// modes (ω ≈ 0) get no damping.
+    pub fn damping_matrix(&self) -> Result<DMatrix<f64>> {
+        let m = self.mass_matrix();
+        let k = self.stiffness_matrix();
+        damping_matrix(&self.damping, &m, &k)
+    }
+}
+
+/// Damping matrix for any (M, K) pair (also reduced models).
+pub fn damping_matrix(d: &Damping, m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+    let n = m.nrows();
+    match d {
+        Damping::None => Ok(DMatrix::zeros(n, n)),
+        Damping::Rayleigh { alpha, beta } => Ok(m * *alpha + k * *beta),
+        Damping::Modal { ratio, ratios } => {
+            let modes = crate::modal::solve(m, k)?;
+            let mut diag = vec![0.0; n];
+            let mut flex = 0usize;
+            for r in 0..n {
+                if modes.rigid[r] {
+                    continue;
+                }
+                let z = match ratio {
+                    Some(z) => *z,
+                    None => *ratios.get(flex).or(ratios.last()).unwrap_or(&0.0),
+                };
+                diag[r] = 2.0 * z * modes.omega[r];
+                flex += 1;
+            }
+            let mphi = m * &modes.shapes;
+            let d = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(diag));
+            let c = &mphi * d * mphi.transpose();
+            Ok((&c + c.transpose()) * 0.5)
+        }
+    }
+}
+
+/// Add a spring of stiffness `k` between `ends` into a stiffness matrix.
+pub fn add_spring(kmat: &mut DMatrix<f64>, ends: (usize, Option<usize>), k: f64) {
+    let (i, j) = ends;
+    kmat[(i, i)] += k;
+    if let Some(j) = j {
+        kmat[(j, j)] += k;
+        kmat[(i, j)] -= k;
+        kmat[(j, i)] -= k;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CHAIN: &str = r#"
+name = "chain"
+masses = [1.0, 2.0]
+[[spring]]
+dofs = [1, 2]
+stiffness = 100.0
+[[spring]]
+dofs = [1]
+stiffness = 50.0
+[damping]
+kind = "rayleigh"
+alpha = 0.1
+beta = 0.001
+"#;
+
+    #[test]
+    fn parses_and_assembles() {
+        let m = Model::from_toml_str(CHAIN, "t").unwrap();
+        let k = m.stiffness_matrix();
+        assert_eq!(k[(0, 0)], 150.0);
+        assert_eq!(k[(0, 1)], -100.0);
+        assert_eq!(k[(1, 1)], 100.0);
+        let c = m.damping_matrix().unwrap();
+        approx::assert_relative_eq!(c[(1, 1)], 0.1 * 2.0 + 0.001 * 100.0);
+        // round trip
+        let again = Model::from_toml_str(&m.to_toml_string(), "rt").unwrap();
+        assert_eq!(again, m);
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        let bad = CHAIN.replace("masses = [1.0, 2.0]", "masses = [1.0, -2.0]");
+        let e = Model::from_toml_str(&bad, "t").unwrap_err().to_string();
+        assert!(e.contains("masses[1]"), "{e}");
+        let bad = CHAIN.replace("dofs = [1, 2]", "dofs = [1, 3]");
+        let e = Model::from_toml_str(&bad, "t").unwrap_err().to_string();
+        assert!(e.contains("spring[0].dofs") && e.contains("DOF 3"), "{e}");
+        let bad = format!("{CHAIN}\n[[contact]]\ndofs = [1, 2]\ngap = -1e-3\nstiffness = 1e6\n");
+        let e = Model::from_toml_str(&bad, "t").unwrap_err().to_string();
+        assert!(e.contains("contact[0].gap"), "{e}");
+        let bad = CHAIN.replace("name = \"chain\"", "name = \"chain\"\nmass = 3");
+        let e = Model::from_toml_str(&bad, "t").unwrap_err().to_string();
+        assert!(e.contains("mass"), "{e}");
+        let bad = format!("{CHAIN}\n[[friction]]\ndof = 1\nlevel = 0.3\nvelocty = 1e-3\n");
+        let e = Model::from_toml_str(&bad, "t").unwrap_err().to_string();
+        assert!(e.contains("velocty"), "{e}");
+    }
+}

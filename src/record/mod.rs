@@ -1,0 +1,316 @@
+//! Test records: a uniform time base, input channels (force at a DOF) and
+//! output channels (displacement, velocity or acceleration at a DOF), and for
+//! simulated records the truth (every DOF's u, v, a and internal force, and
+//! the model TOML used).
+//!
+//! File formats: native HDF5 (`hdf5io`), CSV with a header row (`csvio`),
+//! MATLAB v5 `.mat` with a variable→channel mapping (`matio`). Layouts are
+//! documented in `docs/formats.md`.
+
+use crate::error::{Result, TacitError};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+pub mod csvio;
+pub mod hdf5io;
+pub mod matio;
+
+/// What a channel measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
+#[serde(rename_all = "lowercase")]
+pub enum Quantity {
+    /// Applied force (input), N.
+    Force,
+    /// Displacement, m.
+    Disp,
+    /// Velocity, m/s.
+    Vel,
+    /// Acceleration, m/s².
+    Accel,
+}
+
+impl Quantity {
+    /// The prefix used in channel names (`force`, `disp`, `vel`, `accel`).
+    pub fn prefix(self) -> &'static str {
+        match self {
+            Quantity::Force => "force",
+            Quantity::Disp => "disp",
+            Quantity::Vel => "vel",
+            Quantity::Accel => "accel",
+        }
+    }
+    /// SI unit.
+    pub fn si_unit(self) -> &'static str {
+        match self {
+            Quantity::Force => "N",
+            Quantity::Disp => "m",
+            Quantity::Vel => "m/s",
+            Quantity::Accel => "m/s^2",
+        }
+    }
+    /// Parse a prefix.
+    pub fn from_prefix(s: &str) -> Option<Quantity> {
+        match s {
+            "force" => Some(Quantity::Force),
+            "disp" => Some(Quantity::Disp),
+            "vel" => Some(Quantity::Vel),
+            "accel" => Some(Quantity::Accel),
+            _ => None,
+        }
+    }
+}
+
+/// One measured signal at one DOF.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Channel {
+    /// What it measures.
+    pub quantity: Quantity,
+    /// DOF, numbered from 1.
+    pub dof: usize,
+    /// Unit string (SI unless the file says otherwise).
+    pub unit: String,
+    /// One value per sample.
+    pub data: Vec<f64>,
+}
+
+impl Channel {
+    /// A channel in SI units.
+    pub fn new(quantity: Quantity, dof: usize, data: Vec<f64>) -> Self {
+        Channel {
+            quantity,
+            dof,
+            unit: quantity.si_unit().to_string(),
+            data,
+        }
+    }
+    /// Channel name, e.g. `accel_5`.
+    pub fn name(&self) -> String {
+        format!("{}_{}", self.quantity.prefix(), self.dof)
+    }
+}
+
+/// The truth stored with a simulated record: every DOF, every sample.
+/// Matrices are stored DOF-major: `u[dof][sample]` (dof from 0 here).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Truth {
+    /// Displacement, m.
+    pub u: Vec<Vec<f64>>,
+    /// Velocity, m/s.
+    pub v: Vec<Vec<f64>>,
+    /// Acceleration, m/s².
+    pub a: Vec<Vec<f64>>,
+    /// Internal (nonlinear-element) force on the left-hand side of
+    /// `M a + C v + K u + f_int = f_ext`, N.
+    pub fint: Vec<Vec<f64>>,
+    /// The model used, as TOML text.
+    pub model_toml: String,
+}
+
+/// A record: uniform time base, inputs, outputs and optional truth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Record {
+    /// Time of sample 0, s.
+    pub t0: f64,
+    /// Sample rate, Hz.
+    pub fs: f64,
+    /// Input channels (quantity = Force).
+    pub inputs: Vec<Channel>,
+    /// Output channels (Disp, Vel or Accel).
+    pub outputs: Vec<Channel>,
+    /// Truth, for simulated records.
+    pub truth: Option<Truth>,
+    /// Where it was read from (for error messages); empty when built in memory.
+    #[serde(skip)]
+    pub source: PathBuf,
+}
+
+impl Record {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.inputs
+            .first()
+            .or(self.outputs.first())
+            .map_or(0, |c| c.data.len())
+    }
+    /// True when the record holds no samples.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Sample interval, s.
+    pub fn dt(&self) -> f64 {
+        1.0 / self.fs
+    }
+    /// Time of sample k.
+    pub fn time(&self, k: usize) -> f64 {
+        self.t0 + k as f64 / self.fs
+    }
+    /// The time vector.
+    pub fn times(&self) -> Vec<f64> {
+        (0..self.len()).map(|k| self.time(k)).collect()
+    }
+    /// Find an output channel.
+    pub fn output(&self, quantity: Quantity, dof: usize) -> Option<&Channel> {
+        self.outputs
+            .iter()
+            .find(|c| c.quantity == quantity && c.dof == dof)
+    }
+    /// Check the record is self-consistent: at least one sample, equal
+    /// lengths, finite values, no duplicated channel, a positive rate, DOFs
+    /// at least 1 (and at most `ndof` when given). Errors name the channel
+    /// and the sample.
+    pub fn validate(&self, ndof: Option<usize>) -> Result<()> {
+        let path = self.source.clone();
+        let err = |m: String| TacitError::record(path.clone(), m);
+        if !(self.fs.is_finite() && self.fs > 0.0) {
+            return Err(err(format!("sample rate {} Hz is not positive", self.fs)));
+        }
+        let n = self.len();
+        if n == 0 {
+            return Err(err("the record holds no samples".into()));
+        }
+        let mut seen = std::collections::HashSet::new();
+        for c in self.inputs.iter().chain(&self.outputs) {
+            if !seen.insert(c.name()) {
+                return Err(err(format!("channel {} appears twice", c.name())));
+            }
+            if c.data.len() != n {
+                return Err(err(format!(
+                    "channel {} has {} samples, expected {}",
+                    c.name(),
+                    c.data.len(),
+                    n
+                )));
+            }
+            if c.dof == 0 {
+                return Err(err(format!(
+                    "channel {}: DOFs are numbered from 1",
+                    c.name()
+                )));
+            }
+            if let Some(nd) = ndof {
+                if c.dof > nd {
+                    return Err(err(format!(
+                        "channel {}: DOF {} is outside the model (1..={})",
+                        c.name(),
+                        c.dof,
+                        nd
+                    )));
+                }
+            }
+            if let Some(k) = c.data.iter().position(|x| !x.is_finite()) {
+                return Err(err(format!(
+                    "channel {}: sample {} is {}",
+                    c.name(),
+                    k,
+                    c.data[k]
+                )));
+            }
+        }
+        for c in &self.inputs {
+            if c.quantity != Quantity::Force {
+                return Err(err(format!("input channel {} is not a force", c.name())));
+            }
+        }
+        for c in &self.outputs {
+            if c.quantity == Quantity::Force {
+                return Err(err(format!("output channel {} is a force", c.name())));
+            }
+        }
+        Ok(())
+    }
+
+    /// External force history at the model DOFs: `f[dof0][k]`.
+    pub fn force_matrix(&self, ndof: usize) -> Vec<Vec<f64>> {
+        let mut f = vec![vec![0.0; self.len()]; ndof];
+        for c in &self.inputs {
+            if c.dof >= 1 && c.dof <= ndof {
+                for (a, b) in f[c.dof - 1].iter_mut().zip(&c.data) {
+                    *a += *b;
+                }
+            }
+        }
+        f
+    }
+}
+
+/// File format of a record, chosen from the extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// `.h5` / `.hdf5`.
+    Hdf5,
+    /// `.csv`.
+    Csv,
+    /// `.mat` (MATLAB v5).
+    Mat,
+}
+
+impl Format {
+    /// Choose from a path's extension.
+    pub fn from_path(path: &Path) -> Result<Format> {
+        match path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .as_deref()
+        {
+            Some("h5") | Some("hdf5") => Ok(Format::Hdf5),
+            Some("csv") => Ok(Format::Csv),
+            Some("mat") => Ok(Format::Mat),
+            _ => Err(TacitError::record(
+                path,
+                "unknown extension: expected .h5, .hdf5, .csv or .mat",
+            )),
+        }
+    }
+}
+
+/// How to read a `.mat` file: which variable is which channel, and the rate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MatMapping {
+    /// (variable name, channel) pairs, e.g. ("V1", force at DOF 1).
+    pub channels: Vec<(String, Quantity, usize)>,
+    /// Sample rate, Hz.
+    pub fs: f64,
+    /// Subtract each channel's mean (the Silverbox README asks for it).
+    pub remove_mean: bool,
+}
+
+/// Read a record (HDF5 or CSV; `.mat` needs [`read_mat`]) and validate it.
+pub fn read(path: &Path) -> Result<Record> {
+    let rec = match Format::from_path(path)? {
+        Format::Hdf5 => hdf5io::read(path)?,
+        Format::Csv => csvio::read(path)?,
+        Format::Mat => {
+            return Err(TacitError::record(
+                path,
+                "a .mat file needs a channel mapping and a sample rate (--mat-map, --fs)",
+            ))
+        }
+    };
+    rec.validate(None)?;
+    Ok(rec)
+}
+
+/// Read a MATLAB v5 record with a mapping.
+pub fn read_mat(path: &Path, mapping: &MatMapping) -> Result<Record> {
+    let rec = matio::read(path, mapping)?;
+    rec.validate(None)?;
+    Ok(rec)
+}
+
+/// Write a record atomically (temporary file in the same directory, then
+/// rename): HDF5 or CSV by extension.
+pub fn write(rec: &Record, path: &Path) -> Result<()> {
+    rec.validate(None)?;
+    let fmt = Format::from_path(path)?;
+    crate::io::write_atomic(path, |tmp| match fmt {
+        Format::Hdf5 => hdf5io::write(rec, tmp),
+        Format::Csv => csvio::write(rec, tmp),
+        Format::Mat => Err(TacitError::record(path, "writing .mat is not supported")),
+    })
+}
+
+/// Path of the record for messages.
+pub fn display_path(rec: &Record) -> PathBuf {
+    rec.source.clone()
+}
