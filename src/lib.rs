@@ -18,3 +18,10 @@ pub mod signal;
 pub mod simulate;
 
 pub use error::{Result, TacitError};
+pub mod linear;
+pub mod reduce;
+pub mod identify;
+pub mod horizon;
+pub mod update;
+pub mod correlate;
+pub mod trace;

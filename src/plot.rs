@@ -62,6 +62,8 @@ const MAX_DASHES: f64 = 6000.0;
 const DASH: i32 = 6;
 const DASH_GAP: i32 = 4;
 const MARKER_RADIUS: i32 = 2;
+/// Light grid lines between two labelled ones.
+const LIGHT_LINES: usize = 4;
 
 /// How a series is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -948,14 +950,19 @@ fn draw_xy<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panel: &Panel) -> 
     let mut chart = builder
         .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)
         .map_err(err)?;
+    let fx = |v: &f64| tick_label(*v, xr);
+    let fy = |v: &f64| tick_label(*v, yr);
     chart
         .configure_mesh()
+        .x_label_formatter(&fx)
+        .y_label_formatter(&fy)
         .x_desc(panel.x_label.as_str())
         .y_desc(panel.y_label.as_str())
         .label_style(font(TICK_SIZE))
         .axis_desc_style(font(AXIS_DESC_SIZE))
         .bold_line_style(RGBColor(215, 215, 215))
-        .light_line_style(RGBColor(240, 240, 240))
+        .light_line_style(RGBColor(242, 242, 242))
+        .max_light_lines(LIGHT_LINES)
         .draw()
         .map_err(err)?;
     let grid = PixelGrid::new(xr, yr, chart.plotting_area().dim_in_pixel());
@@ -993,10 +1000,15 @@ fn draw_xy<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panel: &Panel) -> 
                 }
             }
             SeriesStyle::Line | SeriesStyle::DashedLine => {
-                let runs: Vec<_> = finite_runs(&s.x, &s.y)
+                let (runs, lone): (Vec<_>, Vec<_>) = finite_runs(&s.x, &s.y)
                     .into_iter()
-                    .map(|r| decimate(r, &grid))
-                    .collect();
+                    .partition(|r| grid.length(r) >= 1.0);
+                // Isolated finite points (between NaNs) and runs shorter than
+                // a pixel would be invisible as lines: mark them with a dot.
+                chart
+                    .draw_series(lone.into_iter().map(|r| Circle::new(r[0], 2, c.filled())))
+                    .map_err(err)?;
+                let runs: Vec<_> = runs.into_iter().map(|r| decimate(r, &grid)).collect();
                 let dashes: f64 =
                     runs.iter().map(|r| grid.length(r)).sum::<f64>() / f64::from(DASH + DASH_GAP);
                 if s.style == SeriesStyle::DashedLine && dashes <= MAX_DASHES {
@@ -1065,6 +1077,41 @@ impl Ranged for Slots {
     }
 }
 
+/// Tick label for `v` on an axis spanning `range`: no float noise, no "-0",
+/// scientific notation for very large or very small magnitudes.
+fn tick_label(v: f64, range: (f64, f64)) -> String {
+    let step = (range.1 - range.0).abs() / 10.0;
+    if !v.is_finite() || step.is_nan() || step <= 0.0 {
+        return format!("{v}");
+    }
+    if v.abs() <= step * 1e-6 {
+        return "0".to_string();
+    }
+    let trim = |s: &str| -> String {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    let mag = range.0.abs().max(range.1.abs());
+    if !(1e-3..1e5).contains(&mag) {
+        let digits = ((mag / step).log10().ceil() as i32).clamp(1, 8) as usize;
+        let s = format!("{v:.digits$e}");
+        return match s.split_once('e') {
+            Some((m, e)) => format!("{}e{e}", trim(m)),
+            None => s,
+        };
+    }
+    let decimals = ((-step.log10()).ceil() as i32 + 1).clamp(0, 12) as usize;
+    let s = trim(&format!("{v:.decimals$}"));
+    if s == "-0" {
+        "0".to_string()
+    } else {
+        s
+    }
+}
+
 fn category_label(labels: &[String], v: f64) -> String {
     let i = v.floor();
     if i >= 0.0 && (i as usize) < labels.len() {
@@ -1103,6 +1150,7 @@ fn draw_bars<DB: DrawingBackend>(
         .build_cartesian_2d(Slots::new(nc as f64, centres), yr.0..yr.1)
         .map_err(err)?;
     let fmt = |v: &f64| category_label(categories, *v);
+    let fy = |v: &f64| tick_label(*v, yr);
     let tick = if categories.len() > 16 {
         TICK_SIZE - 2.0
     } else {
@@ -1112,13 +1160,15 @@ fn draw_bars<DB: DrawingBackend>(
         .configure_mesh()
         .disable_x_mesh()
         .x_label_formatter(&fmt)
+        .y_label_formatter(&fy)
         .x_label_style(font(tick))
         .y_label_style(font(TICK_SIZE))
         .x_desc(panel.x_label.as_str())
         .y_desc(panel.y_label.as_str())
         .axis_desc_style(font(AXIS_DESC_SIZE))
         .bold_line_style(RGBColor(215, 215, 215))
-        .light_line_style(RGBColor(240, 240, 240))
+        .light_line_style(RGBColor(242, 242, 242))
+        .max_light_lines(LIGHT_LINES)
         .draw()
         .map_err(err)?;
 
@@ -1503,6 +1553,18 @@ mod tests {
         assert!(save(&small, &dir.path().join("small")).is_err());
         let missing = dir.path().join("no/such/dir/fig");
         assert!(save(&Figure::single("x", Panel::default()), &missing).is_err());
+    }
+
+    #[test]
+    fn plot_tick_labels() {
+        assert_eq!(tick_label(0.5, (0.0, 5.0)), "0.5");
+        assert_eq!(tick_label(2.0, (0.0, 5.0)), "2");
+        assert_eq!(tick_label(-1e-17, (-1.0, 1.0)), "0");
+        assert_eq!(tick_label(0.30000000000000004, (0.0, 1.0)), "0.3");
+        assert_eq!(tick_label(0.25, (0.0, 1.0)), "0.25");
+        assert_eq!(tick_label(150000.0, (0.0, 200000.0)), "1.5e5");
+        assert_eq!(tick_label(-5e-5, (-1e-4, 1e-4)), "-5e-5");
+        assert_eq!(tick_label(12.0, (-4.0, 13.0)), "12");
     }
 
     #[test]

@@ -30,6 +30,17 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
+/// A list of DOFs (from 1) given as `1,5,6` or `1-8`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DofList(pub Vec<usize>);
+
+impl std::str::FromStr for DofList {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        parse_dofs(s).map(DofList)
+    }
+}
+
 /// Parse a comma-separated list of DOFs (from 1), e.g. `1,5,6` or `1-8`.
 pub fn parse_dofs(s: &str) -> Result<Vec<usize>, String> {
     let mut out = Vec::new();

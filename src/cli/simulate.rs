@@ -1,6 +1,6 @@
 //! `tacit simulate`: simulate a model and write a record with its truth.
 
-use super::{check_dofs, parse_dofs, parse_pair};
+use super::{check_dofs, parse_pair, DofList};
 use std::path::PathBuf;
 use tacit::integrate::SimSettings;
 use tacit::model::Model;
@@ -60,8 +60,8 @@ pub struct Args {
     #[arg(long, default_value_t = 4096)]
     samples: usize,
     /// Sensor DOFs, e.g. 1,5,6 or 1-8 (default: all).
-    #[arg(long, value_parser = parse_dofs)]
-    sensors: Option<Vec<usize>>,
+    #[arg(long)]
+    sensors: Option<DofList>,
     /// Measured quantity (repeatable).
     #[arg(long, value_enum, default_values_t = vec![Kind::Accel])]
     kind: Vec<Kind>,
@@ -85,7 +85,11 @@ pub struct Args {
 pub fn run(a: Args) -> anyhow::Result<()> {
     let model = Model::from_file(&a.model)?;
     let n = model.ndof();
-    let sensors = a.sensors.clone().unwrap_or_else(|| (1..=n).collect());
+    let sensors = a
+        .sensors
+        .clone()
+        .map(|d| d.0)
+        .unwrap_or_else(|| (1..=n).collect());
     check_dofs(&sensors, n, "--sensors")?;
     check_dofs(&[a.input_dof], n, "--input-dof")?;
     let fmt = record::Format::from_path(&a.output)?;
