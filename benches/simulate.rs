@@ -1,0 +1,54 @@
+//! Simulator speed: lanl8dof with the bumper and 0.3 N friction on every
+//! mass, 4096 samples × 10 sub-steps (issue target: under 20 ms; a
+//! pure-NumPy Newmark takes about 3.4 s).
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use std::hint::black_box;
+use tacit::integrate::{Integrator, SimSettings};
+use tacit::model::{Friction, Model};
+
+fn testbed() -> Model {
+    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof-contact.toml");
+    let mut m = Model::from_file(std::path::Path::new(p)).unwrap();
+    m.frictions = (1..=8)
+        .map(|d| Friction {
+            dof: d,
+            level: 0.3,
+            velocity: 1e-3,
+        })
+        .collect();
+    m
+}
+
+fn bench(c: &mut Criterion) {
+    let model = testbed();
+    let fs = 512.0;
+    let n = 4096;
+    let x = tacit::signal::random_band(n, fs, (5.0, 200.0), 20.0, 7).unwrap();
+    let mut f = nalgebra::DMatrix::zeros(8, n);
+    for (k, v) in x.iter().enumerate() {
+        f[(0, k)] = *v;
+    }
+    let integ = Integrator::new(&model, fs, SimSettings::default()).unwrap();
+    let sim = integ.run(f.as_view(), &[0.0; 8], &[0.0; 8]);
+    assert!(sim.completed());
+    eprintln!(
+        "contact+friction: {} sub-steps, {} Newton iterations",
+        sim.steps, sim.newton_iterations
+    );
+    c.bench_function("lanl8dof_contact_friction_4096x10", |b| {
+        b.iter(|| black_box(integ.run(black_box(f.as_view()), &[0.0; 8], &[0.0; 8])))
+    });
+    let linear = model.linear_part();
+    let integ_l = Integrator::new(&linear, fs, SimSettings::default()).unwrap();
+    c.bench_function("lanl8dof_linear_4096x10", |b| {
+        b.iter(|| black_box(integ_l.run(black_box(f.as_view()), &[0.0; 8], &[0.0; 8])))
+    });
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(20);
+    targets = bench
+}
+criterion_main!(benches);
