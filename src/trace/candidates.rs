@@ -1,0 +1,240 @@
+//! The candidate effects and their unit-strength internal forces.
+
+use crate::model::Model;
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+/// Kind of effect (the names used in `report.json`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, PartialOrd, Ord)]
+#[serde(rename_all = "snake_case")]
+pub enum EffectKind {
+    /// Penalty contact i→j with a gap: force `k_c (u_i − u_j − g)` when positive.
+    Contact,
+    /// Coulomb friction to ground at one DOF (or the same level at several).
+    Friction,
+    /// Cubic spring between two DOFs or to ground.
+    Cubic,
+    /// Stiffness change of an existing spring.
+    Stiffness,
+    /// A linear spring from a DOF to ground.
+    GroundSpring,
+    /// A change of the model's viscous damping (`δ C v`).
+    Damping,
+}
+
+impl EffectKind {
+    /// Name as in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            EffectKind::Contact => "contact",
+            EffectKind::Friction => "friction",
+            EffectKind::Cubic => "cubic",
+            EffectKind::Stiffness => "stiffness",
+            EffectKind::GroundSpring => "ground_spring",
+            EffectKind::Damping => "damping",
+        }
+    }
+}
+
+/// One candidate effect. DOFs are 0-based here.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Candidate {
+    /// Kind.
+    pub kind: EffectKind,
+    /// DOFs (0-based): `[i, j]` for a pair (contact: on when `u_i − u_j > gap`),
+    /// `[i]` for a DOF to ground; friction may list several DOFs sharing a level.
+    pub dofs: Vec<usize>,
+    /// Index of the spring for [`EffectKind::Stiffness`].
+    pub spring: Option<usize>,
+    /// Gap for a contact (m), fixed during the regression.
+    pub gap: Option<f64>,
+    /// Regularisation velocity of friction (m/s).
+    pub vreg: f64,
+    /// Nominal stiffness of the spring for [`EffectKind::Stiffness`] (N/m),
+    /// so the strength is reported as a relative change.
+    pub nominal: f64,
+}
+
+impl Candidate {
+    /// A candidate with default settings.
+    pub fn new(kind: EffectKind, dofs: Vec<usize>) -> Candidate {
+        Candidate {
+            kind,
+            dofs,
+            spring: None,
+            gap: None,
+            vreg: 1e-3,
+            nominal: 1.0,
+        }
+    }
+
+    /// Short label with DOFs from 1, e.g. `contact 5→6`, `friction @3`.
+    pub fn label(&self) -> String {
+        let d: Vec<String> = self.dofs.iter().map(|d| (d + 1).to_string()).collect();
+        match (self.kind, self.dofs.len()) {
+            (EffectKind::Contact, 2) => format!("contact {}→{}", d[0], d[1]),
+            (EffectKind::Damping, _) => "damping (all modes)".into(),
+            (_, 1) => format!("{} @{}", self.kind.name(), d[0]),
+            (EffectKind::Friction, _) => format!("friction @{}", d.join(",")),
+            _ => format!("{} {}", self.kind.name(), d.join("–")),
+        }
+    }
+
+    /// Number of parameters (for the information criterion).
+    pub fn nparams(&self) -> usize {
+        match self.kind {
+            EffectKind::Contact => 2,
+            _ => 1,
+        }
+    }
+
+    /// Force direction for pair/ground effects: `e_i − e_j` or `e_i`; `None`
+    /// for effects with a force at several DOFs.
+    pub fn direction(&self, n: usize) -> Option<DVector<f64>> {
+        match self.kind {
+            EffectKind::Damping => None,
+            EffectKind::Friction if self.dofs.len() > 1 => None,
+            _ => {
+                let mut d = DVector::zeros(n);
+                d[self.dofs[0]] = 1.0;
+                if self.dofs.len() == 2 {
+                    d[self.dofs[1]] = -1.0;
+                }
+                Some(d)
+            }
+        }
+    }
+
+    /// Relative displacement (pair) or displacement (ground) at sample k.
+    pub fn delta(&self, states: &DMatrix<f64>, k: usize) -> f64 {
+        let i = self.dofs[0];
+        match self.dofs.get(1) {
+            Some(&j) if self.dofs.len() == 2 => states[(i, k)] - states[(j, k)],
+            _ => states[(i, k)],
+        }
+    }
+
+    /// Relative velocity (pair) or velocity (ground) at sample k.
+    pub fn delta_rate(&self, states: &DMatrix<f64>, n: usize, k: usize) -> f64 {
+        let i = self.dofs[0];
+        match self.dofs.get(1) {
+            Some(&j) if self.dofs.len() == 2 => states[(n + i, k)] - states[(n + j, k)],
+            _ => states[(n + i, k)],
+        }
+    }
+
+    /// Scalar shape history `φ(t)` (unit strength) for effects with one
+    /// direction: contact `max(δ − g, 0)`, friction `tanh(v/v_r)`, cubic
+    /// `δ³`, stiffness `k_nominal δ` (strength = relative change) and ground
+    /// spring `δ`.
+    pub fn shape(&self, states: &DMatrix<f64>, n: usize) -> Vec<f64> {
+        let ns = states.ncols();
+        (0..ns)
+            .map(|k| {
+                let d = self.delta(states, k);
+                match self.kind {
+                    EffectKind::Contact => (d - self.gap.unwrap_or(0.0)).max(0.0),
+                    EffectKind::Friction => (self.delta_rate(states, n, k) / self.vreg).tanh(),
+                    EffectKind::Cubic => d * d * d,
+                    EffectKind::Stiffness => d * self.nominal,
+                    EffectKind::GroundSpring => d,
+                    EffectKind::Damping => 0.0,
+                }
+            })
+            .collect()
+    }
+
+    /// Full internal-force history (n × N) at unit strength, for any kind;
+    /// `c` is the model's damping matrix (for [`EffectKind::Damping`]).
+    pub fn force(&self, states: &DMatrix<f64>, c: &DMatrix<f64>) -> DMatrix<f64> {
+        let n = states.nrows() / 2;
+        let ns = states.ncols();
+        match self.kind {
+            EffectKind::Damping => c * states.rows(n, n),
+            EffectKind::Friction if self.dofs.len() > 1 => {
+                let mut f = DMatrix::zeros(n, ns);
+                for &d in &self.dofs {
+                    for k in 0..ns {
+                        f[(d, k)] = (states[(n + d, k)] / self.vreg).tanh();
+                    }
+                }
+                f
+            }
+            _ => {
+                let mut f = DMatrix::zeros(n, ns);
+                let phi = self.shape(states, n);
+                for (k, p) in phi.iter().enumerate() {
+                    f[(self.dofs[0], k)] = *p;
+                    if self.dofs.len() == 2 {
+                        f[(self.dofs[1], k)] = -*p;
+                    }
+                }
+                f
+            }
+        }
+    }
+}
+
+/// Pairs of DOFs joined by a spring of the model (0-based, i < j), and the
+/// spring index.
+pub fn spring_pairs(model: &Model) -> Vec<(usize, usize, usize)> {
+    let mut out = Vec::new();
+    for (s, sp) in model.springs.iter().enumerate() {
+        if let (i, Some(j)) = sp.ends() {
+            out.push((i.min(j), i.max(j), s));
+        }
+    }
+    out
+}
+
+/// The candidate library for a model: contact on each spring-joined pair in
+/// both directions, friction at each DOF and at all DOFs with one level, a
+/// cubic spring on each spring-joined pair and from each DOF to ground, a
+/// stiffness change of each spring, a spring to ground at each DOF, and a
+/// change of the viscous damping (when the model has damping).
+pub fn library(model: &Model, has_damping: bool, vreg: f64) -> Vec<Candidate> {
+    let n = model.ndof();
+    let pairs = spring_pairs(model);
+    let mut out = Vec::new();
+    for &(i, j, _) in &pairs {
+        out.push(Candidate::new(EffectKind::Contact, vec![i, j]));
+        out.push(Candidate::new(EffectKind::Contact, vec![j, i]));
+    }
+    for d in 0..n {
+        out.push(Candidate {
+            vreg,
+            ..Candidate::new(EffectKind::Friction, vec![d])
+        });
+    }
+    if n > 1 {
+        out.push(Candidate {
+            vreg,
+            ..Candidate::new(EffectKind::Friction, (0..n).collect())
+        });
+    }
+    for &(i, j, _) in &pairs {
+        out.push(Candidate::new(EffectKind::Cubic, vec![i, j]));
+    }
+    for d in 0..n {
+        out.push(Candidate::new(EffectKind::Cubic, vec![d]));
+    }
+    for (s, sp) in model.springs.iter().enumerate() {
+        let (i, j) = sp.ends();
+        let dofs = match j {
+            Some(j) => vec![i, j],
+            None => vec![i],
+        };
+        out.push(Candidate {
+            spring: Some(s),
+            nominal: sp.stiffness,
+            ..Candidate::new(EffectKind::Stiffness, dofs)
+        });
+    }
+    for d in 0..n {
+        out.push(Candidate::new(EffectKind::GroundSpring, vec![d]));
+    }
+    if has_damping {
+        out.push(Candidate::new(EffectKind::Damping, (0..n).collect()));
+    }
+    out
+}
