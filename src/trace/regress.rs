@@ -1,0 +1,524 @@
+//! Segment-wise regression of the residual on candidate effects, and the
+//! greedy selection with the Bayesian information criterion.
+
+use super::candidates::{library, Candidate, EffectKind};
+use crate::linear::SampledModel;
+use crate::model::Model;
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+/// Settings of the trace step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TraceSettings {
+    /// Smallest fraction of the remaining residual energy an effect must
+    /// remove to be selected (default 0.05).
+    pub min_gain: f64,
+    /// Most effects selected (default 3).
+    pub max_effects: usize,
+    /// Friction regularisation velocity, m/s (default 1e-3).
+    pub friction_vreg: f64,
+    /// Points of the coarse gap scan of a contact (default 24).
+    pub gap_grid: usize,
+}
+
+impl Default for TraceSettings {
+    fn default() -> Self {
+        TraceSettings {
+            min_gain: 0.05,
+            max_effects: 3,
+            friction_vreg: 1e-3,
+            gap_grid: 24,
+        }
+    }
+}
+
+/// What the trace step needs.
+#[derive(Debug, Clone, Copy)]
+pub struct TraceInput<'a> {
+    /// The declared model (its linear part is `sampled`).
+    pub model: &'a Model,
+    /// The linear model's sampled map.
+    pub sampled: &'a SampledModel,
+    /// Output map rows for the measured channels (p × 2n).
+    pub cy: &'a DMatrix<f64>,
+    /// Output feed-through (p × n).
+    pub dy: &'a DMatrix<f64>,
+    /// Measured channels (p × N).
+    pub measured: &'a DMatrix<f64>,
+    /// External force (n × N).
+    pub force_ext: &'a DMatrix<f64>,
+    /// Reconstructed states `[u; v]` (2n × N).
+    pub states: &'a DMatrix<f64>,
+    /// Identified internal force (n × N, left-hand-side convention), if any.
+    pub identified_force: Option<&'a DMatrix<f64>>,
+    /// Samples per segment.
+    pub segment: usize,
+}
+
+/// A scored effect with its parameters from the regression.
+#[derive(Debug, Clone, Serialize)]
+pub struct RankedEffect {
+    /// The candidate (with its gap for a contact).
+    pub candidate: Candidate,
+    /// Label with DOFs from 1.
+    pub label: String,
+    /// Parameters (SI names: gap, stiffness, level, k3, delta).
+    pub parameters: Vec<(String, f64)>,
+    /// Standard errors of the parameters (same order).
+    pub std_errors: Vec<f64>,
+    /// Fraction of the remaining residual energy removed.
+    pub residual_explained: f64,
+    /// Fraction of the identified force's energy it explains (if given).
+    pub force_explained: Option<f64>,
+    /// Change of the information criterion (negative pays).
+    pub bic_change: f64,
+}
+
+/// Result of the trace step.
+#[derive(Debug, Clone, Serialize)]
+pub struct TraceResult {
+    /// Every candidate of the first round, best first.
+    pub ranking: Vec<RankedEffect>,
+    /// Effects selected, in order.
+    pub selected: Vec<RankedEffect>,
+    /// Weighted residual energy before any effect and after each selected one.
+    pub rss_history: Vec<f64>,
+    /// Why the selection stopped.
+    pub stop_reason: String,
+    /// Linear segment simulations run.
+    pub simulations: usize,
+}
+
+/// Segment responses of the linear model: each segment of `seg` samples
+/// starts from `starts` (the state at its first sample) or from rest, under
+/// the force `f` (n × N, right-hand side). Returns p × N.
+pub fn segment_response(
+    sm: &SampledModel,
+    cy: &DMatrix<f64>,
+    dy: &DMatrix<f64>,
+    starts: Option<&DMatrix<f64>>,
+    f: &DMatrix<f64>,
+    seg: usize,
+) -> DMatrix<f64> {
+    let ns = f.ncols();
+    let mut y = DMatrix::zeros(cy.nrows(), ns);
+    let mut x = DVector::zeros(2 * sm.n);
+    let mut xn = DVector::zeros(2 * sm.n);
+    for k in 0..ns {
+        if k % seg == 0 {
+            match starts {
+                Some(s) => x.copy_from(&s.column(k)),
+                None => x.fill(0.0),
+            }
+        }
+        let mut yk = y.column_mut(k);
+        yk.gemv(1.0, cy, &x, 0.0);
+        yk.gemv(1.0, dy, &f.column(k), 1.0);
+        if k + 1 < ns && (k + 1) % seg != 0 {
+            xn.gemv(1.0, &sm.a, &x, 0.0);
+            xn.gemv(1.0, &sm.b0, &f.column(k), 1.0);
+            xn.gemv(1.0, &sm.b1, &f.column(k + 1), 1.0);
+            std::mem::swap(&mut x, &mut xn);
+        }
+    }
+    y
+}
+
+/// Segment response to a scalar force history `phi` along `dir` (right-hand
+/// side), from rest at every segment start.
+fn siso_response(
+    sm: &SampledModel,
+    cy: &DMatrix<f64>,
+    dy: &DMatrix<f64>,
+    dir: &DVector<f64>,
+    phi: &[f64],
+    seg: usize,
+) -> DMatrix<f64> {
+    let b0 = &sm.b0 * dir;
+    let b1 = &sm.b1 * dir;
+    let dd = dy * dir;
+    let ns = phi.len();
+    let mut y = DMatrix::zeros(cy.nrows(), ns);
+    let mut x = DVector::zeros(2 * sm.n);
+    let mut xn = DVector::zeros(2 * sm.n);
+    for k in 0..ns {
+        if k % seg == 0 {
+            x.fill(0.0);
+        }
+        let mut yk = y.column_mut(k);
+        yk.gemv(1.0, cy, &x, 0.0);
+        yk.axpy(phi[k], &dd, 1.0);
+        if k + 1 < ns && (k + 1) % seg != 0 {
+            xn.gemv(1.0, &sm.a, &x, 0.0);
+            xn.axpy(phi[k], &b0, 1.0);
+            xn.axpy(phi[k + 1], &b1, 1.0);
+            std::mem::swap(&mut x, &mut xn);
+        }
+    }
+    y
+}
+
+/// Weighted, stacked vector of a p × N matrix.
+fn stack(m: &DMatrix<f64>, w: &[f64]) -> DVector<f64> {
+    let (p, ns) = m.shape();
+    DVector::from_fn(p * ns, |i, _| w[i % p] * m[(i % p, i / p)])
+}
+
+/// Channel weights 1 / RMS of the measured channel.
+pub fn channel_weights(measured: &DMatrix<f64>) -> Vec<f64> {
+    (0..measured.nrows())
+        .map(|c| {
+            let r = (measured.row(c).norm_squared() / measured.ncols().max(1) as f64).sqrt();
+            if r > 0.0 {
+                1.0 / r
+            } else {
+                1.0
+            }
+        })
+        .collect()
+}
+
+/// The current selection: columns, an orthonormal basis of them, the
+/// residual energy and the parameter count.
+struct Selection {
+    q: Vec<DVector<f64>>,
+    cols: Vec<DVector<f64>>,
+    r0: DVector<f64>,
+    rss: f64,
+    nobs: f64,
+    npar: usize,
+}
+
+impl Selection {
+    /// RSS after adding column `s`, and its normalised part orthogonal to
+    /// the selection (None when it adds nothing).
+    fn rss_with(&self, s: &DVector<f64>, r: &DVector<f64>) -> (f64, Option<DVector<f64>>) {
+        let mut t = s.clone();
+        for q in &self.q {
+            let c = q.dot(&t);
+            t.axpy(-c, q, 1.0);
+        }
+        let nn = t.norm();
+        if !(nn > 1e-10 * s.norm()) {
+            return (self.rss, None);
+        }
+        t /= nn;
+        let c = t.dot(r);
+        (self.rss - c * c, Some(t))
+    }
+
+    /// Joint least-squares strengths of the selected columns and their
+    /// standard errors.
+    fn coefficients(&self) -> (Vec<f64>, Vec<f64>) {
+        let m = self.cols.len();
+        let g = DMatrix::from_fn(m, m, |i, j| self.cols[i].dot(&self.cols[j]));
+        let b = DVector::from_fn(m, |i, _| self.cols[i].dot(&self.r0));
+        let Some(ginv) = g.try_inverse() else {
+            return (vec![f64::NAN; m], vec![f64::NAN; m]);
+        };
+        let th = &ginv * b;
+        let s2 = self.rss.max(0.0) / (self.nobs - self.npar as f64).max(1.0);
+        let se = (0..m).map(|i| (s2 * ginv[(i, i)]).max(0.0).sqrt()).collect();
+        (th.iter().copied().collect(), se)
+    }
+}
+
+/// Run the trace: rank every candidate, then select effects greedily.
+pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
+    let sm = input.sampled;
+    let (p, ns) = input.measured.shape();
+    let seg = input.segment.max(2);
+    let w = channel_weights(input.measured);
+    let ylin = segment_response(sm, input.cy, input.dy, Some(input.states), input.force_ext, seg);
+    let r0 = stack(&(input.measured - &ylin), &w);
+    let rss0 = r0.norm_squared();
+    let lib = library(input.model, sm.c.amax() > 0.0, settings.friction_vreg);
+    let mut sel = Selection {
+        q: vec![],
+        cols: vec![],
+        r0: r0.clone(),
+        rss: rss0,
+        nobs: (p * ns) as f64,
+        npar: 0,
+    };
+    let mut r = r0;
+    let mut selected: Vec<RankedEffect> = vec![];
+    let mut ranking = vec![];
+    let mut history = vec![rss0];
+    let mut sims = 0usize;
+    let mut stop = String::from("effect limit reached");
+    for round in 0..settings.max_effects {
+        let ctx = Context { input, w: &w, seg, settings };
+        let mut scored: Vec<Scored> = lib
+            .iter()
+            .filter(|c| !selected.iter().any(|s| same_effect(&s.candidate, c)))
+            .filter_map(|c| score(c, &ctx, &sel, &r, &mut sims))
+            .collect();
+        scored.sort_by(|a, b| a.effect.bic_change.total_cmp(&b.effect.bic_change));
+        if round == 0 {
+            ranking = scored.iter().map(|s| s.effect.clone()).collect();
+        }
+        let Some(best) = scored.into_iter().next() else {
+            stop = "no candidate could be evaluated".into();
+            break;
+        };
+        let e = &best.effect;
+        if !(e.bic_change < 0.0 && e.residual_explained >= settings.min_gain) {
+            stop = format!(
+                "best remaining candidate ({}) removes {:.1} % of the residual (threshold {:.1} %), BIC change {:.1}",
+                e.label,
+                100.0 * e.residual_explained,
+                100.0 * settings.min_gain,
+                e.bic_change
+            );
+            break;
+        }
+        let c = best.q.dot(&r);
+        r.axpy(-c, &best.q, 1.0);
+        sel.q.push(best.q);
+        sel.cols.push(best.col);
+        sel.rss = r.norm_squared();
+        sel.npar += best.effect.candidate.nparams();
+        history.push(sel.rss);
+        selected.push(best.effect);
+        let (th, se) = sel.coefficients();
+        for (i, eff) in selected.iter_mut().enumerate() {
+            set_strength(eff, th[i], se[i]);
+        }
+    }
+    if let Some(f) = input.identified_force {
+        for eff in selected.iter_mut().chain(ranking.iter_mut().take(10)) {
+            let th = strength(eff);
+            eff.force_explained = Some(force_explained(&eff.candidate, th, f, input.states, &sm.c));
+        }
+    }
+    TraceResult {
+        ranking,
+        selected,
+        rss_history: history,
+        stop_reason: stop,
+        simulations: sims,
+    }
+}
+
+/// The same physical effect (so it is not selected twice).
+fn same_effect(a: &Candidate, b: &Candidate) -> bool {
+    a.kind == b.kind
+        && match a.kind {
+            EffectKind::Friction => a.dofs.iter().any(|d| b.dofs.contains(d)),
+            _ => a.dofs == b.dofs,
+        }
+}
+
+/// Index of the strength among an effect's parameters.
+fn strength_index(kind: EffectKind) -> usize {
+    usize::from(kind == EffectKind::Contact)
+}
+
+fn strength(e: &RankedEffect) -> f64 {
+    e.parameters[strength_index(e.candidate.kind)].1
+}
+
+fn set_strength(e: &mut RankedEffect, th: f64, se: f64) {
+    let i = strength_index(e.candidate.kind);
+    e.parameters[i].1 = th;
+    e.std_errors[i] = se;
+}
+
+/// Name of the strength parameter in reports.
+pub fn strength_name(kind: EffectKind) -> &'static str {
+    match kind {
+        EffectKind::Contact | EffectKind::GroundSpring => "stiffness",
+        EffectKind::Friction => "level",
+        EffectKind::Cubic => "k3",
+        EffectKind::Stiffness | EffectKind::Damping => "delta",
+    }
+}
+
+/// Strength must be positive for these kinds.
+fn positive_only(kind: EffectKind) -> bool {
+    matches!(
+        kind,
+        EffectKind::Contact | EffectKind::Friction | EffectKind::GroundSpring
+    )
+}
+
+struct Context<'a, 'b> {
+    input: &'a TraceInput<'b>,
+    w: &'a [f64],
+    seg: usize,
+    settings: &'a TraceSettings,
+}
+
+struct Scored {
+    effect: RankedEffect,
+    col: DVector<f64>,
+    q: DVector<f64>,
+}
+
+/// One evaluation: RSS, strength, raw column, orthonormal part.
+type Eval = (f64, f64, DVector<f64>, DVector<f64>);
+
+/// Weighted stacked response column of a candidate at unit strength
+/// (internal force on the left-hand side → minus on the right).
+fn column(cand: &Candidate, ctx: &Context<'_, '_>) -> DVector<f64> {
+    let input = ctx.input;
+    let sm = input.sampled;
+    let y = match cand.direction(sm.n) {
+        Some(dir) => {
+            let phi: Vec<f64> = cand.shape(input.states, sm.n).iter().map(|x| -x).collect();
+            siso_response(sm, input.cy, input.dy, &dir, &phi, ctx.seg)
+        }
+        None => {
+            let f = -cand.force(input.states, &sm.c);
+            segment_response(sm, input.cy, input.dy, None, &f, ctx.seg)
+        }
+    };
+    stack(&y, ctx.w)
+}
+
+fn evaluate(
+    cand: &Candidate,
+    ctx: &Context<'_, '_>,
+    sel: &Selection,
+    r: &DVector<f64>,
+    sims: &mut usize,
+) -> Option<Eval> {
+    *sims += 1;
+    let col = column(cand, ctx);
+    let (rss, q) = sel.rss_with(&col, r);
+    let q = q?;
+    let th = q.dot(r) / q.dot(&col);
+    if positive_only(cand.kind) && !(th > 0.0) {
+        return None;
+    }
+    Some((rss, th, col, q))
+}
+
+/// Scan the gap of a contact candidate (coarse grid over the upper half of
+/// the relative displacement, then golden-section refinement); returns the
+/// best candidate, its evaluation and a standard error of the gap from the
+/// curvature of the residual.
+fn scan_gap(
+    cand: &Candidate,
+    ctx: &Context<'_, '_>,
+    sel: &Selection,
+    r: &DVector<f64>,
+    sims: &mut usize,
+) -> Option<(Candidate, Eval, f64)> {
+    let states = ctx.input.states;
+    let mut sorted: Vec<f64> = (0..states.ncols()).map(|k| cand.delta(states, k)).collect();
+    sorted.sort_by(f64::total_cmp);
+    let quant = |f: f64| sorted[((sorted.len() - 1) as f64 * f) as usize];
+    let (lo, hi) = (quant(0.5).max(0.0), quant(0.999));
+    if !(hi > lo) {
+        return None;
+    }
+    let ng = ctx.settings.gap_grid.max(4);
+    let gaps: Vec<f64> = (0..ng).map(|i| lo + (hi - lo) * i as f64 / (ng - 1) as f64).collect();
+    let mut at = |g: f64, sims: &mut usize| {
+        let c = Candidate { gap: Some(g), ..cand.clone() };
+        evaluate(&c, ctx, sel, r, sims).map(|e| (c, e))
+    };
+    let mut best: Option<(usize, Candidate, Eval)> = None;
+    for (i, &g) in gaps.iter().enumerate() {
+        if let Some((c, e)) = at(g, sims) {
+            if best.as_ref().is_none_or(|b| e.0 < b.2 .0) {
+                best = Some((i, c, e));
+            }
+        }
+    }
+    let (bi, mut c_best, mut e_best) = best?;
+    let (mut a, mut b) = (gaps[bi.saturating_sub(1)], gaps[(bi + 1).min(ng - 1)]);
+    const PHI: f64 = 0.618_033_988_75;
+    for _ in 0..10 {
+        let (x1, x2) = (b - PHI * (b - a), a + PHI * (b - a));
+        let f1 = at(x1, sims);
+        let f2 = at(x2, sims);
+        let v1 = f1.as_ref().map_or(f64::INFINITY, |f| f.1 .0);
+        let v2 = f2.as_ref().map_or(f64::INFINITY, |f| f.1 .0);
+        let winner = if v1 < v2 {
+            b = x2;
+            f1
+        } else {
+            a = x1;
+            f2
+        };
+        if let Some((c, e)) = winner {
+            if e.0 < e_best.0 {
+                c_best = c;
+                e_best = e;
+            }
+        }
+    }
+    let g = c_best.gap.unwrap_or(0.0);
+    let h = ((hi - lo) / ng as f64 * 0.25).max(1e-9);
+    let rp = at(g + h, sims).map(|e| e.1 .0);
+    let rm = at((g - h).max(0.0), sims).map(|e| e.1 .0);
+    let se = match (rp, rm) {
+        (Some(p), Some(m)) if p - 2.0 * e_best.0 + m > 0.0 => {
+            let curv = (p - 2.0 * e_best.0 + m) / (h * h);
+            let s2 = e_best.0 / (sel.nobs - (sel.npar + 2) as f64).max(1.0);
+            (2.0 * s2 / curv).sqrt()
+        }
+        _ => f64::NAN,
+    };
+    Some((c_best, e_best, se))
+}
+
+fn score(
+    cand: &Candidate,
+    ctx: &Context<'_, '_>,
+    sel: &Selection,
+    r: &DVector<f64>,
+    sims: &mut usize,
+) -> Option<Scored> {
+    let (cand, (rss, th, col, q), gap_se) = if cand.kind == EffectKind::Contact {
+        let (c, e, se) = scan_gap(cand, ctx, sel, r, sims)?;
+        (c, e, Some(se))
+    } else {
+        (cand.clone(), evaluate(cand, ctx, sel, r, sims)?, None)
+    };
+    let gain = if sel.rss > 0.0 { 1.0 - rss / sel.rss } else { 0.0 };
+    let bic = sel.nobs * (rss.max(1e-300) / sel.rss.max(1e-300)).ln()
+        + cand.nparams() as f64 * sel.nobs.ln();
+    let dof = (sel.nobs - (sel.npar + cand.nparams()) as f64).max(1.0);
+    let se_th = (rss.max(0.0) / dof).sqrt() / col.norm().max(1e-300);
+    let mut parameters = vec![];
+    let mut std_errors = vec![];
+    if let Some(g) = cand.gap {
+        parameters.push(("gap".to_string(), g));
+        std_errors.push(gap_se.unwrap_or(f64::NAN));
+    }
+    parameters.push((strength_name(cand.kind).to_string(), th));
+    std_errors.push(se_th);
+    Some(Scored {
+        effect: RankedEffect {
+            label: cand.label(),
+            candidate: cand,
+            parameters,
+            std_errors,
+            residual_explained: gain,
+            force_explained: None,
+            bic_change: bic,
+        },
+        col,
+        q,
+    })
+}
+
+/// 1 − ‖f̂ − θΦ‖² / ‖f̂‖².
+fn force_explained(
+    cand: &Candidate,
+    th: f64,
+    f: &DMatrix<f64>,
+    states: &DMatrix<f64>,
+    c: &DMatrix<f64>,
+) -> f64 {
+    let den = f.norm_squared();
+    if den > 0.0 {
+        1.0 - (f - cand.force(states, c) * th).norm_squared() / den
+    } else {
+        f64::NAN
+    }
+}
