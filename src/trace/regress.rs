@@ -124,38 +124,58 @@ pub fn segment_response(
     y
 }
 
-/// Segment response to a scalar force history `phi` along `dir` (right-hand
-/// side), from rest at every segment start.
-fn siso_response(
-    sm: &SampledModel,
-    cy: &DMatrix<f64>,
-    dy: &DMatrix<f64>,
-    dir: &DVector<f64>,
-    phi: &[f64],
-    seg: usize,
+/// Segment response to a force history resolved at the sub-step nodes
+/// (`forces` n × ((N−1)S+1), right-hand side), from rest at every segment
+/// start: `x_{k+1} = A x_k + Σ_j N_j f_{kS+j}`, `y_k = C_y x_k + D_y f_{kS}`.
+/// A force given along one direction `dir` with scalar node history `phi`
+/// uses the projected node inputs `N_j dir` (much cheaper).
+fn node_response(
+    ctx: &Context<'_, '_>,
+    force: NodeForce<'_>,
 ) -> DMatrix<f64> {
-    let b0 = &sm.b0 * dir;
-    let b1 = &sm.b1 * dir;
-    let dd = dy * dir;
-    let ns = phi.len();
+    let sm = ctx.input.sampled;
+    let (cy, dy) = (ctx.input.cy, ctx.input.dy);
+    let s = ctx.nodes.len() - 1;
+    let ns = ctx.input.measured.ncols();
     let mut y = DMatrix::zeros(cy.nrows(), ns);
     let mut x = DVector::zeros(2 * sm.n);
     let mut xn = DVector::zeros(2 * sm.n);
+    let proj: Option<(Vec<DVector<f64>>, DVector<f64>)> = match force {
+        NodeForce::Along(dir, _) => Some((ctx.nodes.iter().map(|nj| nj * dir).collect(), dy * dir)),
+        NodeForce::Full(_) => None,
+    };
     for k in 0..ns {
-        if k % seg == 0 {
+        if k % ctx.seg == 0 {
             x.fill(0.0);
         }
         let mut yk = y.column_mut(k);
         yk.gemv(1.0, cy, &x, 0.0);
-        yk.axpy(phi[k], &dd, 1.0);
-        if k + 1 < ns && (k + 1) % seg != 0 {
+        match (&force, &proj) {
+            (NodeForce::Along(_, phi), Some((_, dd))) => yk.axpy(phi[k * s], dd, 1.0),
+            (NodeForce::Full(f), _) => yk.gemv(1.0, dy, &f.column(k * s), 1.0),
+            _ => {}
+        }
+        if k + 1 < ns && (k + 1) % ctx.seg != 0 {
             xn.gemv(1.0, &sm.a, &x, 0.0);
-            xn.axpy(phi[k], &b0, 1.0);
-            xn.axpy(phi[k + 1], &b1, 1.0);
+            for j in 0..=s {
+                match (&force, &proj) {
+                    (NodeForce::Along(_, phi), Some((bj, _))) => xn.axpy(phi[k * s + j], &bj[j], 1.0),
+                    (NodeForce::Full(f), _) => xn.gemv(1.0, &ctx.nodes[j], &f.column(k * s + j), 1.0),
+                    _ => {}
+                }
+            }
             std::mem::swap(&mut x, &mut xn);
         }
     }
     y
+}
+
+/// A force history at the sub-step nodes.
+enum NodeForce<'a> {
+    /// Along one direction with a scalar history.
+    Along(&'a DVector<f64>, &'a [f64]),
+    /// Full n × nodes matrix.
+    Full(&'a DMatrix<f64>),
 }
 
 /// Weighted, stacked vector of a p × N matrix.
@@ -233,6 +253,19 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
     let r0 = stack(&(input.measured - &ylin), &w);
     let rss0 = r0.norm_squared();
     let lib = library(input.model, sm.c.amax() > 0.0, settings.friction_vreg);
+    let nodes = match sm.node_inputs() {
+        Ok(n) => n,
+        Err(e) => {
+            return TraceResult {
+                ranking: vec![],
+                selected: vec![],
+                rss_history: vec![rss0],
+                stop_reason: format!("sub-step input matrices could not be built: {e}"),
+                simulations: 0,
+            }
+        }
+    };
+    let hires = crate::linear::hermite_upsample(input.states, sm.fs, sm.substeps);
     let mut sel = Selection {
         q: vec![],
         cols: vec![],
@@ -248,7 +281,14 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
     let mut sims = 0usize;
     let mut stop = String::from("effect limit reached");
     for round in 0..settings.max_effects {
-        let ctx = Context { input, w: &w, seg, settings };
+        let ctx = Context {
+            input,
+            w: &w,
+            seg,
+            settings,
+            nodes: &nodes,
+            hires: &hires,
+        };
         let mut scored: Vec<Scored> = lib
             .iter()
             .filter(|c| !selected.iter().any(|s| same_effect(&s.candidate, c)))
@@ -348,6 +388,10 @@ struct Context<'a, 'b> {
     w: &'a [f64],
     seg: usize,
     settings: &'a TraceSettings,
+    /// Node input matrices of one sample.
+    nodes: &'a [DMatrix<f64>],
+    /// States upsampled to the sub-step nodes.
+    hires: &'a DMatrix<f64>,
 }
 
 struct Scored {
@@ -362,16 +406,15 @@ type Eval = (f64, f64, DVector<f64>, DVector<f64>);
 /// Weighted stacked response column of a candidate at unit strength
 /// (internal force on the left-hand side → minus on the right).
 fn column(cand: &Candidate, ctx: &Context<'_, '_>) -> DVector<f64> {
-    let input = ctx.input;
-    let sm = input.sampled;
+    let sm = ctx.input.sampled;
     let y = match cand.direction(sm.n) {
         Some(dir) => {
-            let phi: Vec<f64> = cand.shape(input.states, sm.n).iter().map(|x| -x).collect();
-            siso_response(sm, input.cy, input.dy, &dir, &phi, ctx.seg)
+            let phi: Vec<f64> = cand.shape(ctx.hires, sm.n).iter().map(|x| -x).collect();
+            node_response(ctx, NodeForce::Along(&dir, &phi))
         }
         None => {
-            let f = -cand.force(input.states, &sm.c);
-            segment_response(sm, input.cy, input.dy, None, &f, ctx.seg)
+            let f = -cand.force(ctx.hires, &sm.c);
+            node_response(ctx, NodeForce::Full(&f))
         }
     };
     stack(&y, ctx.w)
@@ -416,7 +459,7 @@ fn scan_gap(
     }
     let ng = ctx.settings.gap_grid.max(4);
     let gaps: Vec<f64> = (0..ng).map(|i| lo + (hi - lo) * i as f64 / (ng - 1) as f64).collect();
-    let mut at = |g: f64, sims: &mut usize| {
+    let at = |g: f64, sims: &mut usize| {
         let c = Candidate { gap: Some(g), ..cand.clone() };
         evaluate(&c, ctx, sel, r, sims).map(|e| (c, e))
     };
