@@ -25,3 +25,4 @@ pub mod horizon;
 pub mod update;
 pub mod correlate;
 pub mod trace;
+pub mod diagnose;

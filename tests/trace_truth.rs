@@ -46,6 +46,8 @@ fn run(truth: &Model, sensors: &[usize], noise: f64, seed: u64) -> tacit::trace:
         states: &states,
         identified_force: Some(&sim.fint),
         segment: 51,
+        baseline: None,
+        exclude: &[],
     };
     let t = std::time::Instant::now();
     let res = trace(&input, &TraceSettings::default());

@@ -1,7 +1,9 @@
 //! Command-line front end: one file per subcommand.
 
+mod diagnose;
 mod modal;
 mod simulate;
+mod update;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -20,6 +22,10 @@ enum Command {
     Modal(modal::Args),
     /// Simulate a model under an input and write a record (with its truth).
     Simulate(simulate::Args),
+    /// Update model parameters so simulated responses match a record (GLS or PCD).
+    Update(update::Args),
+    /// Find what the model misses, trace it to an effect, add and fit it, report before/after.
+    Diagnose(diagnose::Args),
 }
 
 /// Run the parsed command.
@@ -27,6 +33,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Modal(a) => modal::run(a),
         Command::Simulate(a) => simulate::run(a),
+        Command::Update(a) => update::run(a),
+        Command::Diagnose(a) => diagnose::run(a),
     }
 }
 
@@ -103,4 +111,54 @@ pub fn with_suffix(path: &std::path::Path, suffix: &str) -> PathBuf {
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
     path.with_file_name(format!("{stem}{suffix}.{ext}"))
+}
+
+/// How to read a record file: `.mat` files need a variable mapping and a rate.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RecordOpts {
+    /// For .mat records: variable=channel pairs, e.g. `V1=force_1,V2=disp_1`.
+    #[arg(long)]
+    pub mat_map: Option<String>,
+    /// For .mat records: sample rate, Hz.
+    #[arg(long)]
+    pub mat_fs: Option<f64>,
+    /// For .mat records: subtract each channel's mean.
+    #[arg(long)]
+    pub remove_mean: bool,
+}
+
+/// Read a record (HDF5, CSV, or MAT with `opts`).
+pub fn load_record(path: &std::path::Path, opts: &RecordOpts) -> anyhow::Result<tacit::record::Record> {
+    use tacit::record::{self, Format, MatMapping, Quantity};
+    if record::Format::from_path(path)? != Format::Mat {
+        return Ok(record::read(path)?);
+    }
+    let map = opts
+        .mat_map
+        .as_ref()
+        .ok_or_else(|| anyhow::anyhow!("{}: a .mat record needs --mat-map and --mat-fs", path.display()))?;
+    let fs = opts
+        .mat_fs
+        .ok_or_else(|| anyhow::anyhow!("{}: a .mat record needs --mat-fs", path.display()))?;
+    let mut channels = vec![];
+    for pair in map.split(',') {
+        let (var, ch) = pair
+            .split_once('=')
+            .ok_or_else(|| anyhow::anyhow!("--mat-map: '{pair}' is not variable=channel"))?;
+        let (q, d) = ch
+            .trim()
+            .split_once('_')
+            .ok_or_else(|| anyhow::anyhow!("--mat-map: channel '{ch}' is not like force_1"))?;
+        let q = Quantity::from_prefix(q).ok_or_else(|| anyhow::anyhow!("--mat-map: unknown quantity '{q}'"))?;
+        let d: usize = d.parse().map_err(|_| anyhow::anyhow!("--mat-map: bad DOF in '{ch}'"))?;
+        channels.push((var.trim().to_string(), q, d));
+    }
+    Ok(record::read_mat(
+        path,
+        &MatMapping {
+            channels,
+            fs,
+            remove_mean: opts.remove_mean,
+        },
+    )?)
 }

@@ -53,6 +53,12 @@ pub struct TraceInput<'a> {
     pub identified_force: Option<&'a DMatrix<f64>>,
     /// Samples per segment.
     pub segment: usize,
+    /// Segment predictions of the current model (p × N) when it is not the
+    /// linear model (after effects were added); `None`: the linear model's
+    /// segments from the reconstructed states.
+    pub baseline: Option<&'a DMatrix<f64>>,
+    /// Effects already in the model (not proposed again).
+    pub exclude: &'a [Candidate],
 }
 
 /// A scored effect with its parameters from the regression.
@@ -249,8 +255,13 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
     let (p, ns) = input.measured.shape();
     let seg = input.segment.max(2);
     let w = channel_weights(input.measured);
-    let ylin = segment_response(sm, input.cy, input.dy, Some(input.states), input.force_ext, seg);
-    let r0 = stack(&(input.measured - &ylin), &w);
+    let r0 = match input.baseline {
+        Some(b) => stack(&(input.measured - b), &w),
+        None => {
+            let ylin = segment_response(sm, input.cy, input.dy, Some(input.states), input.force_ext, seg);
+            stack(&(input.measured - &ylin), &w)
+        }
+    };
     let rss0 = r0.norm_squared();
     let lib = library(input.model, sm.c.amax() > 0.0, settings.friction_vreg);
     let nodes = match sm.node_inputs() {
@@ -292,6 +303,7 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
         let mut scored: Vec<Scored> = lib
             .iter()
             .filter(|c| !selected.iter().any(|s| same_effect(&s.candidate, c)))
+            .filter(|c| !input.exclude.iter().any(|s| same_effect(s, c)))
             .filter_map(|c| score(c, &ctx, &sel, &r, &mut sims))
             .collect();
         scored.sort_by(|a, b| a.effect.bic_change.total_cmp(&b.effect.bic_change));

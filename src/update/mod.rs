@@ -1,1 +1,333 @@
-//! (in progress)
+//! Time-domain parametric model updating (paper §5, §6.1).
+//!
+//! Adjust parameters `p` of a [`Model`] (spring stiffnesses, masses,
+//! damping, contact gap and stiffness, friction level, cubic coefficient)
+//! so that simulated responses match a record:
+//!
+//! 1. simulate the model at `p` (eq. 8) over each segment of the record,
+//!    from the segment's start state ([`shooting`]), on the full-order or
+//!    the reduced model ([`forward`]);
+//! 2. form the residual at the chosen DOFs and samples: GLS (eq. 9) or PCD
+//!    (eqs 11–12) ([`cost`]);
+//! 3. minimise `‖r‖² + α‖x − x0‖²` (eq. 10, squared) with Levenberg–Marquardt,
+//!    Gauss–Newton, BFGS or the simplex ([`optimize`]), with bounds and
+//!    centered finite-difference derivatives;
+//! 4. report the parameters, the errors before and after, and whether the
+//!    data determine them ([`identifiability`]).
+//!
+//! The front door is [`fit`] (one start) or [`fit_multistart`]. A failed
+//! simulation inside the search is a rejected trial, never a large cost;
+//! the result says how the search ended. Everything is single-threaded and
+//! deterministic: the same problem gives the same result bit for bit.
+//!
+//! ```no_run
+//! use tacit::update::{self, Parameter, Problem, Target, FitSettings};
+//! # fn main() -> tacit::Result<()> {
+//! # let (model, record): (tacit::model::Model, tacit::record::Record) = todo!();
+//! let params = vec![
+//!     Parameter::relative(&model, Target::SpringStiffness(2))?,
+//!     Parameter::relative(&model, Target::CubicK3(0))?,
+//! ];
+//! let u0 = vec![0.0; model.ndof()];
+//! let problem = Problem::from_record(&model, &record, &[tacit::record::Quantity::Disp],
+//!     None, params, u0.clone(), u0)?;
+//! let result = update::fit(&problem, &FitSettings::default())?;
+//! println!("{:?}", result.percent_changes());
+//! # Ok(()) }
+//! ```
+
+pub mod cost;
+pub mod figures;
+pub mod forward;
+pub mod identifiability;
+pub mod optimize;
+pub mod param;
+pub mod problem;
+pub mod shooting;
+pub mod table4;
+
+pub use forward::Failure;
+pub use identifiability::Identifiability;
+pub use optimize::{FitSettings, Optimizer, Termination};
+pub use param::{parse_free, Parameter, Scaling, Target};
+pub use problem::{Metric, Observation, Problem};
+pub use shooting::Segment;
+
+use crate::error::Result;
+use crate::model::Model;
+use cost::Evaluator;
+use serde::Serialize;
+
+/// A fitted parameter.
+#[derive(Debug, Clone, Serialize)]
+pub struct FittedParameter {
+    /// Name.
+    pub name: String,
+    /// What it is.
+    pub target: Target,
+    /// Nominal value p0.
+    pub nominal: f64,
+    /// Start of the search.
+    pub start: f64,
+    /// Final value.
+    pub value: f64,
+    /// Change from nominal, % (NaN for a zero nominal value).
+    pub percent_change: f64,
+    /// Lower bound.
+    pub lower: f64,
+    /// Upper bound.
+    pub upper: f64,
+    /// True when the value sits on a bound.
+    pub at_bound: bool,
+}
+
+/// Relative error of one channel.
+#[derive(Debug, Clone, Serialize)]
+pub struct ChannelError {
+    /// Channel name, e.g. `disp_4`.
+    pub channel: String,
+    /// `‖ŷ − y‖₂ / ‖y‖₂` over the simulated samples.
+    pub relative_error: f64,
+}
+
+/// Relative errors of every channel and over all of them.
+#[derive(Debug, Clone, Serialize)]
+pub struct ErrorReport {
+    /// Per channel.
+    pub channels: Vec<ChannelError>,
+    /// Over all channels: `√(Σ‖ŷ − y‖² / Σ‖y‖²)` with each channel scaled by
+    /// its weight.
+    pub overall: f64,
+}
+
+/// Everything a fit did.
+#[derive(Debug, Clone, Serialize)]
+pub struct FitResult {
+    /// Fitted parameters.
+    pub parameters: Vec<FittedParameter>,
+    /// Final scaled parameters.
+    pub x: Vec<f64>,
+    /// Optimizer used.
+    pub optimizer: Optimizer,
+    /// Metric used.
+    pub metric: Metric,
+    /// Reduction used (None: full order).
+    pub reduction: Option<crate::reduce::Method>,
+    /// How the search ended.
+    pub termination: Termination,
+    /// Iterations.
+    pub iterations: usize,
+    /// Cost evaluations (parameter vectors) by the optimizer.
+    pub evaluations: usize,
+    /// Segment simulations, all included (optimizer, final Jacobian, error
+    /// reports).
+    pub simulations: usize,
+    /// Rejected trial points whose evaluation failed.
+    pub failed_trials: usize,
+    /// Cost J at the start and after each iteration.
+    pub cost_history: Vec<f64>,
+    /// Relative errors at the start.
+    pub errors_before: Option<ErrorReport>,
+    /// Relative errors at the solution.
+    pub errors_after: Option<ErrorReport>,
+    /// Identifiability at the solution (None when its Jacobian failed).
+    pub identifiability: Option<Identifiability>,
+    /// Relative difference between the reduced and the full-order responses
+    /// at the solution (None for full order).
+    pub reduction_error: Option<f64>,
+    /// Wall time, s.
+    pub elapsed_s: f64,
+    /// The model at the fitted values.
+    #[serde(skip)]
+    pub model: Model,
+}
+
+impl FitResult {
+    /// Percent changes of the parameters, in order.
+    pub fn percent_changes(&self) -> Vec<f64> {
+        self.parameters.iter().map(|p| p.percent_change).collect()
+    }
+    /// Final values, in order.
+    pub fn values(&self) -> Vec<f64> {
+        self.parameters.iter().map(|p| p.value).collect()
+    }
+    /// Final cost.
+    pub fn cost(&self) -> f64 {
+        self.cost_history.last().copied().unwrap_or(f64::NAN)
+    }
+}
+
+/// Fit the problem from its parameters' start values.
+pub fn fit(problem: &Problem, settings: &FitSettings) -> Result<FitResult> {
+    problem.validate()?;
+    settings.validate()?;
+    let t0 = std::time::Instant::now();
+    let mut ev = Evaluator::new(problem);
+    let x0 = problem.x_start();
+    let (lo, hi) = problem.x_bounds();
+    let out = optimize::minimize(&mut ev, &x0, &lo, &hi, settings);
+    let (evaluations, mut simulations) = (ev.evaluations, ev.simulations);
+    let (errors_before, n1) = error_report(problem, &x0);
+    let (errors_after, n2) = error_report(problem, &out.x);
+    let (identifiability, n3) = if matches!(out.termination, Termination::StartFailed { .. }) {
+        (None, 0)
+    } else {
+        identify(problem, &out.x, settings)
+    };
+    simulations += n1 + n2 + n3;
+    let reduction_error = forward::reduction_error(problem, &out.x);
+    if reduction_error.is_some() {
+        simulations += 2 * problem.segments.len();
+    }
+    let parameters = problem
+        .parameters
+        .iter()
+        .zip(&out.x)
+        .map(|(p, &x)| {
+            let value = p.from_x(x);
+            FittedParameter {
+                name: p.name.clone(),
+                target: p.target,
+                nominal: p.nominal,
+                start: p.start,
+                value,
+                percent_change: p.percent(value),
+                lower: p.lower,
+                upper: p.upper,
+                at_bound: x <= p.to_x(p.lower) || x >= p.to_x(p.upper),
+            }
+        })
+        .collect();
+    Ok(FitResult {
+        parameters,
+        model: problem.model_at(&out.x),
+        x: out.x,
+        optimizer: settings.optimizer,
+        metric: problem.metric,
+        reduction: problem.reduction,
+        termination: out.termination,
+        iterations: out.iterations,
+        evaluations,
+        simulations,
+        failed_trials: out.failed_trials,
+        cost_history: out.history,
+        errors_before,
+        errors_after,
+        identifiability,
+        reduction_error,
+        elapsed_s: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// Fit from several starts (scaled changes, one vector per start, e.g.
+/// `[-0.3, 0.3]` for −30 % / +30 % on relative parameters) and return every
+/// result with the index of the lowest final cost among the runs that did
+/// not fail at their start (None if all did).
+pub fn fit_multistart(
+    problem: &Problem,
+    settings: &FitSettings,
+    starts: &[Vec<f64>],
+) -> Result<(Option<usize>, Vec<FitResult>)> {
+    let mut results = Vec::with_capacity(starts.len());
+    for (k, s) in starts.iter().enumerate() {
+        if s.len() != problem.parameters.len() {
+            return Err(crate::TacitError::Setting(format!(
+                "start {k} has {} values, the problem {} parameters",
+                s.len(),
+                problem.parameters.len()
+            )));
+        }
+        let mut p = problem.clone();
+        for (prm, &x) in p.parameters.iter_mut().zip(s) {
+            prm.start = prm.from_x(x).clamp(prm.lower, prm.upper);
+        }
+        results.push(fit(&p, settings)?);
+    }
+    let best = results
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| r.cost().is_finite())
+        .min_by(|a, b| a.1.cost().total_cmp(&b.1.cost()))
+        .map(|(i, _)| i);
+    Ok((best, results))
+}
+
+/// Simulated channels at `x` over the whole record (NaN outside the
+/// segments), one vector per observation; `Err` when a simulation fails.
+pub fn predict(problem: &Problem, x: &[f64]) -> std::result::Result<Vec<Vec<f64>>, Failure> {
+    let (resp, _) = forward::simulate(problem, x);
+    let resp = resp?;
+    let n = problem.samples();
+    let mut out = vec![vec![f64::NAN; n]; problem.observations.len()];
+    for (seg, y) in problem.segments.iter().zip(&resp) {
+        for (r, row) in out.iter_mut().enumerate() {
+            for k in 0..y.ncols() {
+                row[seg.start + k] = y[(r, k)];
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Per-channel relative errors at `x` and the simulations spent.
+fn error_report(problem: &Problem, x: &[f64]) -> (Option<ErrorReport>, usize) {
+    let (resp, n) = forward::simulate(problem, x);
+    let Ok(resp) = resp else {
+        return (None, n);
+    };
+    let mut channels = Vec::new();
+    let (mut tn, mut td) = (0.0, 0.0);
+    for (r, o) in problem.observations.iter().enumerate() {
+        let (mut num, mut den) = (0.0, 0.0);
+        for (seg, y) in problem.segments.iter().zip(&resp) {
+            for k in 0..y.ncols() {
+                let m = o.data[seg.start + k];
+                num += (y[(r, k)] - m).powi(2);
+                den += m * m;
+            }
+        }
+        tn += num * o.weight * o.weight;
+        td += den * o.weight * o.weight;
+        channels.push(ChannelError {
+            channel: o.name(),
+            relative_error: crate::metrics::ratio(num, den),
+        });
+    }
+    let overall = crate::metrics::ratio(tn, td);
+    (Some(ErrorReport { channels, overall }), n)
+}
+
+/// Identifiability on the GLS residual at `x`; returns the report and the
+/// simulations spent.
+fn identify(problem: &Problem, x: &[f64], s: &FitSettings) -> (Option<Identifiability>, usize) {
+    let gls = Problem {
+        metric: Metric::Gls,
+        alpha: 0.0,
+        ..problem.clone()
+    };
+    let mut ev = Evaluator::new(&gls);
+    let Ok(r0) = ev.residual(x) else {
+        return (None, ev.simulations);
+    };
+    let (lo, hi) = gls.x_bounds();
+    let jac = optimize::jacobian(&mut ev, x, &r0, &lo, &hi, s.fd_step);
+    let sims = ev.simulations;
+    let Ok(jac) = jac else {
+        return (None, sims);
+    };
+    // residual rows are ordered sample-major within a segment (column-major
+    // observation × sample matrices)
+    let rms: Vec<f64> = gls
+        .observations
+        .iter()
+        .map(|o| s.noise_level * o.weight * crate::signal::rms_of(&o.data))
+        .collect();
+    let mut sig = Vec::with_capacity(r0.len());
+    for seg in &gls.segments {
+        for _ in 0..seg.len {
+            sig.extend(&rms);
+        }
+    }
+    let rep = identifiability::report(&jac, &sig, &gls.parameters, s.noise_level, s.determined_tol);
+    (Some(rep), sims)
+}

@@ -1,0 +1,748 @@
+//! Close the loop: find the residual, trace it to the missing effect, add
+//! it, fit it, and report the error before and after.
+//!
+//! 1. **Before**: the declared model's errors ([`errors`]): multiple-shooting
+//!    prediction over short segments from the reconstructed start states
+//!    (`relative_error`) and open-loop simulation (`simulation_error`).
+//! 2. **Identify**: the full-horizon smoother ([`crate::horizon`]) on the
+//!    full-order linear model, an unknown force at every DOF: reconstructed
+//!    states and internal force.
+//! 3. **Trace** ([`crate::trace`]): rank the candidate effects by how much of
+//!    the segment residual they remove (BIC, minimum gain).
+//! 4. **Add and fit**: add the best effect as a model element and fit all
+//!    added effects' parameters jointly by multiple-shooting simulation error
+//!    ([`crate::update`], Levenberg–Marquardt, bounds, several starts for a
+//!    contact), with sub-steps that resolve the stiffest element. The new
+//!    residual (nonlinear model) goes back to step 3 while the next effect
+//!    pays for itself.
+//! 5. **After**: the errors again, on the record and on a validation record.
+
+pub mod effects;
+pub mod errors;
+pub mod lifted;
+pub mod report;
+
+use crate::error::{Result, TacitError};
+use crate::horizon::{self, problem::HorizonData, settings::HorizonSettings};
+use crate::integrate::SimSettings;
+use crate::linear::SampledModel;
+use crate::model::Model;
+use crate::record::{Quantity, Record};
+use crate::trace::{self, RankedEffect, TraceInput, TraceSettings};
+use crate::update::optimize::FitSettings;
+use crate::update::problem::Observation;
+use crate::update::shooting::{self, Segment};
+use effects::AddedEffect;
+pub use errors::{ChannelError, Comparison, ErrorSet};
+use nalgebra::DMatrix;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Settings of the diagnosis. Every field has a default.
+#[derive(Debug, Clone, Serialize)]
+pub struct DiagnoseSettings {
+    /// Segment length of the multiple-shooting error, s (default 0.1).
+    pub segment_seconds: f64,
+    /// Sub-steps per sample of the linear model and the identification
+    /// (default 10).
+    pub substeps: usize,
+    /// Most effects added (default 3).
+    pub max_effects: usize,
+    /// Trace settings.
+    pub trace: TraceSettings,
+    /// Identification settings.
+    pub horizon: HorizonSettings,
+    /// Optimizer settings of the parameter fit.
+    pub fit: FitSettings,
+    /// Segments used by the fit (evenly spread over the record; default 20).
+    pub fit_segments: usize,
+    /// Target ω h of the stiffest element when choosing sub-steps (default 0.15).
+    pub omega_h: f64,
+    /// Largest number of sub-steps (default 80).
+    pub max_substeps: usize,
+    /// An added and fitted effect must lower the multiple-shooting error by
+    /// at least this fraction, or it is withdrawn (default 0.1).
+    pub min_improvement: f64,
+    /// Where the states come from (default: reconstructed).
+    pub states: StatesSource,
+}
+
+/// Source of the states the trace and the segments use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StatesSource {
+    /// Reconstructed from the record by the identification.
+    Reconstructed,
+    /// The truth stored with a simulated record (for validation of the
+    /// later steps only; an error on a record without truth).
+    Truth,
+}
+
+impl Default for DiagnoseSettings {
+    fn default() -> Self {
+        DiagnoseSettings {
+            segment_seconds: 0.1,
+            substeps: 10,
+            max_effects: 3,
+            trace: TraceSettings::default(),
+            horizon: HorizonSettings::default(),
+            fit: FitSettings {
+                max_iterations: 30,
+                ..FitSettings::default()
+            },
+            fit_segments: 20,
+            omega_h: 0.15,
+            max_substeps: 80,
+            min_improvement: 0.1,
+            states: StatesSource::Reconstructed,
+        }
+    }
+}
+
+/// Sub-steps that resolve the stiffest element of `model`:
+/// `ω h ≤ omega_h` with ω the contact (or stiffest spring) frequency of the
+/// lightest masses it joins; at least `base`, at most `max`.
+pub fn auto_substeps(model: &Model, fs: f64, base: usize, omega_h: f64, max: usize) -> usize {
+    let inv_m = |d: usize| 1.0 / model.masses[d - 1];
+    let mut w2: f64 = 0.0;
+    for c in &model.contacts {
+        let s: f64 = c.dofs.iter().map(|&d| inv_m(d)).sum();
+        w2 = w2.max(c.stiffness * s);
+    }
+    for sp in &model.springs {
+        let s: f64 = sp.dofs.iter().map(|&d| inv_m(d)).sum();
+        w2 = w2.max(sp.stiffness * s);
+    }
+    let need = (w2.sqrt() / (omega_h * fs)).ceil() as usize;
+    need.clamp(base.max(1), max.max(base))
+}
+
+/// The reconstruction from the identification step.
+#[derive(Debug, Clone)]
+pub struct Reconstruction {
+    /// States `[u; v]` (2n × N).
+    pub states: DMatrix<f64>,
+    /// Identified internal force (n × N), left-hand-side convention (the
+    /// simulator's `f_int`: the force the model lacks is `−f_int`).
+    pub force: DMatrix<f64>,
+    /// Standard deviation of the force (n × N) when available.
+    pub force_std: Option<DMatrix<f64>>,
+    /// Tikhonov weight λ used.
+    pub lambda: f64,
+    /// Status and notes of the smoother.
+    pub status: String,
+    /// Seconds.
+    pub elapsed_s: f64,
+}
+
+/// A record prepared for the loop: the channels, the comparison data and
+/// the reconstruction.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    /// `(quantity, dof0)` of every measured channel used.
+    pub channels: Vec<(Quantity, usize)>,
+    /// Data the errors are computed on.
+    pub comparison: Comparison,
+    /// Reconstructed states and force.
+    pub recon: Reconstruction,
+    /// The linear model's sampled map.
+    pub sampled: SampledModel,
+    /// Samples per segment.
+    pub segment: usize,
+}
+
+/// Prepare a record: select the channels (all outputs at `sensors`, or all
+/// outputs), reconstruct states and force with the linear part of `model`,
+/// cut the segments.
+pub fn prepare(
+    model: &Model,
+    rec: &Record,
+    sensors: Option<&[usize]>,
+    settings: &DiagnoseSettings,
+) -> Result<Prepared> {
+    let n = model.ndof();
+    rec.validate(Some(n))?;
+    if let Some(s) = sensors {
+        for &d in s {
+            if d < 1 || d > n {
+                return Err(TacitError::Setting(format!(
+                    "sensor DOF {d} is outside the model (1..={n})"
+                )));
+            }
+            if !rec.outputs.iter().any(|c| c.dof == d) {
+                return Err(TacitError::record(
+                    rec.source.clone(),
+                    format!("no output channel at sensor DOF {d}"),
+                ));
+            }
+        }
+    }
+    let outs: Vec<_> = rec
+        .outputs
+        .iter()
+        .filter(|c| sensors.is_none_or(|s| s.contains(&c.dof)))
+        .collect();
+    if outs.is_empty() {
+        return Err(TacitError::record(rec.source.clone(), "no output channel to compare"));
+    }
+    let segment = ((settings.segment_seconds * rec.fs).round() as usize).max(4);
+    if rec.len() < 2 * segment {
+        return Err(TacitError::record(
+            rec.source.clone(),
+            format!(
+                "{} samples: at least two segments of {segment} samples are needed",
+                rec.len()
+            ),
+        ));
+    }
+    let channels: Vec<(Quantity, usize)> = outs.iter().map(|c| (c.quantity, c.dof - 1)).collect();
+    let force = crate::signal::force_matrix(rec, n);
+    let measured = DMatrix::from_fn(outs.len(), rec.len(), |c, k| outs[c].data[k]);
+    let sampled = SampledModel::from_model(&model.linear_part(), rec.fs, settings.substeps)?;
+    let mut recon = reconstruct(&sampled, &force, &measured, &channels, &settings.horizon)?;
+    if settings.states == StatesSource::Truth {
+        let t = rec.truth.as_ref().ok_or_else(|| {
+            TacitError::record(rec.source.clone(), "states from the truth: the record has no truth")
+        })?;
+        for i in 0..n {
+            for k in 0..rec.len() {
+                recon.states[(i, k)] = t.u[i][k];
+                recon.states[(n + i, k)] = t.v[i][k];
+            }
+        }
+        recon.status = format!("{} (states replaced by the record's truth)", recon.status);
+    }
+    let state = |k: usize| -> Result<(Vec<f64>, Vec<f64>)> {
+        let u = (0..n).map(|i| recon.states[(i, k)]).collect();
+        let v = (0..n).map(|i| recon.states[(n + i, k)]).collect();
+        Ok((u, v))
+    };
+    let segments = shooting::uniform(rec.len(), segment, state)?;
+    let (u0, v0) = state(0)?;
+    let observations = outs
+        .iter()
+        .map(|c| Observation {
+            quantity: c.quantity,
+            dof: c.dof,
+            weight: 1.0 / c.data.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-300),
+            data: c.data.clone(),
+        })
+        .collect();
+    Ok(Prepared {
+        channels,
+        comparison: Comparison {
+            fs: rec.fs,
+            force,
+            observations,
+            segments,
+            whole: Segment {
+                start: 0,
+                len: rec.len(),
+                u0,
+                v0,
+            },
+        },
+        recon,
+        sampled,
+        segment,
+    })
+}
+
+/// Reconstruct states and the internal force with the full-horizon
+/// smoother, an unknown force at every DOF.
+pub fn reconstruct(
+    sampled: &SampledModel,
+    force: &DMatrix<f64>,
+    measured: &DMatrix<f64>,
+    channels: &[(Quantity, usize)],
+    settings: &HorizonSettings,
+) -> Result<Reconstruction> {
+    let t = Instant::now();
+    let n = sampled.n;
+    let unknown = horizon::problem::unknown_at_dofs(n, &(0..n).collect::<Vec<_>>())?;
+    let data = HorizonData {
+        known_force: force,
+        measured,
+        channels,
+        unknown: &unknown,
+    };
+    let res = horizon::identify(sampled, &data, settings)?;
+    let mut status = format!("{:?}", res.status);
+    if !res.notes.is_empty() {
+        status = format!("{status}: {}", res.notes.join("; "));
+    }
+    Ok(Reconstruction {
+        force: -&res.dof_force,
+        force_std: res.force_std.clone(),
+        states: res.states,
+        lambda: res.weights.lambda,
+        status,
+        elapsed_s: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// One effect in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct EffectReport {
+    /// `contact`, `friction`, `cubic`, `stiffness`, `ground_spring`, `damping`.
+    pub kind: String,
+    /// DOFs from 1 (contact `[i, j]`: on when `u_i − u_j` exceeds the gap).
+    pub dofs: Vec<usize>,
+    /// Label.
+    pub label: String,
+    /// Fitted parameters, SI (`gap` m, `stiffness` N/m, `level` N, `k3`
+    /// N/m³, `delta` relative change).
+    pub parameters: BTreeMap<String, f64>,
+    /// Standard errors of the parameters (null when not determined).
+    pub std_errors: BTreeMap<String, Option<f64>>,
+    /// Parameters from the trace regression (the fit's start).
+    pub traced: BTreeMap<String, f64>,
+    /// Scores.
+    pub score: Score,
+}
+
+/// How much an effect pays.
+#[derive(Debug, Clone, Serialize)]
+pub struct Score {
+    /// Fraction of the remaining segment residual its regression removed.
+    pub residual_explained: f64,
+    /// BIC change of the regression (negative pays).
+    pub bic_change: f64,
+    /// Fraction of the identified force it explains.
+    pub force_explained: Option<f64>,
+    /// Multiple-shooting error before it was added.
+    pub error_before: Option<f64>,
+    /// Multiple-shooting error after it was added and fitted.
+    pub error_after: Option<f64>,
+}
+
+/// One round of the loop.
+#[derive(Debug, Clone, Serialize)]
+pub struct Round {
+    /// Effect proposed (None when none paid).
+    pub proposed: Option<String>,
+    /// Whether it was kept.
+    pub kept: bool,
+    /// Why the round ended as it did.
+    pub note: String,
+    /// Fit termination (if fitted).
+    pub fit: Option<String>,
+    /// Simulations spent by the fit.
+    pub simulations: usize,
+}
+
+/// Errors on the validation record.
+#[derive(Debug, Clone, Serialize)]
+pub struct Validation {
+    /// Declared model.
+    pub before: ErrorSet,
+    /// Fitted model.
+    pub after: ErrorSet,
+    /// Linear model driven by the force identified on the first record
+    /// (non-parametric prediction), multiple-shooting error.
+    pub nonparametric_relative_error: Option<f64>,
+}
+
+/// The result of [`diagnose`].
+#[derive(Debug, Clone, Serialize)]
+pub struct Diagnosis {
+    /// "no missing effect found" or what was found.
+    pub verdict: String,
+    /// Declared model's errors.
+    pub before: ErrorSet,
+    /// Fitted model's errors.
+    pub after: ErrorSet,
+    /// On the validation record, when given.
+    pub validation: Option<Validation>,
+    /// Effects added, in order.
+    pub effects: Vec<EffectReport>,
+    /// Best candidates of the first trace round.
+    pub ranking: Vec<RankedEffect>,
+    /// The rounds of the loop.
+    pub rounds: Vec<Round>,
+    /// Sub-steps used before and after.
+    pub substeps: (usize, usize),
+    /// Nonlinear simulations run (fits and errors).
+    pub simulations: usize,
+    /// Linear segment simulations of the trace.
+    pub trace_simulations: usize,
+    /// Identification notes.
+    pub identification: String,
+    /// Timings, s.
+    pub timings: BTreeMap<String, f64>,
+    /// The fitted model.
+    #[serde(skip)]
+    pub model: Model,
+    /// Data of the first record (for figures).
+    #[serde(skip)]
+    pub prepared: Prepared,
+    /// Segment predictions before and after (p × N).
+    #[serde(skip)]
+    pub predictions: (Option<DMatrix<f64>>, Option<DMatrix<f64>>),
+}
+
+/// Pick up to `k` segments spread evenly over `all`.
+fn spread(all: &[Segment], k: usize) -> Vec<Segment> {
+    if all.len() <= k || k == 0 {
+        return all.to_vec();
+    }
+    (0..k).map(|i| all[i * all.len() / k].clone()).collect()
+}
+
+/// Run the loop.
+pub fn diagnose(
+    declared: &Model,
+    rec: &Record,
+    validation: Option<&Record>,
+    sensors: Option<&[usize]>,
+    settings: &DiagnoseSettings,
+    progress: &dyn Fn(&str),
+) -> Result<Diagnosis> {
+    let t_all = Instant::now();
+    let mut timings = BTreeMap::new();
+    progress("identify");
+    let prep = prepare(declared, rec, sensors, settings)?;
+    timings.insert("identify".into(), prep.recon.elapsed_s);
+    let cmp = &prep.comparison;
+    let base_sub = auto_substeps(declared, rec.fs, settings.substeps, settings.omega_h, settings.max_substeps);
+    let sim0 = SimSettings {
+        substeps: base_sub,
+        ..Default::default()
+    };
+    progress("errors before");
+    let before = cmp.errors(declared, sim0);
+    let mut sims = 2 * cmp.segments.len() + 2;
+    let measured = cmp.measured();
+    let (cy, dy) = prep.sampled.outputs(&prep.channels)?;
+    let pred_before = cmp.predict(declared, &cmp.segments, sim0).ok();
+    let mut current = declared.clone();
+    let mut current_err = before.relative_error;
+    let mut current_sub = base_sub;
+    let mut baseline = if declared.is_nonlinear() {
+        pred_before.clone()
+    } else {
+        None
+    };
+    let mut added: Vec<(AddedEffect, RankedEffect, Score)> = vec![];
+    let mut rounds = vec![];
+    let mut ranking = vec![];
+    let mut trace_sims = 0;
+    let t_loop = Instant::now();
+    for round in 0..settings.max_effects {
+        progress(&format!("trace, round {}", round + 1));
+        let exclude: Vec<_> = added.iter().map(|a| a.0.candidate.clone()).collect();
+        let input = TraceInput {
+            model: declared,
+            sampled: &prep.sampled,
+            cy: &cy,
+            dy: &dy,
+            measured: &measured,
+            force_ext: &cmp.force,
+            states: &prep.recon.states,
+            identified_force: Some(&prep.recon.force),
+            segment: prep.segment,
+            baseline: baseline.as_ref(),
+            exclude: &exclude,
+        };
+        let ts = TraceSettings {
+            max_effects: 1,
+            ..settings.trace
+        };
+        let tr = trace::trace(&input, &ts);
+        trace_sims += tr.simulations;
+        if round == 0 {
+            ranking = tr.ranking.iter().take(10).cloned().collect();
+        }
+        let Some(best) = tr.selected.first().cloned() else {
+            rounds.push(Round {
+                proposed: None,
+                kept: false,
+                note: tr.stop_reason.clone(),
+                fit: None,
+                simulations: 0,
+            });
+            break;
+        };
+        progress(&format!("fit {}", best.label));
+        let mut trial = current.clone();
+        let eff = effects::add(&mut trial, &best);
+        let mut all: Vec<AddedEffect> = added.iter().map(|a| a.0.clone()).collect();
+        all.push(eff.clone());
+        let (fitted, note, fit_sims) = fit_effects(&trial, &all, cmp, rec.fs, settings)?;
+        sims += fit_sims;
+        let sub = auto_substeps(&fitted, rec.fs, settings.substeps, settings.omega_h, settings.max_substeps);
+        let sim = SimSettings {
+            substeps: sub,
+            ..Default::default()
+        };
+        let pred = cmp.predict(&fitted, &cmp.segments, sim);
+        sims += cmp.segments.len();
+        let new_err = pred.as_ref().ok().map(|y| cmp.total_error(y));
+        let pays = match (current_err, new_err) {
+            (Some(a), Some(b)) => b < a * (1.0 - settings.min_improvement),
+            (None, Some(_)) => true,
+            _ => false,
+        };
+        rounds.push(Round {
+            proposed: Some(best.label.clone()),
+            kept: pays,
+            note: if pays {
+                format!(
+                    "kept: multiple-shooting error {:.4} → {:.4}",
+                    current_err.unwrap_or(f64::NAN),
+                    new_err.unwrap_or(f64::NAN)
+                )
+            } else {
+                format!(
+                    "withdrawn: the fitted effect does not lower the multiple-shooting error by {:.0} % ({:.4} → {:.4})",
+                    100.0 * settings.min_improvement,
+                    current_err.unwrap_or(f64::NAN),
+                    new_err.unwrap_or(f64::NAN)
+                )
+            },
+            fit: Some(note),
+            simulations: fit_sims,
+        });
+        if !pays {
+            break;
+        }
+        let score = Score {
+            residual_explained: best.residual_explained,
+            bic_change: best.bic_change,
+            force_explained: best.force_explained,
+            error_before: current_err,
+            error_after: new_err,
+        };
+        added.push((eff, best, score));
+        current = fitted;
+        current_err = new_err;
+        current_sub = sub;
+        baseline = pred.ok();
+    }
+    timings.insert("trace_and_fit".into(), t_loop.elapsed().as_secs_f64());
+    progress("errors after");
+    let sim1 = SimSettings {
+        substeps: current_sub,
+        ..Default::default()
+    };
+    let after = cmp.errors(&current, sim1);
+    sims += cmp.segments.len() + 1;
+    let pred_after = cmp.predict(&current, &cmp.segments, sim1).ok();
+    let effects = report_effects(&current, &added, cmp, rec.fs, settings, &mut sims);
+    let validation = match validation {
+        Some(v) => {
+            progress("validation");
+            Some(validate(declared, &current, v, sensors, &prep, settings, (sim0, sim1), &mut sims)?)
+        }
+        None => None,
+    };
+    let verdict = if effects.is_empty() {
+        "no missing effect found".to_string()
+    } else {
+        format!(
+            "found {}",
+            effects.iter().map(|e| e.label.clone()).collect::<Vec<_>>().join(", ")
+        )
+    };
+    timings.insert("total".into(), t_all.elapsed().as_secs_f64());
+    Ok(Diagnosis {
+        verdict,
+        before,
+        after,
+        validation,
+        effects,
+        ranking,
+        rounds,
+        substeps: (base_sub, current_sub),
+        simulations: sims,
+        trace_simulations: trace_sims,
+        identification: format!(
+            "full-horizon smoother, full-order model, unknown force at every DOF, λ = {:.3e}: {}",
+            prep.recon.lambda, prep.recon.status
+        ),
+        timings,
+        model: current,
+        prepared: prep,
+        predictions: (pred_before, pred_after),
+    })
+}
+
+/// Fit the parameters of all added effects jointly; returns the fitted
+/// model, a note on how the fit ended and the simulations spent.
+fn fit_effects(
+    trial: &Model,
+    all: &[AddedEffect],
+    cmp: &Comparison,
+    fs: f64,
+    settings: &DiagnoseSettings,
+) -> Result<(Model, String, usize)> {
+    let mut params = vec![];
+    for e in all {
+        params.extend(effects::parameters(trial, e)?);
+    }
+    let sub = auto_substeps(trial, fs, settings.substeps, settings.omega_h, settings.max_substeps);
+    let mut problem = cmp.problem(
+        trial,
+        spread(&cmp.segments, settings.fit_segments),
+        SimSettings {
+            substeps: sub,
+            ..Default::default()
+        },
+    );
+    problem.parameters = params;
+    // several starts for a contact: its gap cost is rough (CONTEXT fact 6)
+    let np = problem.parameters.len();
+    let mut starts = vec![vec![0.0; np]];
+    if let Some(last) = all.last() {
+        if last.candidate.kind == crate::trace::EffectKind::Contact {
+            for (dg, dk) in [(0.25, 1.0), (0.5, 2.0)] {
+                let mut s = vec![0.0; np];
+                s[np - 2] = dg;
+                s[np - 1] = dk;
+                starts.push(s);
+            }
+        }
+    }
+    let (best, results) = crate::update::fit_multistart(&problem, &settings.fit, &starts)?;
+    let sims: usize = results.iter().map(|r| r.simulations).sum();
+    match best {
+        Some(i) => {
+            let r = &results[i];
+            Ok((
+                r.model.clone(),
+                format!(
+                    "{:?} after {} iterations (start {} of {}, {} sub-steps)",
+                    r.termination,
+                    r.iterations,
+                    i + 1,
+                    starts.len(),
+                    sub
+                ),
+                sims,
+            ))
+        }
+        None => Ok((
+            trial.clone(),
+            "every start failed; traced values kept".into(),
+            sims,
+        )),
+    }
+}
+
+/// Effect reports with fitted values and standard errors (from the
+/// Jacobian of the multiple-shooting residual at the fitted values).
+fn report_effects(
+    model: &Model,
+    added: &[(AddedEffect, RankedEffect, Score)],
+    cmp: &Comparison,
+    fs: f64,
+    settings: &DiagnoseSettings,
+    sims: &mut usize,
+) -> Vec<EffectReport> {
+    let mut ses: BTreeMap<(usize, usize), f64> = BTreeMap::new();
+    if !added.is_empty() {
+        let mut params = vec![];
+        let mut owner = vec![];
+        for (ei, (e, _, _)) in added.iter().enumerate() {
+            if let Ok(ps) = effects::parameters(model, e) {
+                for (pi, p) in ps.into_iter().enumerate() {
+                    params.push(p);
+                    owner.push((ei, pi));
+                }
+            }
+        }
+        let sub = auto_substeps(model, fs, settings.substeps, settings.omega_h, settings.max_substeps);
+        let mut problem = cmp.problem(
+            model,
+            spread(&cmp.segments, settings.fit_segments),
+            SimSettings {
+                substeps: sub,
+                ..Default::default()
+            },
+        );
+        problem.parameters = params;
+        let fs_ = FitSettings {
+            max_iterations: 1,
+            ..settings.fit
+        };
+        if let Ok(r) = crate::update::fit(&problem, &fs_) {
+            *sims += r.simulations;
+            if let Some(id) = &r.identifiability {
+                for (k, pid) in id.parameters.iter().enumerate() {
+                    if let Some(&o) = owner.get(k) {
+                        ses.insert(o, pid.std_value);
+                    }
+                }
+            }
+        }
+    }
+    added
+        .iter()
+        .enumerate()
+        .map(|(ei, (e, r, score))| {
+            let vals = effects::values(model, e);
+            let mut std_errors = BTreeMap::new();
+            for (pi, (name, _)) in vals.iter().enumerate() {
+                let se = ses.get(&(ei, pi)).copied().filter(|x| x.is_finite());
+                let se = match e.candidate.kind {
+                    crate::trace::EffectKind::Stiffness if e.nominal != 0.0 => se.map(|s| s / e.nominal),
+                    _ => se,
+                };
+                std_errors.insert(name.clone(), se);
+            }
+            EffectReport {
+                kind: e.candidate.kind.name().to_string(),
+                dofs: e.candidate.dofs.iter().map(|d| d + 1).collect(),
+                label: e.label.clone(),
+                parameters: vals.into_iter().collect(),
+                std_errors,
+                traced: r.parameters.iter().cloned().collect(),
+                score: score.clone(),
+            }
+        })
+        .collect()
+}
+
+/// Errors on a validation record, and the non-parametric prediction.
+#[allow(clippy::too_many_arguments)]
+fn validate(
+    declared: &Model,
+    fitted: &Model,
+    v: &Record,
+    sensors: Option<&[usize]>,
+    first: &Prepared,
+    settings: &DiagnoseSettings,
+    sims: (SimSettings, SimSettings),
+    count: &mut usize,
+) -> Result<Validation> {
+    let prep = prepare(declared, v, sensors, settings)?;
+    let cmp = &prep.comparison;
+    let before = cmp.errors(declared, sims.0);
+    let after = cmp.errors(fitted, sims.1);
+    *count += 2 * (cmp.segments.len() + 1);
+    // the linear model driven by the first record's identified force
+    let n = declared.ndof();
+    let ns = v.len();
+    let f1 = &first.recon.force;
+    let mut force = cmp.force.clone();
+    for k in 0..ns.min(f1.ncols()) {
+        for i in 0..n {
+            force[(i, k)] -= f1[(i, k)];
+        }
+    }
+    let (cy, dy) = prep.sampled.outputs(&prep.channels)?;
+    let y = trace::regress::segment_response(
+        &prep.sampled,
+        &cy,
+        &dy,
+        Some(&prep.recon.states),
+        &force,
+        prep.segment,
+    );
+    Ok(Validation {
+        before,
+        after,
+        nonparametric_relative_error: Some(cmp.total_error(&y)),
+    })
+}

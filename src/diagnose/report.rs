@@ -1,0 +1,266 @@
+//! Files of a diagnosis: `report.json` (machines), `report.md` (people),
+//! `model-fitted.toml`, and figures (PNG + SVG).
+
+use super::Diagnosis;
+use crate::io::{ensure_dir, write_json, write_string};
+use crate::plot::{self, Figure, Panel, Series, SeriesStyle};
+use crate::Result;
+use nalgebra::DMatrix;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// What was run, for the report header.
+#[derive(Debug, Clone, Serialize)]
+pub struct Meta {
+    /// Model file.
+    pub model: String,
+    /// Record file.
+    pub record: String,
+    /// Validation record file.
+    pub validation_record: Option<String>,
+    /// Sensor DOFs (from 1) used.
+    pub sensors: Vec<usize>,
+    /// tacit version.
+    pub tacit_version: String,
+}
+
+#[derive(Serialize)]
+struct Doc<'a> {
+    #[serde(flatten)]
+    meta: &'a Meta,
+    #[serde(flatten)]
+    diagnosis: &'a Diagnosis,
+    settings: &'a super::DiagnoseSettings,
+}
+
+/// Write every file into `dir`; returns the paths written.
+pub fn write(
+    dir: &Path,
+    meta: &Meta,
+    d: &Diagnosis,
+    settings: &super::DiagnoseSettings,
+) -> Result<Vec<PathBuf>> {
+    ensure_dir(dir)?;
+    let mut out = vec![];
+    let json = dir.join("report.json");
+    write_json(
+        &json,
+        &Doc {
+            meta,
+            diagnosis: d,
+            settings,
+        },
+    )?;
+    out.push(json);
+    let toml = dir.join("model-fitted.toml");
+    write_string(&toml, &d.model.to_toml_string())?;
+    out.push(toml);
+    let figs = figures(dir, d)?;
+    let md = dir.join("report.md");
+    write_string(&md, &markdown(meta, d, &figs))?;
+    out.push(md);
+    out.extend(figs);
+    Ok(out)
+}
+
+fn pct(x: Option<f64>) -> String {
+    x.map_or("failed".into(), |v| format!("{:.2} %", 100.0 * v))
+}
+
+fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# tacit diagnosis\n");
+    let _ = writeln!(
+        s,
+        "Model `{}`, record `{}`{}, sensors at DOFs {:?}.\n",
+        meta.model,
+        meta.record,
+        meta.validation_record
+            .as_ref()
+            .map_or(String::new(), |v| format!(", validation record `{v}`")),
+        meta.sensors
+    );
+    let _ = writeln!(s, "**Result: {}.**\n", d.verdict);
+    let _ = writeln!(s, "## Errors\n");
+    let _ = writeln!(
+        s,
+        "`relative_error`: multiple-shooting prediction over {}-sample segments, each simulated from the state reconstructed at its start; `simulation_error`: open-loop simulation of the whole record.\n",
+        d.prepared.segment
+    );
+    let _ = writeln!(s, "| | relative_error | simulation_error |\n|---|---|---|");
+    let _ = writeln!(s, "| before (declared model) | {} | {} |", pct(d.before.relative_error), pct(d.before.simulation_error));
+    let _ = writeln!(s, "| after (with the effects) | {} | {} |", pct(d.after.relative_error), pct(d.after.simulation_error));
+    if let Some(v) = &d.validation {
+        let _ = writeln!(s, "| validation, before | {} | {} |", pct(v.before.relative_error), pct(v.before.simulation_error));
+        let _ = writeln!(s, "| validation, after | {} | {} |", pct(v.after.relative_error), pct(v.after.simulation_error));
+        let _ = writeln!(
+            s,
+            "\nNon-parametric prediction of the validation record (linear model driven by the force identified on the first record): {}.",
+            pct(v.nonparametric_relative_error)
+        );
+    }
+    for (name, e) in [("before", &d.before), ("after", &d.after)] {
+        if e.status != "ok" {
+            let _ = writeln!(s, "\n*{name}: {}*", e.status);
+        }
+    }
+    let _ = writeln!(s, "\nPer channel (relative_error before → after):\n");
+    for (b, a) in d.before.per_channel.iter().zip(&d.after.per_channel) {
+        let _ = writeln!(s, "- {}: {} → {}", b.channel, pct(b.relative_error), pct(a.relative_error));
+    }
+    let _ = writeln!(s, "\n## Effects found\n");
+    if d.effects.is_empty() {
+        let _ = writeln!(s, "No missing effect found: no candidate removes enough of the residual to pay for its parameters.\n");
+    }
+    for e in &d.effects {
+        let params: Vec<String> = e
+            .parameters
+            .iter()
+            .map(|(k, v)| {
+                let se = e.std_errors.get(k).copied().flatten();
+                match se {
+                    Some(se) => format!("{k} = {v:.4e} ± {se:.1e}"),
+                    None => format!("{k} = {v:.4e}"),
+                }
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "- **{}** (DOFs {:?}): {}; removed {:.1} % of the remaining residual in the trace; multiple-shooting error {} → {}.",
+            e.label,
+            e.dofs,
+            params.join(", "),
+            100.0 * e.score.residual_explained,
+            pct(e.score.error_before),
+            pct(e.score.error_after)
+        );
+    }
+    let _ = writeln!(s, "\n## How the loop went\n");
+    for (i, r) in d.rounds.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "{}. {} — {}{}",
+            i + 1,
+            r.proposed.clone().unwrap_or_else(|| "no candidate".into()),
+            r.note,
+            r.fit.as_ref().map_or(String::new(), |f| format!(" (fit: {f})"))
+        );
+    }
+    let _ = writeln!(s, "\nBest candidates of the first trace round:\n\n| candidate | residual removed | BIC change | parameters |\n|---|---|---|---|");
+    for r in d.ranking.iter().take(8) {
+        let p: Vec<String> = r.parameters.iter().map(|(k, v)| format!("{k} = {v:.3e}")).collect();
+        let _ = writeln!(s, "| {} | {:.1} % | {:.0} | {} |", r.label, 100.0 * r.residual_explained, r.bic_change, p.join(", "));
+    }
+    let _ = writeln!(s, "\nIdentification: {}.", d.identification);
+    let _ = writeln!(
+        s,
+        "Sub-steps per sample: {} (declared model), {} (final model). Simulations: {} nonlinear, {} linear (trace). Time: {:.2} s.",
+        d.substeps.0,
+        d.substeps.1,
+        d.simulations,
+        d.trace_simulations,
+        d.timings.get("total").copied().unwrap_or(f64::NAN)
+    );
+    let _ = writeln!(s, "\n## Figures\n");
+    for f in figs.iter().filter(|f| f.extension().is_some_and(|e| e == "png")) {
+        let name = f.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let _ = writeln!(s, "![{name}]({name})");
+    }
+    s
+}
+
+fn row(m: &DMatrix<f64>, r: usize) -> Vec<f64> {
+    m.row(r).iter().copied().collect()
+}
+
+fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
+    let prep = &d.prepared;
+    let cmp = &prep.comparison;
+    let ns = cmp.force.ncols();
+    let t: Vec<f64> = (0..ns).map(|k| k as f64 / cmp.fs).collect();
+    let meas = cmp.measured();
+    let mut out = vec![];
+    // residuals before / after
+    let mut panels = vec![];
+    for (c, o) in cmp.observations.iter().enumerate() {
+        let mut series = vec![];
+        if let Some(b) = &d.predictions.0 {
+            series.push(("before".to_string(), (0..ns).map(|k| meas[(c, k)] - b[(c, k)]).collect(), SeriesStyle::Line));
+        }
+        if let Some(a) = &d.predictions.1 {
+            series.push(("after".to_string(), (0..ns).map(|k| meas[(c, k)] - a[(c, k)]).collect(), SeriesStyle::Line));
+        }
+        panels.push(plot::time_panel(&o.name(), "residual", &t, series));
+    }
+    out.extend(plot::save(&Figure::new("Segment residual, before and after", panels, 1), &dir.join("residual"))?);
+    // responses over the first 0.5 s
+    let kmax = ((0.5 * cmp.fs) as usize).min(ns);
+    let tt = &t[..kmax];
+    let mut panels = vec![];
+    for (c, o) in cmp.observations.iter().enumerate() {
+        let mut series = vec![("measured".to_string(), row(&meas, c)[..kmax].to_vec(), SeriesStyle::Line)];
+        if let Some(b) = &d.predictions.0 {
+            series.push(("before".to_string(), row(b, c)[..kmax].to_vec(), SeriesStyle::DashedLine));
+        }
+        if let Some(a) = &d.predictions.1 {
+            series.push(("after".to_string(), row(a, c)[..kmax].to_vec(), SeriesStyle::DashedLine));
+        }
+        panels.push(plot::time_panel(&o.name(), &o.quantity.si_unit().to_string(), tt, series));
+    }
+    out.extend(plot::save(&Figure::new("Responses (segments), first 0.5 s", panels, 1), &dir.join("responses"))?);
+    // identified force
+    let f = &prep.recon.force;
+    let n = f.nrows();
+    let panels: Vec<Panel> = (0..n)
+        .map(|i| plot::time_panel(&format!("DOF {}", i + 1), "f_int [N]", &t, vec![(format!("f{}", i + 1), row(f, i), SeriesStyle::Line)]))
+        .collect();
+    out.extend(plot::save(&Figure::new("Identified internal force (left-hand side)", panels, 2), &dir.join("identified_force"))?);
+    // restoring-force plots of the effects (and of the best candidate when none)
+    let states = &prep.recon.states;
+    let cands: Vec<crate::trace::Candidate> = if d.effects.is_empty() {
+        d.ranking.iter().take(1).map(|r| r.candidate.clone()).collect()
+    } else {
+        d.effects
+            .iter()
+            .map(|e| crate::trace::Candidate::new(kind_of(&e.kind), e.dofs.iter().map(|x| x - 1).collect()))
+            .collect()
+    };
+    for (i, c) in cands.iter().enumerate() {
+        if c.dofs.len() > 2 {
+            continue;
+        }
+        let fy: Vec<f64> = (0..ns)
+            .map(|k| match c.dofs.get(1) {
+                Some(&j) => 0.5 * (f[(c.dofs[0], k)] - f[(j, k)]),
+                None => f[(c.dofs[0], k)],
+            })
+            .collect();
+        let dx: Vec<f64> = (0..ns).map(|k| c.delta(states, k)).collect();
+        let dv: Vec<f64> = (0..ns).map(|k| c.delta_rate(states, n, k)).collect();
+        let what = if c.dofs.len() == 2 {
+            format!("u{} − u{}", c.dofs[0] + 1, c.dofs[1] + 1)
+        } else {
+            format!("u{}", c.dofs[0] + 1)
+        };
+        let p1 = Panel::xy("force vs displacement", format!("{what} [m]"), "f_int [N]", vec![Series::points("identified", dx, fy.clone())]);
+        let p2 = Panel::xy("force vs velocity", format!("d/dt({what}) [m/s]"), "f_int [N]", vec![Series::points("identified", dv, fy)]);
+        out.extend(plot::save(
+            &Figure::new(format!("Restoring force: {}", c.label()), vec![p1, p2], 2),
+            &dir.join(format!("restoring_{}", i + 1)),
+        )?);
+    }
+    Ok(out)
+}
+
+fn kind_of(name: &str) -> crate::trace::EffectKind {
+    use crate::trace::EffectKind::*;
+    match name {
+        "contact" => Contact,
+        "friction" => Friction,
+        "cubic" => Cubic,
+        "stiffness" => Stiffness,
+        "ground_spring" => GroundSpring,
+        _ => Damping,
+    }
+}

@@ -1,0 +1,227 @@
+//! Forward simulation of a [`Problem`] at given parameters: every segment
+//! from its start state, on the full-order model or on the model reduced to
+//! the measured DOFs.
+//!
+//! Reduced model: `u ≈ T u_a` with `T` from [`crate::reduce::reduce`] built
+//! for the current parameters, `M_a = TᵀMT`, `C_a = TᵀCT`, `K_a = TᵀKT`,
+//! `f_a = Tᵀ f`. The kept set is the measured DOFs plus every DOF a
+//! nonlinear element acts on; Guyan, IRS and SEREP bases have identity rows
+//! at the kept DOFs, so the reduced coordinates *are* the kept displacements
+//! and an element between kept DOFs acts on them unchanged
+//! (`Tᵀ f_int(T u_a) = f_int,a(u_a)`). The start state of a segment is its
+//! full-order state projected on the basis in the mass metric,
+//! `u_a = (TᵀMT)⁻¹ TᵀM u` (for SEREP: the modal coordinates of the retained
+//! modes, seen at the kept DOFs), so the omitted part of the state does not
+//! leak into the retained modes.
+
+use super::problem::Problem;
+use crate::integrate::{Integrator, Simulation};
+use crate::model::elements::{self, Element};
+use crate::model::Model;
+use crate::record::Quantity;
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+/// Why an evaluation of the model failed (a status, not an error: the
+/// optimizer rejects the trial point and goes on).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Failure {
+    /// Segment whose simulation failed, if the failure is in a simulation.
+    pub segment: Option<usize>,
+    /// What happened, with the numbers.
+    pub reason: String,
+}
+
+impl std::fmt::Display for Failure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.segment {
+            Some(s) => write!(f, "segment {s}: {}", self.reason),
+            None => write!(f, "{}", self.reason),
+        }
+    }
+}
+
+/// Simulated channels of one segment: one row per observation of the
+/// problem, one column per sample of the segment.
+pub type SegmentResponse = DMatrix<f64>;
+
+/// A compiled simulator for one parameter vector.
+struct Compiled {
+    integ: Integrator,
+    /// Reduction basis transposed (m × n) when reduced.
+    tt: Option<DMatrix<f64>>,
+    /// Mass-metric projection `(TᵀMT)⁻¹ TᵀM` (m × n) of full-order states
+    /// onto the reduced coordinates.
+    proj: Option<DMatrix<f64>>,
+    /// Position of each model DOF in the simulated coordinates (None: not
+    /// simulated).
+    pos: Vec<Option<usize>>,
+}
+
+/// Simulate every segment of `problem` for the scaled parameters `x`.
+/// Returns the responses and the number of segment simulations run.
+pub fn simulate(
+    problem: &Problem,
+    x: &[f64],
+) -> (std::result::Result<Vec<SegmentResponse>, Failure>, usize) {
+    let model = problem.model_at(x);
+    let compiled = match compile(problem, &model) {
+        Ok(c) => c,
+        Err(f) => return (Err(f), 0),
+    };
+    let mut out = Vec::with_capacity(problem.segments.len());
+    let mut count = 0;
+    for (i, seg) in problem.segments.iter().enumerate() {
+        let force = problem.force.columns(seg.start, seg.len);
+        let sim = match &compiled.tt {
+            None => compiled.integ.run(force, &seg.u0, &seg.v0),
+            Some(tt) => {
+                let fa = tt * force;
+                let proj = compiled.proj.as_ref().unwrap_or(tt);
+                let ua = proj * DVector::from_column_slice(&seg.u0);
+                let va = proj * DVector::from_column_slice(&seg.v0);
+                compiled.integ.run(fa.as_view(), ua.as_slice(), va.as_slice())
+            }
+        };
+        count += 1;
+        if !sim.completed() {
+            let f = Failure {
+                segment: Some(i),
+                reason: format!("simulation stopped: {:?}", sim.status),
+            };
+            return (Err(f), count);
+        }
+        out.push(extract(problem, &sim, &compiled.pos));
+    }
+    (Ok(out), count)
+}
+
+/// Relative difference between the reduced and the full-order responses
+/// at `x` over all channels and segments (`None` for a full-order problem
+/// or when either simulation fails).
+pub fn reduction_error(problem: &Problem, x: &[f64]) -> Option<f64> {
+    problem.reduction?;
+    let full = Problem {
+        reduction: None,
+        ..problem.clone()
+    };
+    let (a, _) = simulate(problem, x);
+    let (b, _) = simulate(&full, x);
+    let (a, b) = (a.ok()?, b.ok()?);
+    let (mut num, mut den) = (0.0, 0.0);
+    for (ra, rb) in a.iter().zip(&b) {
+        num += (ra - rb).norm_squared();
+        den += rb.norm_squared();
+    }
+    Some(crate::metrics::ratio(num, den))
+}
+
+fn compile(problem: &Problem, model: &Model) -> std::result::Result<Compiled, Failure> {
+    let fail = |reason: String| Failure {
+        segment: None,
+        reason,
+    };
+    let n = model.ndof();
+    let Some(method) = problem.reduction else {
+        let integ = Integrator::new(model, problem.fs, problem.sim)
+            .map_err(|e| fail(format!("model could not be compiled: {e}")))?;
+        return Ok(Compiled {
+            integ,
+            tt: None,
+            proj: None,
+            pos: (0..n).map(Some).collect(),
+        });
+    };
+    let kept = kept_dofs(problem, model);
+    let m = model.mass_matrix();
+    let k = model.stiffness_matrix();
+    let c = model
+        .damping_matrix()
+        .map_err(|e| fail(format!("damping matrix: {e}")))?;
+    let red = crate::reduce::reduce(&m, &k, &kept, method)
+        .map_err(|e| fail(format!("reduction failed: {e}")))?;
+    let mut pos = vec![None; n];
+    for (p, &d) in red.kept.iter().enumerate() {
+        pos[d] = Some(p);
+    }
+    let els = elements::compile(model)
+        .into_iter()
+        .map(|e| remap(e, &pos))
+        .collect::<Option<Vec<_>>>()
+        .ok_or_else(|| fail("a nonlinear element acts on a DOF outside the reduced model".into()))?;
+    let cr = red.project(&c);
+    let tm = red.t.transpose() * &m;
+    let proj = red
+        .m
+        .clone()
+        .cholesky()
+        .map(|ch| ch.solve(&tm))
+        .ok_or_else(|| fail("the reduced mass matrix is not positive definite".into()))?;
+    let integ = Integrator::from_matrices(red.m.clone(), cr, red.k.clone(), els, problem.fs, problem.sim)
+        .map_err(|e| fail(format!("reduced model could not be compiled: {e}")))?;
+    Ok(Compiled {
+        integ,
+        tt: Some(red.t.transpose()),
+        proj: Some(proj),
+        pos,
+    })
+}
+
+/// Kept DOFs (0-based, ascending): measured DOFs and element DOFs.
+pub fn kept_dofs(problem: &Problem, model: &Model) -> Vec<usize> {
+    let mut kept: Vec<usize> = problem.measured_dofs().iter().map(|d| d - 1).collect();
+    for e in elements::compile(model) {
+        let (i, j) = match e {
+            Element::Contact { i, j, .. } | Element::Cubic { i, j, .. } => (i, j),
+            Element::Friction { d, .. } => (d, None),
+        };
+        kept.push(i);
+        kept.extend(j);
+    }
+    kept.sort_unstable();
+    kept.dedup();
+    kept
+}
+
+fn remap(e: Element, pos: &[Option<usize>]) -> Option<Element> {
+    let map_j = |j: Option<usize>| -> Option<Option<usize>> {
+        match j {
+            None => Some(None),
+            Some(j) => pos[j].map(Some),
+        }
+    };
+    Some(match e {
+        Element::Contact { i, j, gap, k } => Element::Contact {
+            i: pos[i]?,
+            j: map_j(j)?,
+            gap,
+            k,
+        },
+        Element::Cubic { i, j, k3 } => Element::Cubic {
+            i: pos[i]?,
+            j: map_j(j)?,
+            k3,
+        },
+        Element::Friction { d, level, vreg } => Element::Friction {
+            d: pos[d]?,
+            level,
+            vreg,
+        },
+    })
+}
+
+fn extract(problem: &Problem, sim: &Simulation, pos: &[Option<usize>]) -> SegmentResponse {
+    let len = sim.len();
+    let mut out = DMatrix::zeros(problem.observations.len(), len);
+    for (r, o) in problem.observations.iter().enumerate() {
+        // measured DOFs are always kept (see `kept_dofs`)
+        let p = pos[o.dof - 1].unwrap_or(0);
+        let src = match o.quantity {
+            Quantity::Disp => &sim.u,
+            Quantity::Vel => &sim.v,
+            _ => &sim.a,
+        };
+        out.row_mut(r).copy_from(&src.row(p));
+    }
+    out
+}
