@@ -16,7 +16,11 @@ fn main() {
             let (mut num, mut den) = (0.0, 0.0);
             for i in 0..n {
                 for k in 0..rec.len() {
-                    let d = if i == 4 { (st[(off + 4, k)] - st[(off + 5, k)]) - (rows[4][k] - rows[5][k]) } else { st[(off + i, k)] - rows[i][k] };
+                    let d = if i == 4 {
+                        (st[(off + 4, k)] - st[(off + 5, k)]) - (rows[4][k] - rows[5][k])
+                    } else {
+                        st[(off + i, k)] - rows[i][k]
+                    };
                     num += d * d;
                     den += rows[i][k] * rows[i][k];
                 }
@@ -29,8 +33,21 @@ fn main() {
             num += d * d;
             den += (truth.u[4][k] - truth.u[5][k]).powi(2);
         }
-        let y = tacit::trace::regress::segment_response(&p.sampled, &p.sampled.outputs(&p.channels).unwrap().0, &p.sampled.outputs(&p.channels).unwrap().1, Some(st), &p.comparison.force, p.segment);
+        let y = tacit::trace::regress::segment_response(
+            &p.sampled,
+            &p.sampled.outputs(&p.channels).unwrap().0,
+            &p.sampled.outputs(&p.channels).unwrap().1,
+            Some(st),
+            &p.comparison.force,
+            p.segment,
+        );
         let err = p.comparison.total_error(&y);
-        println!("lambda {lam}: {} | u5-u6 rel err {:.3} | lin seg err {:.3} | {}", e.join(" "), (num / den).sqrt(), err, p.recon.status);
+        println!(
+            "lambda {lam}: {} | u5-u6 rel err {:.3} | lin seg err {:.3} | {}",
+            e.join(" "),
+            (num / den).sqrt(),
+            err,
+            p.recon.status
+        );
     }
 }

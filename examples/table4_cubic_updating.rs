@@ -29,7 +29,12 @@ fn main() -> tacit::Result<()> {
     println!("\nOptimizers on column 3 (PCD, FM, D), noise-free:");
     let case = table4::case(0.0, seed)?;
     let col = table4::columns()[2];
-    for opt in [Optimizer::Lm, Optimizer::Gn, Optimizer::Bfgs, Optimizer::Simplex] {
+    for opt in [
+        Optimizer::Lm,
+        Optimizer::Gn,
+        Optimizer::Bfgs,
+        Optimizer::Simplex,
+    ] {
         let problem = table4::problem(&case, &col)?;
         let r = update::fit(&problem, &FitSettings::with(opt))?;
         println!(

@@ -57,7 +57,10 @@ fn main() -> tacit::Result<()> {
     problem.sim.substeps = substeps;
     let whole = problem.clone();
     problem.segments = shooting::from_truth(&rec, 51)?;
-    for (label, p) in [("multiple shooting, 0.1 s segments", &problem), ("whole record, open loop", &whole)] {
+    for (label, p) in [
+        ("multiple shooting, 0.1 s segments", &problem),
+        ("whole record, open loop", &whole),
+    ] {
         let r = update::fit(p, &FitSettings::default())?;
         println!("\n{label}: {} segment(s)", p.segments.len());
         for q in &r.parameters {
@@ -80,7 +83,12 @@ fn main() -> tacit::Result<()> {
         );
     }
     // several starts: the four corners at ±30 %
-    let corners = vec![vec![0.3, -0.3], vec![-0.3, 0.3], vec![0.3, 0.3], vec![-0.3, -0.3]];
+    let corners = vec![
+        vec![0.3, -0.3],
+        vec![-0.3, 0.3],
+        vec![0.3, 0.3],
+        vec![-0.3, -0.3],
+    ];
     let (best, runs) = update::fit_multistart(&problem, &FitSettings::default(), &corners)?;
     println!("\nmultiple shooting from four starts (gap, stiffness at ±30 %):");
     for (i, r) in runs.iter().enumerate() {
@@ -98,4 +106,3 @@ fn main() -> tacit::Result<()> {
     }
     Ok(())
 }
-

@@ -18,11 +18,12 @@ pub mod signal;
 pub mod simulate;
 
 pub use error::{Result, TacitError};
+pub mod correlate;
+pub mod diagnose;
+pub mod horizon;
+pub mod identify;
 pub mod linear;
 pub mod reduce;
-pub mod identify;
-pub mod horizon;
-pub mod update;
-pub mod correlate;
+pub mod silverbox;
 pub mod trace;
-pub mod diagnose;
+pub mod update;

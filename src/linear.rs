@@ -240,8 +240,18 @@ pub fn hermite_upsample(states: &DMatrix<f64>, fs: f64, s: usize) -> DMatrix<f64
         for j in 1..=s {
             let t = j as f64 / s as f64;
             let (t2, t3) = (t * t, t * t * t);
-            let (h00, h10, h01, h11) = (2.0 * t3 - 3.0 * t2 + 1.0, t3 - 2.0 * t2 + t, -2.0 * t3 + 3.0 * t2, t3 - t2);
-            let (d00, d10, d01, d11) = (6.0 * t2 - 6.0 * t, 3.0 * t2 - 4.0 * t + 1.0, -6.0 * t2 + 6.0 * t, 3.0 * t2 - 2.0 * t);
+            let (h00, h10, h01, h11) = (
+                2.0 * t3 - 3.0 * t2 + 1.0,
+                t3 - 2.0 * t2 + t,
+                -2.0 * t3 + 3.0 * t2,
+                t3 - t2,
+            );
+            let (d00, d10, d01, d11) = (
+                6.0 * t2 - 6.0 * t,
+                3.0 * t2 - 4.0 * t + 1.0,
+                -6.0 * t2 + 6.0 * t,
+                3.0 * t2 - 2.0 * t,
+            );
             let col = k * s + j;
             for i in 0..n {
                 let (u0, v0) = (states[(i, k)], states[(n + i, k)]);

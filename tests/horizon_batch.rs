@@ -35,12 +35,17 @@ fn check(len: usize, dofs: &[usize], lambda: f64, mu: f64, init: InitialState, t
     let ex = rel(&r.states, &b.states);
     let es = rel(r.force_std.as_ref().unwrap(), &b.force_std);
     let ec = (r.diagnostics.cost - b.cost).abs() / b.cost;
+    let et = (r.diagnostics.tr_h - b.tr_h).abs() / b.tr_h;
+    eprintln!("tr H: sweep {:.6}, batch {:.6}", r.diagnostics.tr_h, b.tr_h);
     let x0s = r.states.column(0).into_owned();
     let x0b = b.states.column(0).into_owned();
     let gs = relative_gradient(&sm, &d, &s, lambda, mu, &x0s, &r.force).unwrap();
     let gb = relative_gradient(&sm, &d, &s, lambda, mu, &x0b, &b.force).unwrap();
     eprintln!("relative gradient: smoother {gs:.2e}, batch {gb:.2e}");
-    assert!(gs < 1e-10, "the smoother's answer is not optimal: gradient {gs:e}");
+    assert!(
+        gs < 1e-10,
+        "the smoother's answer is not optimal: gradient {gs:e}"
+    );
     if !tight {
         return;
     }
@@ -53,6 +58,7 @@ fn check(len: usize, dofs: &[usize], lambda: f64, mu: f64, init: InitialState, t
     assert!(ex < 1e-8, "states differ by {ex:e}");
     assert!(es < 1e-8, "force std differs by {es:e}");
     assert!(ec < 1e-8, "cost differs by {ec:e}");
+    assert!(et < 1e-8, "tr H differs by {et:e}");
 }
 
 #[test]
@@ -72,7 +78,14 @@ fn equals_batch_least_squares_200_samples_at_rest_white_prior() {
 
 #[test]
 fn equals_batch_least_squares_all_eight_forces() {
-    check(60, &[0, 1, 2, 3, 4, 5, 6, 7], 1e-2, 1e-3, InitialState::Rest, true);
+    check(
+        60,
+        &[0, 1, 2, 3, 4, 5, 6, 7],
+        1e-2,
+        1e-3,
+        InitialState::Rest,
+        true,
+    );
 }
 
 #[test]

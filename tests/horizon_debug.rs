@@ -1,8 +1,8 @@
 mod horizon_common;
 use horizon_common::*;
 use nalgebra::DVector;
-use tacit::horizon::{solve, unknown_at_dofs, ChannelNoise, InitialState};
 use tacit::horizon::batch::solve_dense;
+use tacit::horizon::{solve, unknown_at_dofs, ChannelNoise, InitialState};
 
 #[test]
 fn debug() {
@@ -23,9 +23,45 @@ fn debug() {
         for t in 0..8 {
             let c = r.force.columns(t * 50, 50) - w.columns(t * 50, 50);
             let cb = b.force.columns(t * 50, 50) - w.columns(t * 50, 50);
-            eprintln!("λ {lam} seg {t}: err {:.3e} batch {:.3e} (norm {:.3e})", c.norm(), cb.norm(), w.columns(t*50,50).norm());
+            eprintln!(
+                "λ {lam} seg {t}: err {:.3e} batch {:.3e} (norm {:.3e})",
+                c.norm(),
+                cb.norm(),
+                w.columns(t * 50, 50).norm()
+            );
         }
-        eprintln!("rel resid {:?}", r.diagnostics.relative_residual);
-        eprintln!("w[0..6] {:?}\nest {:?}", w.row(0).columns(0,6), r.force.row(0).columns(0,6));
+        eprintln!(
+            "rel resid {:?} rss {:e} cost {:e} batch cost {:e}",
+            r.diagnostics.relative_residual, r.diagnostics.rss, r.diagnostics.cost, b.cost
+        );
+        let gt = tacit::horizon::batch::relative_gradient(
+            &sm,
+            &d,
+            &s,
+            lam,
+            0.0,
+            &DVector::zeros(16),
+            &w,
+        )
+        .unwrap();
+        eprintln!("gradient at truth {gt:e}");
+        let (cy, dy) = sm.outputs(&ch).unwrap();
+        let ft = &g + &bu * &w;
+        let xs = sm.simulate(&DVector::zeros(16), &ft);
+        let yt = &cy * &xs + &dy * &ft;
+        eprintln!("truth resid {:e} rel", (&yt - &y).norm() / y.norm());
+        let fe = &g + &bu * &r.force;
+        let xe = sm.simulate(&DVector::zeros(16), &fe);
+        let ye = &cy * &xe + &dy * &fe;
+        eprintln!(
+            "est resid {:e} rel; est pred vs reported {:e}",
+            (&ye - &y).norm() / y.norm(),
+            (&ye - &r.predicted).norm() / y.norm()
+        );
+        eprintln!(
+            "w[0..6] {:?}\nest {:?}",
+            w.row(0).columns(0, 6),
+            r.force.row(0).columns(0, 6)
+        );
     }
 }

@@ -29,17 +29,20 @@ fn known_forces_come_back_on_linear_data() {
     let len = 2000;
     let bu = unknown_at_dofs(8, &[4, 5]).unwrap();
     let w = band_forces(len);
-    let (g, y, _) = linear_record(&sm, len, &bu, &w, &DVector::zeros(16), &[1e-6; 3], 3);
+    let (g, y, _) = linear_record(&sm, len, &bu, &w, &DVector::zeros(16), &[1e-3; 3], 3);
     let ch = channels();
     let d = data(&g, &y, &ch, &bu);
     let mut s = settings();
-    s.noise = ChannelNoise::Std { std: vec![1e-6; 3] };
+    s.noise = ChannelNoise::Std { std: vec![1e-3; 3] };
     s.initial = InitialState::Rest;
-    let r = solve(&sm, &d, &s, 1e-4, 0.0, false).unwrap();
+    let r = solve(&sm, &d, &s, 1e-2, 0.0, false).unwrap();
     assert_eq!(r.status, HorizonStatus::Solved);
     let e = (&r.force - &w).norm() / w.norm();
-    eprintln!("relative force error {e:.2e}");
-    assert!(e < 1e-3, "relative force error {e}");
+    eprintln!(
+        "relative force error {e:.2e}, relative residual {:.2e}",
+        r.diagnostics.relative_residual_total
+    );
+    assert!(e < 0.02, "relative force error {e}");
 }
 
 #[test]
@@ -60,8 +63,13 @@ fn no_false_force_on_a_linear_record() {
     };
     let ch = channels();
     let d = data(&g, &y, &ch, &bu);
+    // 8 unknowns per sample, 3 measurements: GCV interpolates the noise
+    // (tr H → N p); the discrepancy principle with the known 1 % noise does not
     let mut s = settings();
-    s.selection = WeightSelection::Gcv;
+    s.selection = WeightSelection::Discrepancy {
+        noise: NoiseLevel::Known,
+        tau: 1.0,
+    };
     s.selection_decades = 4.0;
     s.selection_points_per_decade = 1;
     let r = identify(&sm, &d, &s).unwrap();
@@ -73,7 +81,7 @@ fn no_false_force_on_a_linear_record() {
         "false force RMS per DOF (N): {per_dof:.3?}; λ = {:.3e}",
         r.weights.lambda
     );
-    assert!(worst < 0.5, "false force {worst} N");
+    assert!(worst < 1.0, "false force {worst} N");
 }
 
 #[test]
@@ -174,13 +182,13 @@ fn a_record_not_at_rest_is_handled_by_estimating_x0() {
     let est = solve(&sm, &d, &s, 1e-2, 0.0, false).unwrap();
     s.initial = InitialState::Rest;
     let rest = solve(&sm, &d, &s, 1e-2, 0.0, false).unwrap();
-    let head = 200;
+    let head = 500;
     let e = |r: &tacit::horizon::HorizonResult| {
         (r.force.columns(0, head) - w.columns(0, head)).norm() / w.columns(0, head).norm()
     };
     // flexible part of x0 (the rigid-body position is not seen by accelerations)
-    let flex_err = (est.states.column(10) - xs.column(10)).rows(8, 8).norm()
-        / xs.column(10).rows(8, 8).norm();
+    let flex_err =
+        (est.states.column(10) - xs.column(10)).rows(8, 8).norm() / xs.column(10).rows(8, 8).norm();
     eprintln!(
         "first {head} samples: force error {:.3} with x0 estimated, {:.3} assuming rest; velocity error at sample 10: {flex_err:.2e}",
         e(&est),
@@ -228,8 +236,13 @@ fn weight_rules_choose_near_the_true_prior() {
             r.weights.candidates.len()
         );
         assert!(r.weights.lambda.is_finite() && !r.weights.candidates.is_empty());
-        if !matches!(sel, WeightSelection::LCurve) {
-            assert!((0.2..5.0).contains(&ratio), "{sel:?} chose {ratio} × truth");
+        match sel {
+            WeightSelection::Gcv => assert!((0.2..5.0).contains(&ratio), "GCV chose {ratio}"),
+            // the discrepancy principle over-smooths (target N p, not N p − tr H)
+            WeightSelection::Discrepancy { .. } => {
+                assert!((0.2..50.0).contains(&ratio), "{sel:?} chose {ratio}")
+            }
+            _ => {}
         }
     }
 }
@@ -260,7 +273,10 @@ fn qp_without_active_constraints_equals_the_sweep_and_respects_constraints() {
     s.constraints.bounds = vec![(0, -1e6, 1e6)];
     let qp = identify(&sm, &d, &s).unwrap();
     let e = rel(&qp.force, &free.force);
-    eprintln!("QP with inactive bounds vs sweep: {e:.2e}; {} iterations", qp.diagnostics.qp_iterations);
+    eprintln!(
+        "QP with inactive bounds vs sweep: {e:.2e}; {} iterations",
+        qp.diagnostics.qp_iterations
+    );
     assert_eq!(qp.status, HorizonStatus::Solved);
     assert!(e < 1e-5);
     s.constraints.bounds = vec![(0, 0.0, f64::INFINITY)];
@@ -271,7 +287,9 @@ fn qp_without_active_constraints_equals_the_sweep_and_respects_constraints() {
     let neg = qp.force.row(0).min();
     let err = (&qp.force - &w).norm() / w.norm();
     let err_free = (&free.force - &w).norm() / w.norm();
-    eprintln!("pair violation {pair:.1e}, min f5 {neg:.1e}, error {err:.3} (unconstrained {err_free:.3})");
+    eprintln!(
+        "pair violation {pair:.1e}, min f5 {neg:.1e}, error {err:.3} (unconstrained {err_free:.3})"
+    );
     assert!(pair < 1e-6 && neg > -1e-6);
     assert!(err < err_free);
 }

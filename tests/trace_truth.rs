@@ -29,7 +29,11 @@ fn run(truth: &Model, sensors: &[usize], noise: f64, seed: u64) -> tacit::trace:
     let (rec, sim) = simulate_record(truth, &spec).unwrap();
     let n = 8;
     let sm = SampledModel::from_model(&declared, rec.fs, 20).unwrap();
-    let chans: Vec<(Quantity, usize)> = rec.outputs.iter().map(|c| (c.quantity, c.dof - 1)).collect();
+    let chans: Vec<(Quantity, usize)> = rec
+        .outputs
+        .iter()
+        .map(|c| (c.quantity, c.dof - 1))
+        .collect();
     let (cy, dy) = sm.outputs(&chans).unwrap();
     let meas = DMatrix::from_fn(chans.len(), rec.len(), |c, k| rec.outputs[c].data[k]);
     let fext = tacit::signal::force_matrix(&rec, n);
@@ -53,10 +57,16 @@ fn run(truth: &Model, sensors: &[usize], noise: f64, seed: u64) -> tacit::trace:
     let res = trace(&input, &TraceSettings::default());
     eprintln!("trace: {:?}, {} sims", t.elapsed(), res.simulations);
     for e in res.ranking.iter().take(5) {
-        eprintln!("  {} gain {:.3} bic {:.1} {:?}", e.label, e.residual_explained, e.bic_change, e.parameters);
+        eprintln!(
+            "  {} gain {:.3} bic {:.1} {:?}",
+            e.label, e.residual_explained, e.bic_change, e.parameters
+        );
     }
     for e in &res.selected {
-        eprintln!("SELECTED {} {:?} se {:?}", e.label, e.parameters, e.std_errors);
+        eprintln!(
+            "SELECTED {} {:?} se {:?}",
+            e.label, e.parameters, e.std_errors
+        );
     }
     eprintln!("stop: {}", res.stop_reason);
     res
@@ -64,7 +74,10 @@ fn run(truth: &Model, sensors: &[usize], noise: f64, seed: u64) -> tacit::trace:
 
 #[test]
 fn contact_is_named_with_its_gap() {
-    for (dofs, sensors) in [([5, 6], vec![1, 2, 3, 4, 5, 6, 7, 8]), ([6, 5], vec![1, 5, 6])] {
+    for (dofs, sensors) in [
+        ([5, 6], vec![1, 2, 3, 4, 5, 6, 7, 8]),
+        ([6, 5], vec![1, 5, 6]),
+    ] {
         let mut truth = lanl();
         truth.contacts = vec![Contact {
             dofs: dofs.to_vec(),
@@ -99,24 +112,41 @@ fn bumper_with_softer_spring_gives_both() {
 #[test]
 fn linear_record_gives_nothing() {
     let res = run(&lanl(), &[1, 5, 6], 0.01, 3);
-    assert!(res.selected.is_empty(), "{:?}", res.selected.first().map(|e| &e.label));
+    assert!(
+        res.selected.is_empty(),
+        "{:?}",
+        res.selected.first().map(|e| &e.label)
+    );
 }
 
 #[test]
 fn other_effects_are_named() {
     let mut fr = lanl();
-    fr.frictions = (1..=8).map(|d| Friction { dof: d, level: 0.5, velocity: 1e-3 }).collect();
+    fr.frictions = (1..=8)
+        .map(|d| Friction {
+            dof: d,
+            level: 0.5,
+            velocity: 1e-3,
+        })
+        .collect();
     let res = run(&fr, &[1, 2, 3, 4, 5, 6, 7, 8], 0.01, 5);
     assert_eq!(res.selected[0].candidate.kind, EffectKind::Friction);
 
     let mut cu = lanl();
-    cu.cubics = vec![Cubic { dofs: vec![3, 4], k3: 2e12 }];
+    cu.cubics = vec![Cubic {
+        dofs: vec![3, 4],
+        k3: 2e12,
+    }];
     let res = run(&cu, &[1, 2, 3, 4, 5, 6, 7, 8], 0.01, 6);
     assert_eq!(res.selected[0].candidate.kind, EffectKind::Cubic);
     assert_eq!(res.selected[0].candidate.dofs, vec![2, 3]);
 
     let mut gs = lanl();
-    gs.springs.push(Spring { dofs: vec![1], stiffness: 2000.0, name: None });
+    gs.springs.push(Spring {
+        dofs: vec![1],
+        stiffness: 2000.0,
+        name: None,
+    });
     let res = run(&gs, &[1, 5, 6], 0.01, 7);
     assert_eq!(res.selected[0].candidate.kind, EffectKind::GroundSpring);
     assert_eq!(res.selected[0].candidate.dofs, vec![0]);

@@ -30,9 +30,16 @@ fn sdof() -> (Model, Problem) {
         source: Default::default(),
     };
     let params = vec![Parameter::relative(&model, Target::SpringStiffness(0)).unwrap()];
-    let mut p =
-        Problem::from_record(&model, &rec, &[Quantity::Disp], None, params, vec![1e-3], vec![0.0])
-            .unwrap();
+    let mut p = Problem::from_record(
+        &model,
+        &rec,
+        &[Quantity::Disp],
+        None,
+        params,
+        vec![1e-3],
+        vec![0.0],
+    )
+    .unwrap();
     p.sim = SimSettings {
         substeps: 50,
         ..Default::default()
@@ -53,7 +60,12 @@ fn finite_difference_jacobian_matches_the_analytic_derivative() {
     for k in (1..100).step_by(7) {
         let t = k as f64 / 1000.0;
         let du = -1e-3 * t * (omega * t).sin() * omega / 2.0;
-        assert_relative_eq!(jac[(k, 0)], -w * du, epsilon = 2e-3 * w * 1e-3, max_relative = 1e-2);
+        assert_relative_eq!(
+            jac[(k, 0)],
+            -w * du,
+            epsilon = 2e-3 * w * 1e-3,
+            max_relative = 1e-2
+        );
     }
     // and the data are matched at the nominal value
     assert!(r0.amax() < 1e-3);
@@ -64,7 +76,7 @@ fn minimum_change_term_pulls_toward_the_nominal_values() {
     let case = table4::case(0.01, 2).unwrap();
     let col = table4::columns()[2];
     let mut last = f64::INFINITY;
-    for alpha in [0.0, 1e-3, 1e-1, 10.0] {
+    for alpha in [0.0, 1e-3, 1e-1, 10.0, 1e3] {
         let mut p = table4::problem(&case, &col).unwrap();
         p.metric = update::Metric::Gls;
         p.alpha = alpha;
@@ -73,7 +85,7 @@ fn minimum_change_term_pulls_toward_the_nominal_values() {
         assert!(norm < last, "alpha {alpha}: |x| {norm} not below {last}");
         last = norm;
     }
-    assert!(last < 0.02, "alpha 10 leaves |x| = {last}");
+    assert!(last < 0.005, "alpha 1000 leaves |x| = {last}");
 }
 
 #[test]
@@ -85,8 +97,19 @@ fn bounds_hold() {
     for opt in [optimize::Optimizer::Lm, optimize::Optimizer::Simplex] {
         let r = update::fit(&p, &FitSettings::with(opt)).unwrap();
         let k3 = &r.parameters[2];
-        assert!(k3.value >= k3.lower - 1e-9 * k3.lower, "{opt:?}: {}", k3.value);
-        assert!(k3.at_bound, "{opt:?}: {:?}", k3);
+        assert!(
+            k3.value >= k3.lower - 1e-9 * k3.lower,
+            "{opt:?}: {}",
+            k3.value
+        );
+        assert!(
+            (k3.value - k3.lower) / k3.nominal < 1e-4,
+            "{opt:?}: {:?}",
+            k3
+        );
+        if opt == optimize::Optimizer::Lm {
+            assert!(k3.at_bound, "{k3:?}");
+        }
         for q in &r.parameters {
             assert!(q.value >= q.lower && q.value <= q.upper, "{opt:?}: {q:?}");
         }
@@ -106,19 +129,28 @@ fn bad_input_is_a_clear_error() {
     // negative stiffness as a bound or a nominal value
     let mut p = table4::problem(&case, &table4::columns()[2]).unwrap();
     p.parameters[1].lower = -1.0;
-    let e = update::fit(&p, &FitSettings::default()).unwrap_err().to_string();
+    let e = update::fit(&p, &FitSettings::default())
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("parameter k2") && e.contains("> 0"), "{e}");
     let mut p = table4::problem(&case, &table4::columns()[2]).unwrap();
     p.parameters.clear();
-    let e = update::fit(&p, &FitSettings::default()).unwrap_err().to_string();
+    let e = update::fit(&p, &FitSettings::default())
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("no free parameter"), "{e}");
     let mut p = table4::problem(&case, &table4::columns()[2]).unwrap();
     p.segments[0].u0.pop();
-    let e = update::fit(&p, &FitSettings::default()).unwrap_err().to_string();
+    let e = update::fit(&p, &FitSettings::default())
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("segment 0"), "{e}");
     let mut p = table4::problem(&case, &table4::columns()[2]).unwrap();
     p.alpha = -1.0;
-    assert!(update::fit(&p, &FitSettings::default()).unwrap_err().to_string().contains("alpha"));
+    assert!(update::fit(&p, &FitSettings::default())
+        .unwrap_err()
+        .to_string()
+        .contains("alpha"));
 }
 
 #[test]

@@ -18,13 +18,22 @@ fn every_column_recovers_the_truth_on_noise_free_data() {
     for col in table4::columns() {
         let p = table4::problem(&case, &col).unwrap();
         let r = update::fit(&p, &FitSettings::default()).unwrap();
-        assert!(r.termination.converged(), "{}: {:?}", col.label, r.termination);
+        assert!(
+            r.termination.converged(),
+            "{}: {:?}",
+            col.label,
+            r.termination
+        );
         let id = r.identifiability.as_ref().unwrap();
         assert!(id.all_determined, "{}: {}", col.label, id.verdict);
         assert_recovers(col.label, &r.percent_changes());
         let before = r.errors_before.as_ref().unwrap().overall;
         let after = r.errors_after.as_ref().unwrap().overall;
-        assert!(before > 0.1 && after < 0.03, "{}: {before} -> {after}", col.label);
+        assert!(
+            before > 0.1 && after < 0.03,
+            "{}: {before} -> {after}",
+            col.label
+        );
         // the reduced columns say how much the reduction leaves out
         assert_eq!(r.reduction_error.is_some(), col.reduction.is_some());
     }
@@ -34,7 +43,12 @@ fn every_column_recovers_the_truth_on_noise_free_data() {
 fn each_optimizer_solves_the_full_order_column() {
     let case = table4::case(0.0, 11).unwrap();
     let col = table4::columns()[2];
-    for opt in [Optimizer::Lm, Optimizer::Gn, Optimizer::Bfgs, Optimizer::Simplex] {
+    for opt in [
+        Optimizer::Lm,
+        Optimizer::Gn,
+        Optimizer::Bfgs,
+        Optimizer::Simplex,
+    ] {
         let p = table4::problem(&case, &col).unwrap();
         let r = update::fit(&p, &FitSettings::with(opt)).unwrap();
         assert!(
@@ -60,7 +74,11 @@ fn one_percent_noise_stays_within_its_predicted_scatter() {
     for (i, truth) in table4::TRUE_CHANGE.iter().enumerate() {
         let err = r.parameters[i].percent_change - 100.0 * truth;
         let sd = 100.0 * id.parameters[i].std_scaled;
-        assert!(err.abs() < 4.0 * sd + 0.3, "{}: error {err} std {sd}", r.parameters[i].name);
+        assert!(
+            err.abs() < 4.0 * sd + 0.3,
+            "{}: error {err} std {sd}",
+            r.parameters[i].name
+        );
     }
 }
 

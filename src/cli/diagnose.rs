@@ -74,9 +74,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     } else {
         ProgressBar::hidden()
     };
-    let d = diagnose::diagnose(&model, &rec, val.as_ref(), sensors.as_deref(), &settings, &|m| {
-        bar.set_message(m.to_string())
-    })?;
+    let d = diagnose::diagnose(
+        &model,
+        &rec,
+        val.as_ref(),
+        sensors.as_deref(),
+        &settings,
+        &|m| bar.set_message(m.to_string()),
+    )?;
     bar.finish_and_clear();
     let used: Vec<usize> = d.prepared.channels.iter().map(|c| c.1 + 1).collect();
     let meta = report::Meta {

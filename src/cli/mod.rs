@@ -1,6 +1,7 @@
 //! Command-line front end: one file per subcommand.
 
 mod diagnose;
+mod identify;
 mod modal;
 mod simulate;
 mod update;
@@ -22,6 +23,8 @@ enum Command {
     Modal(modal::Args),
     /// Simulate a model under an input and write a record (with its truth).
     Simulate(simulate::Args),
+    /// Reconstruct the internal forces a linear model lacks (sliding windows).
+    Identify(identify::Args),
     /// Update model parameters so simulated responses match a record (GLS or PCD).
     Update(update::Args),
     /// Find what the model misses, trace it to an effect, add and fit it, report before/after.
@@ -33,6 +36,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Modal(a) => modal::run(a),
         Command::Simulate(a) => simulate::run(a),
+        Command::Identify(a) => identify::run(a),
         Command::Update(a) => update::run(a),
         Command::Diagnose(a) => diagnose::run(a),
     }
@@ -128,15 +132,20 @@ pub struct RecordOpts {
 }
 
 /// Read a record (HDF5, CSV, or MAT with `opts`).
-pub fn load_record(path: &std::path::Path, opts: &RecordOpts) -> anyhow::Result<tacit::record::Record> {
+pub fn load_record(
+    path: &std::path::Path,
+    opts: &RecordOpts,
+) -> anyhow::Result<tacit::record::Record> {
     use tacit::record::{self, Format, MatMapping, Quantity};
     if record::Format::from_path(path)? != Format::Mat {
         return Ok(record::read(path)?);
     }
-    let map = opts
-        .mat_map
-        .as_ref()
-        .ok_or_else(|| anyhow::anyhow!("{}: a .mat record needs --mat-map and --mat-fs", path.display()))?;
+    let map = opts.mat_map.as_ref().ok_or_else(|| {
+        anyhow::anyhow!(
+            "{}: a .mat record needs --mat-map and --mat-fs",
+            path.display()
+        )
+    })?;
     let fs = opts
         .mat_fs
         .ok_or_else(|| anyhow::anyhow!("{}: a .mat record needs --mat-fs", path.display()))?;
@@ -149,8 +158,11 @@ pub fn load_record(path: &std::path::Path, opts: &RecordOpts) -> anyhow::Result<
             .trim()
             .split_once('_')
             .ok_or_else(|| anyhow::anyhow!("--mat-map: channel '{ch}' is not like force_1"))?;
-        let q = Quantity::from_prefix(q).ok_or_else(|| anyhow::anyhow!("--mat-map: unknown quantity '{q}'"))?;
-        let d: usize = d.parse().map_err(|_| anyhow::anyhow!("--mat-map: bad DOF in '{ch}'"))?;
+        let q = Quantity::from_prefix(q)
+            .ok_or_else(|| anyhow::anyhow!("--mat-map: unknown quantity '{q}'"))?;
+        let d: usize = d
+            .parse()
+            .map_err(|_| anyhow::anyhow!("--mat-map: bad DOF in '{ch}'"))?;
         channels.push((var.trim().to_string(), q, d));
     }
     Ok(record::read_mat(

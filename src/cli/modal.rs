@@ -1,6 +1,14 @@
-//! `tacit modal`: natural frequencies and mode shapes.
+//! `tacit modal`: natural frequencies and mode shapes of a model; with
+//! `--test-modes` or `--record`, test-analysis correlation against test
+//! modes (MAC, pairing, frequency error: the paper's Tables 2–3) and, with
+//! `--update`, modal updating of the spring stiffnesses (Figs 2–3).
 
-use std::path::PathBuf;
+use super::DofList;
+use std::path::{Path, PathBuf};
+use tacit::correlate::{
+    self, report, CorrelationSettings, Expansion, FitSettings, FrfSettings, Residue,
+    TestModes, UpdateSettings,
+};
 use tacit::model::Model;
 
 /// Arguments of `tacit modal`.
@@ -9,9 +17,63 @@ pub struct Args {
     /// Model file (TOML).
     #[arg(long)]
     model: PathBuf,
-    /// Print JSON instead of a table.
+    /// Print JSON instead of tables.
     #[arg(long)]
     json: bool,
+    /// Test modes to correlate with the model (TOML: `dofs`, then
+    /// `[[mode]]` tables with `frequency_hz`, `damping`, `shape`; see
+    /// docs/modal.md).
+    #[arg(long, conflicts_with = "record")]
+    test_modes: Option<PathBuf>,
+    /// Record(s) with a force input and accelerations (HDF5 or CSV) to
+    /// identify test modes from (H1 averaged over all of them, then an
+    /// LSCF/LSFD curve fit). Repeat for several records.
+    #[arg(long)]
+    record: Vec<PathBuf>,
+    /// Accelerometer DOFs used from the record(s), e.g. `1-8` or `1,4,7`
+    /// (default: every acceleration channel of the first record).
+    #[arg(long, requires = "record")]
+    sensors: Option<DofList>,
+    /// DOF of the input force (default: the record's only force channel).
+    #[arg(long, requires = "record")]
+    input_dof: Option<usize>,
+    /// Curve-fit band, Hz, as `lo,hi` (default 5,150).
+    #[arg(long, value_parser = super::parse_pair, requires = "record")]
+    band: Option<(f64, f64)>,
+    /// FRF segment length in samples (default 2048).
+    #[arg(long, requires = "record")]
+    segment: Option<usize>,
+    /// Correlate (and update with) the first N test modes only.
+    #[arg(long)]
+    modes: Option<usize>,
+    /// Correlate at these DOFs only (a subset of the measured ones), e.g.
+    /// `1,4,7`.
+    #[arg(long)]
+    dofs: Option<DofList>,
+    /// Update the spring stiffnesses by minimising modal residues.
+    #[arg(long, value_parser = parse_residue)]
+    update: Option<Residue>,
+    /// Expansion of the test shapes to unmeasured DOFs for `--update`.
+    #[arg(long, value_parser = parse_expansion, default_value = "serep")]
+    expansion: Expansion,
+    /// Write figures (MAC matrix, stiffness adjustments) as
+    /// `<STEM>_mac.{png,svg}` and `<STEM>_update.{png,svg}`.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Write the test modes (identified or read) to this TOML file.
+    #[arg(long)]
+    save_test_modes: Option<PathBuf>,
+    /// Write the updated model to this TOML file (with `--update`).
+    #[arg(long, requires = "update")]
+    save_model: Option<PathBuf>,
+}
+
+fn parse_residue(s: &str) -> Result<Residue, String> {
+    s.parse()
+}
+
+fn parse_expansion(s: &str) -> Result<Expansion, String> {
+    s.parse()
 }
 
 #[derive(serde::Serialize)]
@@ -22,8 +84,191 @@ struct ModeOut {
     shape: Vec<f64>,
 }
 
+/// Run `tacit modal`.
 pub fn run(a: Args) -> anyhow::Result<()> {
     let model = Model::from_file(&a.model)?;
+    if a.test_modes.is_none() && a.record.is_empty() {
+        if a.update.is_some() || a.dofs.is_some() || a.modes.is_some() {
+            anyhow::bail!("--update, --dofs and --modes need --test-modes or --record");
+        }
+        return model_modes(&model, a.json);
+    }
+    let (test, fit_doc) = test_modes(&a, &model)?;
+    let mut test = match &a.dofs {
+        Some(d) => {
+            super::check_dofs(&d.0, model.ndof(), "--dofs")?;
+            test.restrict(&d.0)?
+        }
+        None => test,
+    };
+    if let Some(n) = a.modes {
+        if n == 0 {
+            anyhow::bail!("--modes must be >= 1");
+        }
+        test = test.first(n);
+    }
+    if let Some(p) = &a.save_test_modes {
+        tacit::io::write_string(p, &test.to_toml_string())?;
+    }
+    let modes = tacit::modal::solve(&model.mass_matrix(), &model.stiffness_matrix())?;
+    let corr = correlate::correlate(&test, &modes, &CorrelationSettings::default())?;
+    let update = match a.update {
+        Some(res) => {
+            let s = UpdateSettings::new(res).with_expansion(a.expansion.clone());
+            let r = correlate::update_stiffness(&model, &test, &s)?;
+            let m2 = &r.model;
+            let modes2 = tacit::modal::solve(&m2.mass_matrix(), &m2.stiffness_matrix())?;
+            let after = correlate::correlate(&test, &modes2, &CorrelationSettings::default())?;
+            if let Some(p) = &a.save_model {
+                tacit::io::write_string(p, &m2.to_toml_string())?;
+            }
+            Some((r, after))
+        }
+        None => None,
+    };
+    if let Some(stem) = &a.plot {
+        write_plots(stem, &corr, &test, &model, update.as_ref().map(|u| &u.0))?;
+    }
+    if a.json {
+        #[derive(serde::Serialize)]
+        struct Doc<'a> {
+            model: &'a str,
+            test_modes: &'a TestModes,
+            fit: Option<serde_json::Value>,
+            correlation: &'a correlate::Correlation,
+            update: Option<&'a correlate::UpdateResult>,
+            correlation_after_update: Option<&'a correlate::Correlation>,
+        }
+        let doc = Doc {
+            model: &model.name,
+            test_modes: &test,
+            fit: fit_doc,
+            correlation: &corr,
+            update: update.as_ref().map(|u| &u.0),
+            correlation_after_update: update.as_ref().map(|u| &u.1),
+        };
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+        return Ok(());
+    }
+    println!(
+        "test modes: {} ({} modes at DOFs {:?}{})",
+        test.name,
+        test.modes.len(),
+        test.dofs,
+        if test.mass_normalized {
+            ", mass-normalized"
+        } else {
+            ""
+        }
+    );
+    print!("{}", report::modes_table(&[(test.name.as_str(), &test)]));
+    println!("\ncorrelation with model {} (before updating)", model.name);
+    print!("{}", report::correlation_table(&corr, None));
+    if let Some((r, after)) = &update {
+        println!(
+            "\nstiffness updating: {:?} residues, {:?} expansion",
+            r.residue, r.expansion
+        );
+        print!("{}", report::adjustment_table(&[("change", r)]));
+        println!("\ncorrelation with the updated model");
+        print!("{}", report::correlation_table(after, None));
+    }
+    Ok(())
+}
+
+/// Test modes from a file or identified from records; the curve-fit
+/// summary for JSON.
+fn test_modes(a: &Args, model: &Model) -> anyhow::Result<(TestModes, Option<serde_json::Value>)> {
+    if let Some(p) = &a.test_modes {
+        return Ok((TestModes::from_file(p, model.ndof())?, None));
+    }
+    let mut recs = Vec::with_capacity(a.record.len());
+    for p in &a.record {
+        let mut r = tacit::record::read(p)?;
+        r.validate(Some(model.ndof()))?;
+        r.source = p.clone();
+        recs.push(r);
+    }
+    let sensors: Vec<usize> = match &a.sensors {
+        Some(d) => d.0.clone(),
+        None => {
+            let mut d: Vec<usize> = recs[0]
+                .outputs
+                .iter()
+                .filter(|c| c.quantity == tacit::record::Quantity::Accel)
+                .map(|c| c.dof)
+                .collect();
+            d.sort_unstable();
+            d.dedup();
+            if d.is_empty() {
+                anyhow::bail!(
+                    "{}: no acceleration channel to identify modes from",
+                    a.record[0].display()
+                );
+            }
+            d
+        }
+    };
+    super::check_dofs(&sensors, model.ndof(), "--sensors")?;
+    let mut frf = FrfSettings::default();
+    if let Some(s) = a.segment {
+        frf.segment = s;
+    }
+    let mut fit = FitSettings::default();
+    if let Some(b) = a.band {
+        fit.band_hz = b;
+    }
+    let id = correlate::identify_records(&recs, a.input_dof, &sensors, &frf, &fit)?;
+    for d in &id.fit.diagnostics {
+        eprintln!("tacit: note: {d}");
+    }
+    let name = format!(
+        "identified from {} record(s), {} averages",
+        recs.len(),
+        id.frf.averages
+    );
+    let t = id.fit.test_modes(&name, model.ndof())?;
+    let doc = serde_json::json!({
+        "status": id.fit.status,
+        "averages": id.frf.averages,
+        "support": id.fit.support,
+        "fit_error": id.fit.fit_error,
+        "diagnostics": id.fit.diagnostics,
+    });
+    Ok((t, Some(doc)))
+}
+
+fn write_plots(
+    stem: &Path,
+    corr: &correlate::Correlation,
+    test: &TestModes,
+    model: &Model,
+    update: Option<&correlate::UpdateResult>,
+) -> anyhow::Result<()> {
+    if let Some(dir) = stem.parent().filter(|d| !d.as_os_str().is_empty()) {
+        tacit::io::ensure_dir(dir)?;
+    }
+    let fig = report::mac_figure("MAC: test vs model", corr, &test.name, &model.name);
+    tacit::plot::save(&fig, &append(stem, "_mac"))?;
+    if let Some(r) = update {
+        let fig = report::adjustment_figure(
+            &format!("Stiffness adjustments ({:?} residues)", r.residue),
+            &[(format!("{:?}", r.residue), r)],
+        );
+        tacit::plot::save(&fig, &append(stem, "_update"))?;
+    }
+    Ok(())
+}
+
+/// `stem` with `suffix` appended to its file name.
+fn append(stem: &Path, suffix: &str) -> PathBuf {
+    let mut name = stem.file_name().unwrap_or_default().to_os_string();
+    name.push(suffix);
+    stem.with_file_name(name)
+}
+
+/// The model's own modes (no test data).
+fn model_modes(model: &Model, json: bool) -> anyhow::Result<()> {
     let modes = tacit::modal::solve(&model.mass_matrix(), &model.stiffness_matrix())?;
     let n = model.ndof();
     let out: Vec<ModeOut> = (0..n)
@@ -38,7 +283,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             }
         })
         .collect();
-    if a.json {
+    if json {
         #[derive(serde::Serialize)]
         struct Doc<'a> {
             model: &'a str,

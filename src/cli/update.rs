@@ -263,7 +263,10 @@ fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
             id.noise_level * 100.0
         ));
         for q in &id.parameters {
-            s.push_str(&format!("| {} | {:.4} | {} |\n", q.name, q.std_scaled, q.determined));
+            s.push_str(&format!(
+                "| {} | {:.4} | {} |\n",
+                q.name, q.std_scaled, q.determined
+            ));
         }
     }
     s.push_str("\nFigures: update_before.png, update_after.png (test solid, model dashed).\n");

@@ -29,7 +29,12 @@ pub struct AddedEffect {
 pub fn add(model: &mut Model, r: &RankedEffect) -> AddedEffect {
     let c = &r.candidate;
     let one = |d: usize| d + 1;
-    let val = |name: &str| r.parameters.iter().find(|p| p.0 == name).map_or(0.0, |p| p.1);
+    let val = |name: &str| {
+        r.parameters
+            .iter()
+            .find(|p| p.0 == name)
+            .map_or(0.0, |p| p.1)
+    };
     let (targets, names, traced, nominal): (Vec<Target>, Vec<&str>, Vec<f64>, f64) = match c.kind {
         EffectKind::Contact => {
             model.contacts.push(Contact {
@@ -79,7 +84,12 @@ pub fn add(model: &mut Model, r: &RankedEffect) -> AddedEffect {
             let s = c.spring.unwrap_or(0);
             let k0 = model.springs[s].stiffness;
             model.springs[s].stiffness = k0 * (1.0 + val("delta"));
-            (vec![Target::SpringStiffness(s)], vec!["delta"], vec![val("delta")], k0)
+            (
+                vec![Target::SpringStiffness(s)],
+                vec!["delta"],
+                vec![val("delta")],
+                k0,
+            )
         }
         EffectKind::GroundSpring => {
             model.springs.push(Spring {
@@ -102,7 +112,12 @@ pub fn add(model: &mut Model, r: &RankedEffect) -> AddedEffect {
             if let Damping::Modal { ratio: Some(z), .. } = &mut model.damping {
                 *z = (z0 * (1.0 + val("delta"))).max(0.0);
             }
-            (vec![Target::DampingRatio], vec!["delta"], vec![val("delta")], z0)
+            (
+                vec![Target::DampingRatio],
+                vec!["delta"],
+                vec![val("delta")],
+                z0,
+            )
         }
     };
     AddedEffect {

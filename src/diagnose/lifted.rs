@@ -46,7 +46,13 @@
 //!
 //! and `u_k = −L x_k + l_k`. `P` does not depend on the data: once it stops
 //! changing the steady gains are used, so a sample costs a few
-//! matrix–vector products. Internally displacements are scaled by a
+//! matrix–vector products. States the outputs never see (the unobservable
+//! subspace `N` of `(A, C_y)`: a free-free model's rigid-body displacement
+//! and velocity under acceleration data) cost nothing from any sample on,
+//! so `P N = 0` and `p ⊥ N` exactly; `P` and `p` are projected onto `N^⊥`
+//! at every step, else rounding in the rigid-body Jordan block grows
+//! without bound and the sweep never settles. Those states are then fixed by
+//! the `x_0` prior and the force prior alone. Internally displacements are scaled by a
 //! reference frequency ω and forces by `m ω` so the blocks are balanced.
 
 use crate::error::{Result, TacitError};
@@ -104,7 +110,10 @@ impl LiftedSettings {
             )));
         }
         if !(self.lambda > 0.0 && self.lambda.is_finite()) {
-            return Err(bad(format!("lambda = {} must be finite and > 0", self.lambda)));
+            return Err(bad(format!(
+                "lambda = {} must be finite and > 0",
+                self.lambda
+            )));
         }
         if !(self.noise_fraction > 0.0 && self.noise_fraction.is_finite()) {
             return Err(bad(format!(
@@ -114,9 +123,7 @@ impl LiftedSettings {
         }
         let (su, sv) = self.x0_std;
         if !(su > 0.0 && su.is_finite() && sv > 0.0 && sv.is_finite()) {
-            return Err(bad(format!(
-                "x0_std = ({su}, {sv}) must be finite and > 0"
-            )));
+            return Err(bad(format!("x0_std = ({su}, {sv}) must be finite and > 0")));
         }
         Ok(())
     }
@@ -218,6 +225,8 @@ struct Scaled {
     lambda: f64,
     /// Prior weight (diagonal, nx).
     p0: DVector<f64>,
+    /// Orthonormal basis of the unobservable subspace of `(A, H_x)` (nx × d).
+    null: DMatrix<f64>,
     dx: DVector<f64>,
     df: f64,
 }
@@ -245,7 +254,9 @@ fn check_sizes(
 ) -> Result<usize> {
     let (n, len) = (sm.n, measured.ncols());
     if len < 2 {
-        return Err(bad(format!("the record has {len} samples, at least 2 are needed")));
+        return Err(bad(format!(
+            "the record has {len} samples, at least 2 are needed"
+        )));
     }
     if measured.nrows() != channels.len() || channels.is_empty() {
         return Err(bad(format!(
@@ -317,11 +328,12 @@ impl Scaled {
         for i in 0..p {
             target.row_mut(i).scale_mut(wsqrt[i]);
         }
-        let mut c = &lm.bg0 * known_force.columns(0, len - 1)
-            + &lm.bg1 * known_force.columns(1, len - 1);
+        let mut c =
+            &lm.bg0 * known_force.columns(0, len - 1) + &lm.bg1 * known_force.columns(1, len - 1);
         for i in 0..nx {
             c.row_mut(i).scale_mut(1.0 / dx[i]);
         }
+        let null = unobservable(&a, &hx);
         let (su, sv) = s.x0_std;
         let p0 = DVector::from_fn(nx, |i, _| {
             let sd = if i < n { su } else { sv };
@@ -339,9 +351,49 @@ impl Scaled {
             c,
             lambda: s.lambda / r as f64 * df * df,
             p0,
+            null,
             dx,
             df,
         })
+    }
+}
+
+/// Orthonormal basis of the unobservable subspace of `(a, h)`: right
+/// singular vectors of `[h; h a; …; h a^{nx−1}]` with singular values below
+/// `1e-9` of the largest.
+fn unobservable(a: &DMatrix<f64>, h: &DMatrix<f64>) -> DMatrix<f64> {
+    let (nx, p) = (a.nrows(), h.nrows());
+    let mut obs = DMatrix::zeros(p * nx, nx);
+    let mut blk = h.clone();
+    for i in 0..nx {
+        obs.rows_mut(i * p, p).copy_from(&blk);
+        blk = &blk * a;
+    }
+    let svd = obs.svd(false, true);
+    let vt = svd.v_t.expect("v_t was requested");
+    let smax = svd.singular_values.max();
+    let idx: Vec<usize> = (0..nx)
+        .filter(|&i| !(svd.singular_values[i] > 1e-9 * smax))
+        .collect();
+    DMatrix::from_fn(nx, idx.len(), |r, c| vt[(idx[c], r)])
+}
+
+/// `P ← (I − N Nᵀ) P (I − N Nᵀ)`.
+fn project_matrix(null: &DMatrix<f64>, p: &mut DMatrix<f64>) {
+    if null.ncols() == 0 {
+        return;
+    }
+    let pn = &*p * null;
+    let npn = null.transpose() * &pn;
+    *p -= &pn * null.transpose() + null * pn.transpose() - null * npn * null.transpose();
+    symmetrize(p);
+}
+
+/// `p ← (I − N Nᵀ) p`.
+fn project_vector(null: &DMatrix<f64>, p: &mut DVector<f64>) {
+    if null.ncols() > 0 {
+        let c = null.transpose() * &*p;
+        p.gemv(-1.0, null, &c, 1.0);
     }
 }
 
@@ -389,7 +441,16 @@ fn riccati_step(sp: &Scaled, pn: &DMatrix<f64>) -> Option<(Gain, DMatrix<f64>)> 
     symmetrize(&mut p);
     let mt = (&sp.hx - &sp.hu * &l).transpose();
     let phit = (&sp.a - &sp.g * &l).transpose();
-    Some((Gain { l, kr, ke, mt, phit }, p))
+    Some((
+        Gain {
+            l,
+            kr,
+            ke,
+            mt,
+            phit,
+        },
+        p,
+    ))
 }
 
 fn rel_change(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
@@ -431,7 +492,8 @@ fn backward(sp: &Scaled) -> Result<Backward> {
     // transient: full Riccati steps until P stops changing
     while k > 0 {
         k -= 1;
-        let (gain, pk) = riccati_step(sp, &p).ok_or_else(|| trouble(k))?;
+        let (gain, mut pk) = riccati_step(sp, &p).ok_or_else(|| trouble(k))?;
+        project_matrix(&sp.null, &mut pk);
         let e = if k + 1 < len {
             &pv - &p * sp.c.column(k)
         } else {
@@ -440,6 +502,7 @@ fn backward(sp: &Scaled) -> Result<Backward> {
         let rk = sp.target.column(k);
         lff.set_column(k, &(&gain.kr * rk + &gain.ke * &e));
         pv = &gain.mt * rk + &gain.phit * &e;
+        project_vector(&sp.null, &mut pv);
         calm = if rel_change(&pk, &p) <= RICCATI_TOL {
             calm + 1
         } else {
@@ -471,6 +534,7 @@ fn backward(sp: &Scaled) -> Result<Backward> {
             pnew.gemv(1.0, &gain.mt, &rk, 0.0);
             pnew.gemv(1.0, &gain.phit, &e, 1.0);
             std::mem::swap(&mut pv, &mut pnew);
+            project_vector(&sp.null, &mut pv);
         }
         steady = Some(gain);
     }
@@ -567,6 +631,7 @@ pub fn reconstruct(
     let last = force.column(len - 2).into_owned();
     force.set_column(len - 1, &last);
     let transient = len - bw.j0;
+    let hidden = sp.null.ncols();
     let riccati = if bw.j0 > 0 {
         format!("Riccati converged after {transient} of {len} samples")
     } else {
@@ -577,7 +642,7 @@ pub fn reconstruct(
         force,
         fine_force,
         status: format!(
-            "solved: {riccati}; R = {r} sub-intervals of {} Newmark sub-steps; weighted residual RMS {wrms:.3} (1 = the assumed noise)",
+            "solved: {riccati}; R = {r} sub-intervals of {} Newmark sub-steps; {hidden} unobservable state directions (set by the priors); weighted residual RMS {wrms:.3} (1 = the assumed noise)",
             lm.substeps_per_sub
         ),
         elapsed_s: t.elapsed().as_secs_f64(),
@@ -613,8 +678,14 @@ mod tests {
             assert_eq!(lm.substeps_per_sub * r, 12);
             let tol = 1e-12 * sm.a.amax();
             assert!((&lm.a - &sm.a).amax() < tol, "A, R = {r}");
-            assert!((&lm.bg0 - &sm.b0).amax() < 1e-12 * sm.b0.amax(), "B0, R = {r}");
-            assert!((&lm.bg1 - &sm.b1).amax() < 1e-12 * sm.b1.amax(), "B1, R = {r}");
+            assert!(
+                (&lm.bg0 - &sm.b0).amax() < 1e-12 * sm.b0.amax(),
+                "B0, R = {r}"
+            );
+            assert!(
+                (&lm.bg1 - &sm.b1).amax() < 1e-12 * sm.b1.amax(),
+                "B1, R = {r}"
+            );
             let mut gsum = DMatrix::zeros(6, 3);
             for j in 0..r {
                 gsum += lm.g.columns(j * 3, 3);
@@ -635,8 +706,14 @@ mod tests {
         let lm = lift(&sm, r).unwrap();
         let channels = [(Quantity::Accel, 0), (Quantity::Disp, 1)];
         let (cy, dy) = sm.outputs(&channels).unwrap();
-        let known = DMatrix::from_fn(n, len, |i, k| if i == 0 { (k as f64 * 0.9).sin() } else { 0.0 });
-        let measured = DMatrix::from_fn(2, len, |c, k| ((c + 1) as f64 * 1.3 + k as f64 * 0.7).cos() * [3.0, 0.01][c]);
+        let known = DMatrix::from_fn(
+            n,
+            len,
+            |i, k| if i == 0 { (k as f64 * 0.9).sin() } else { 0.0 },
+        );
+        let measured = DMatrix::from_fn(2, len, |c, k| {
+            ((c + 1) as f64 * 1.3 + k as f64 * 0.7).cos() * [3.0, 0.01][c]
+        });
         let s = LiftedSettings {
             resolution: r,
             lambda: 0.3,
@@ -659,7 +736,8 @@ mod tests {
                 for j in 0..n {
                     row[nx + k * nu + j] += dy[(c, j)] * w[c];
                 }
-                let rhs = w[c] * (measured[(c, k)] - (cy.row(c) * &xc)[0] - (dy.row(c) * known.column(k))[0]);
+                let rhs = w[c]
+                    * (measured[(c, k)] - (cy.row(c) * &xc)[0] - (dy.row(c) * known.column(k))[0]);
                 rows.push((row, rhs));
             }
             if k + 1 < len {
@@ -690,18 +768,27 @@ mod tests {
                 for i in 0..n {
                     let d = z[nx + k * nu + j * n + i];
                     let f = res.fine_force[(i, k * r + j)];
-                    assert!((d - f).abs() < 1e-7 * (1.0 + d.abs()), "f[{i},{k},{j}] {d} vs {f}");
+                    assert!(
+                        (d - f).abs() < 1e-7 * (1.0 + d.abs()),
+                        "f[{i},{k},{j}] {d} vs {f}"
+                    );
                 }
             }
         }
         let mut x = z.rows(0, nx).into_owned();
         for k in 0..len {
             for i in 0..nx {
-                assert!((x[i] - res.states[(i, k)]).abs() < 1e-7 * (1e-3 + x[i].abs()), "x[{i},{k}]");
+                assert!(
+                    (x[i] - res.states[(i, k)]).abs() < 1e-7 * (1e-3 + x[i].abs()),
+                    "x[{i},{k}]"
+                );
             }
             if k + 1 < len {
                 let u = z.rows(nx + k * nu, nu);
-                x = &lm.a * &x + &lm.g * u + &lm.bg0 * known.column(k) + &lm.bg1 * known.column(k + 1);
+                x = &lm.a * &x
+                    + &lm.g * u
+                    + &lm.bg0 * known.column(k)
+                    + &lm.bg1 * known.column(k + 1);
             }
         }
         assert!(res.status.starts_with("solved"), "{}", res.status);
@@ -710,9 +797,25 @@ mod tests {
     #[test]
     fn settings_are_checked() {
         assert!(LiftedSettings::default().validate().is_ok());
-        let e = LiftedSettings { resolution: 0, ..Default::default() }.validate().unwrap_err().to_string();
+        let e = LiftedSettings {
+            resolution: 0,
+            ..Default::default()
+        }
+        .validate()
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("resolution = 0"), "{e}");
-        assert!(LiftedSettings { lambda: 0.0, ..Default::default() }.validate().is_err());
-        assert!(LiftedSettings { x0_std: (1.0, f64::INFINITY), ..Default::default() }.validate().is_err());
+        assert!(LiftedSettings {
+            lambda: 0.0,
+            ..Default::default()
+        }
+        .validate()
+        .is_err());
+        assert!(LiftedSettings {
+            x0_std: (1.0, f64::INFINITY),
+            ..Default::default()
+        }
+        .validate()
+        .is_err());
     }
 }

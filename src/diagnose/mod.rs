@@ -61,8 +61,9 @@ pub struct DiagnoseSettings {
     pub omega_h: f64,
     /// Largest number of sub-steps (default 80).
     pub max_substeps: usize,
-    /// An added and fitted effect must lower the multiple-shooting error by
-    /// at least this fraction, or it is withdrawn (default 0.1).
+    /// An added and fitted effect must remove at least this fraction of the
+    /// squared multiple-shooting error, or it is withdrawn (default 0.05,
+    /// the trace's threshold).
     pub min_improvement: f64,
     /// Where the states come from (default: reconstructed).
     pub states: StatesSource,
@@ -86,15 +87,20 @@ impl Default for DiagnoseSettings {
             substeps: 10,
             max_effects: 3,
             trace: TraceSettings::default(),
-            horizon: HorizonSettings::default(),
+            horizon: HorizonSettings {
+                selection: horizon::settings::WeightSelection::Gcv,
+                ..HorizonSettings::default()
+            },
             fit: FitSettings {
                 max_iterations: 30,
+                x_tol: 1e-5,
+                f_tol: 1e-7,
                 ..FitSettings::default()
             },
             fit_segments: 20,
             omega_h: 0.15,
             max_substeps: 80,
-            min_improvement: 0.1,
+            min_improvement: 0.05,
             states: StatesSource::Reconstructed,
         }
     }
@@ -184,7 +190,10 @@ pub fn prepare(
         .filter(|c| sensors.is_none_or(|s| s.contains(&c.dof)))
         .collect();
     if outs.is_empty() {
-        return Err(TacitError::record(rec.source.clone(), "no output channel to compare"));
+        return Err(TacitError::record(
+            rec.source.clone(),
+            "no output channel to compare",
+        ));
     }
     let segment = ((settings.segment_seconds * rec.fs).round() as usize).max(4);
     if rec.len() < 2 * segment {
@@ -203,7 +212,10 @@ pub fn prepare(
     let mut recon = reconstruct(&sampled, &force, &measured, &channels, &settings.horizon)?;
     if settings.states == StatesSource::Truth {
         let t = rec.truth.as_ref().ok_or_else(|| {
-            TacitError::record(rec.source.clone(), "states from the truth: the record has no truth")
+            TacitError::record(
+                rec.source.clone(),
+                "states from the truth: the record has no truth",
+            )
         })?;
         for i in 0..n {
             for k in 0..rec.len() {
@@ -405,7 +417,13 @@ pub fn diagnose(
     let prep = prepare(declared, rec, sensors, settings)?;
     timings.insert("identify".into(), prep.recon.elapsed_s);
     let cmp = &prep.comparison;
-    let base_sub = auto_substeps(declared, rec.fs, settings.substeps, settings.omega_h, settings.max_substeps);
+    let base_sub = auto_substeps(
+        declared,
+        rec.fs,
+        settings.substeps,
+        settings.omega_h,
+        settings.max_substeps,
+    );
     let sim0 = SimSettings {
         substeps: base_sub,
         ..Default::default()
@@ -471,7 +489,13 @@ pub fn diagnose(
         all.push(eff.clone());
         let (fitted, note, fit_sims) = fit_effects(&trial, &all, cmp, rec.fs, settings)?;
         sims += fit_sims;
-        let sub = auto_substeps(&fitted, rec.fs, settings.substeps, settings.omega_h, settings.max_substeps);
+        let sub = auto_substeps(
+            &fitted,
+            rec.fs,
+            settings.substeps,
+            settings.omega_h,
+            settings.max_substeps,
+        );
         let sim = SimSettings {
             substeps: sub,
             ..Default::default()
@@ -480,7 +504,7 @@ pub fn diagnose(
         sims += cmp.segments.len();
         let new_err = pred.as_ref().ok().map(|y| cmp.total_error(y));
         let pays = match (current_err, new_err) {
-            (Some(a), Some(b)) => b < a * (1.0 - settings.min_improvement),
+            (Some(a), Some(b)) => b * b < a * a * (1.0 - settings.min_improvement),
             (None, Some(_)) => true,
             _ => false,
         };
@@ -495,7 +519,7 @@ pub fn diagnose(
                 )
             } else {
                 format!(
-                    "withdrawn: the fitted effect does not lower the multiple-shooting error by {:.0} % ({:.4} → {:.4})",
+                    "withdrawn: the fitted effect does not remove {:.0} % of the squared multiple-shooting error ({:.4} → {:.4})",
                     100.0 * settings.min_improvement,
                     current_err.unwrap_or(f64::NAN),
                     new_err.unwrap_or(f64::NAN)
@@ -533,7 +557,16 @@ pub fn diagnose(
     let validation = match validation {
         Some(v) => {
             progress("validation");
-            Some(validate(declared, &current, v, sensors, &prep, settings, (sim0, sim1), &mut sims)?)
+            Some(validate(
+                declared,
+                &current,
+                v,
+                sensors,
+                &prep,
+                settings,
+                (sim0, sim1),
+                &mut sims,
+            )?)
         }
         None => None,
     };
@@ -542,7 +575,11 @@ pub fn diagnose(
     } else {
         format!(
             "found {}",
-            effects.iter().map(|e| e.label.clone()).collect::<Vec<_>>().join(", ")
+            effects
+                .iter()
+                .map(|e| e.label.clone())
+                .collect::<Vec<_>>()
+                .join(", ")
         )
     };
     timings.insert("total".into(), t_all.elapsed().as_secs_f64());
@@ -581,7 +618,13 @@ fn fit_effects(
     for e in all {
         params.extend(effects::parameters(trial, e)?);
     }
-    let sub = auto_substeps(trial, fs, settings.substeps, settings.omega_h, settings.max_substeps);
+    let sub = auto_substeps(
+        trial,
+        fs,
+        settings.substeps,
+        settings.omega_h,
+        settings.max_substeps,
+    );
     let mut problem = cmp.problem(
         trial,
         spread(&cmp.segments, settings.fit_segments),
@@ -652,7 +695,13 @@ fn report_effects(
                 }
             }
         }
-        let sub = auto_substeps(model, fs, settings.substeps, settings.omega_h, settings.max_substeps);
+        let sub = auto_substeps(
+            model,
+            fs,
+            settings.substeps,
+            settings.omega_h,
+            settings.max_substeps,
+        );
         let mut problem = cmp.problem(
             model,
             spread(&cmp.segments, settings.fit_segments),
@@ -686,7 +735,9 @@ fn report_effects(
             for (pi, (name, _)) in vals.iter().enumerate() {
                 let se = ses.get(&(ei, pi)).copied().filter(|x| x.is_finite());
                 let se = match e.candidate.kind {
-                    crate::trace::EffectKind::Stiffness if e.nominal != 0.0 => se.map(|s| s / e.nominal),
+                    crate::trace::EffectKind::Stiffness if e.nominal != 0.0 => {
+                        se.map(|s| s / e.nominal)
+                    }
                     _ => se,
                 };
                 std_errors.insert(name.clone(), se);

@@ -89,11 +89,31 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
         d.prepared.segment
     );
     let _ = writeln!(s, "| | relative_error | simulation_error |\n|---|---|---|");
-    let _ = writeln!(s, "| before (declared model) | {} | {} |", pct(d.before.relative_error), pct(d.before.simulation_error));
-    let _ = writeln!(s, "| after (with the effects) | {} | {} |", pct(d.after.relative_error), pct(d.after.simulation_error));
+    let _ = writeln!(
+        s,
+        "| before (declared model) | {} | {} |",
+        pct(d.before.relative_error),
+        pct(d.before.simulation_error)
+    );
+    let _ = writeln!(
+        s,
+        "| after (with the effects) | {} | {} |",
+        pct(d.after.relative_error),
+        pct(d.after.simulation_error)
+    );
     if let Some(v) = &d.validation {
-        let _ = writeln!(s, "| validation, before | {} | {} |", pct(v.before.relative_error), pct(v.before.simulation_error));
-        let _ = writeln!(s, "| validation, after | {} | {} |", pct(v.after.relative_error), pct(v.after.simulation_error));
+        let _ = writeln!(
+            s,
+            "| validation, before | {} | {} |",
+            pct(v.before.relative_error),
+            pct(v.before.simulation_error)
+        );
+        let _ = writeln!(
+            s,
+            "| validation, after | {} | {} |",
+            pct(v.after.relative_error),
+            pct(v.after.simulation_error)
+        );
         let _ = writeln!(
             s,
             "\nNon-parametric prediction of the validation record (linear model driven by the force identified on the first record): {}.",
@@ -107,7 +127,13 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
     }
     let _ = writeln!(s, "\nPer channel (relative_error before → after):\n");
     for (b, a) in d.before.per_channel.iter().zip(&d.after.per_channel) {
-        let _ = writeln!(s, "- {}: {} → {}", b.channel, pct(b.relative_error), pct(a.relative_error));
+        let _ = writeln!(
+            s,
+            "- {}: {} → {}",
+            b.channel,
+            pct(b.relative_error),
+            pct(a.relative_error)
+        );
     }
     let _ = writeln!(s, "\n## Effects found\n");
     if d.effects.is_empty() {
@@ -144,13 +170,26 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
             i + 1,
             r.proposed.clone().unwrap_or_else(|| "no candidate".into()),
             r.note,
-            r.fit.as_ref().map_or(String::new(), |f| format!(" (fit: {f})"))
+            r.fit
+                .as_ref()
+                .map_or(String::new(), |f| format!(" (fit: {f})"))
         );
     }
     let _ = writeln!(s, "\nBest candidates of the first trace round:\n\n| candidate | residual removed | BIC change | parameters |\n|---|---|---|---|");
     for r in d.ranking.iter().take(8) {
-        let p: Vec<String> = r.parameters.iter().map(|(k, v)| format!("{k} = {v:.3e}")).collect();
-        let _ = writeln!(s, "| {} | {:.1} % | {:.0} | {} |", r.label, 100.0 * r.residual_explained, r.bic_change, p.join(", "));
+        let p: Vec<String> = r
+            .parameters
+            .iter()
+            .map(|(k, v)| format!("{k} = {v:.3e}"))
+            .collect();
+        let _ = writeln!(
+            s,
+            "| {} | {:.1} % | {:.0} | {} |",
+            r.label,
+            100.0 * r.residual_explained,
+            r.bic_change,
+            p.join(", ")
+        );
     }
     let _ = writeln!(s, "\nIdentification: {}.", d.identification);
     let _ = writeln!(
@@ -163,8 +202,14 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
         d.timings.get("total").copied().unwrap_or(f64::NAN)
     );
     let _ = writeln!(s, "\n## Figures\n");
-    for f in figs.iter().filter(|f| f.extension().is_some_and(|e| e == "png")) {
-        let name = f.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    for f in figs
+        .iter()
+        .filter(|f| f.extension().is_some_and(|e| e == "png"))
+    {
+        let name = f
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
         let _ = writeln!(s, "![{name}]({name})");
     }
     s
@@ -186,44 +231,94 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
     for (c, o) in cmp.observations.iter().enumerate() {
         let mut series = vec![];
         if let Some(b) = &d.predictions.0 {
-            series.push(("before".to_string(), (0..ns).map(|k| meas[(c, k)] - b[(c, k)]).collect(), SeriesStyle::Line));
+            series.push((
+                "before".to_string(),
+                (0..ns).map(|k| meas[(c, k)] - b[(c, k)]).collect(),
+                SeriesStyle::Line,
+            ));
         }
         if let Some(a) = &d.predictions.1 {
-            series.push(("after".to_string(), (0..ns).map(|k| meas[(c, k)] - a[(c, k)]).collect(), SeriesStyle::Line));
+            series.push((
+                "after".to_string(),
+                (0..ns).map(|k| meas[(c, k)] - a[(c, k)]).collect(),
+                SeriesStyle::Line,
+            ));
         }
         panels.push(plot::time_panel(&o.name(), "residual", &t, series));
     }
-    out.extend(plot::save(&Figure::new("Segment residual, before and after", panels, 1), &dir.join("residual"))?);
+    out.extend(plot::save(
+        &Figure::new("Segment residual, before and after", panels, 1),
+        &dir.join("residual"),
+    )?);
     // responses over the first 0.5 s
     let kmax = ((0.5 * cmp.fs) as usize).min(ns);
     let tt = &t[..kmax];
     let mut panels = vec![];
     for (c, o) in cmp.observations.iter().enumerate() {
-        let mut series = vec![("measured".to_string(), row(&meas, c)[..kmax].to_vec(), SeriesStyle::Line)];
+        let mut series = vec![(
+            "measured".to_string(),
+            row(&meas, c)[..kmax].to_vec(),
+            SeriesStyle::Line,
+        )];
         if let Some(b) = &d.predictions.0 {
-            series.push(("before".to_string(), row(b, c)[..kmax].to_vec(), SeriesStyle::DashedLine));
+            series.push((
+                "before".to_string(),
+                row(b, c)[..kmax].to_vec(),
+                SeriesStyle::DashedLine,
+            ));
         }
         if let Some(a) = &d.predictions.1 {
-            series.push(("after".to_string(), row(a, c)[..kmax].to_vec(), SeriesStyle::DashedLine));
+            series.push((
+                "after".to_string(),
+                row(a, c)[..kmax].to_vec(),
+                SeriesStyle::DashedLine,
+            ));
         }
-        panels.push(plot::time_panel(&o.name(), &o.quantity.si_unit().to_string(), tt, series));
+        panels.push(plot::time_panel(
+            &o.name(),
+            &o.quantity.si_unit().to_string(),
+            tt,
+            series,
+        ));
     }
-    out.extend(plot::save(&Figure::new("Responses (segments), first 0.5 s", panels, 1), &dir.join("responses"))?);
+    out.extend(plot::save(
+        &Figure::new("Responses (segments), first 0.5 s", panels, 1),
+        &dir.join("responses"),
+    )?);
     // identified force
     let f = &prep.recon.force;
     let n = f.nrows();
     let panels: Vec<Panel> = (0..n)
-        .map(|i| plot::time_panel(&format!("DOF {}", i + 1), "f_int [N]", &t, vec![(format!("f{}", i + 1), row(f, i), SeriesStyle::Line)]))
+        .map(|i| {
+            plot::time_panel(
+                &format!("DOF {}", i + 1),
+                "f_int [N]",
+                &t,
+                vec![(format!("f{}", i + 1), row(f, i), SeriesStyle::Line)],
+            )
+        })
         .collect();
-    out.extend(plot::save(&Figure::new("Identified internal force (left-hand side)", panels, 2), &dir.join("identified_force"))?);
+    out.extend(plot::save(
+        &Figure::new("Identified internal force (left-hand side)", panels, 2),
+        &dir.join("identified_force"),
+    )?);
     // restoring-force plots of the effects (and of the best candidate when none)
     let states = &prep.recon.states;
     let cands: Vec<crate::trace::Candidate> = if d.effects.is_empty() {
-        d.ranking.iter().take(1).map(|r| r.candidate.clone()).collect()
+        d.ranking
+            .iter()
+            .take(1)
+            .map(|r| r.candidate.clone())
+            .collect()
     } else {
         d.effects
             .iter()
-            .map(|e| crate::trace::Candidate::new(kind_of(&e.kind), e.dofs.iter().map(|x| x - 1).collect()))
+            .map(|e| {
+                crate::trace::Candidate::new(
+                    kind_of(&e.kind),
+                    e.dofs.iter().map(|x| x - 1).collect(),
+                )
+            })
             .collect()
     };
     for (i, c) in cands.iter().enumerate() {
@@ -243,8 +338,18 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
         } else {
             format!("u{}", c.dofs[0] + 1)
         };
-        let p1 = Panel::xy("force vs displacement", format!("{what} [m]"), "f_int [N]", vec![Series::points("identified", dx, fy.clone())]);
-        let p2 = Panel::xy("force vs velocity", format!("d/dt({what}) [m/s]"), "f_int [N]", vec![Series::points("identified", dv, fy)]);
+        let p1 = Panel::xy(
+            "force vs displacement",
+            format!("{what} [m]"),
+            "f_int [N]",
+            vec![Series::points("identified", dx, fy.clone())],
+        );
+        let p2 = Panel::xy(
+            "force vs velocity",
+            format!("d/dt({what}) [m/s]"),
+            "f_int [N]",
+            vec![Series::points("identified", dv, fy)],
+        );
         out.extend(plot::save(
             &Figure::new(format!("Restoring force: {}", c.label()), vec![p1, p2], 2),
             &dir.join(format!("restoring_{}", i + 1)),

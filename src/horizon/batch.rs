@@ -28,6 +28,9 @@ pub struct BatchSolution {
     pub force_std: DMatrix<f64>,
     /// Cost J at the solution.
     pub cost: f64,
+    /// Trace of the influence matrix `∂ŷ/∂y`: `‖A_y R^{-1}‖²_F` over the
+    /// output rows.
+    pub tr_h: f64,
 }
 
 type InitSplit = (Option<DVector<f64>>, Option<(DVector<f64>, DVector<f64>)>);
@@ -199,11 +202,14 @@ pub fn solve_dense(
         let j = wcol(k) + i;
         rinv.row(j).norm() * cs[j]
     });
+    let p = data.channels.len();
+    let tr_h = (a_scaled.rows(0, p * len) * &rinv).norm_squared();
     Ok(BatchSolution {
         force,
         states,
         force_std,
         cost,
+        tr_h,
     })
 }
 

@@ -24,7 +24,11 @@ pub fn problem_data(
     prob: &Problem,
     sys: &System,
     dofs: &[usize],
-) -> Result<(DMatrix<f64>, Vec<(crate::record::Quantity, usize)>, DMatrix<f64>)> {
+) -> Result<(
+    DMatrix<f64>,
+    Vec<(crate::record::Quantity, usize)>,
+    DMatrix<f64>,
+)> {
     let n = sys.n();
     let dofs: Vec<usize> = if dofs.is_empty() {
         (0..n).collect()
@@ -43,12 +47,17 @@ pub fn problem_data(
         .iter()
         .map(|&(q, d)| match &sys.reduction {
             None => Ok((q, d)),
-            Some(r) => r.kept.iter().position(|&k| k == d).map(|i| (q, i)).ok_or_else(|| {
-                TacitError::Setting(format!(
-                    "horizon: channel at DOF {} is not a kept DOF of the reduction",
-                    d + 1
-                ))
-            }),
+            Some(r) => r
+                .kept
+                .iter()
+                .position(|&k| k == d)
+                .map(|i| (q, i))
+                .ok_or_else(|| {
+                    TacitError::Setting(format!(
+                        "horizon: channel at DOF {} is not a kept DOF of the reduction",
+                        d + 1
+                    ))
+                }),
         })
         .collect::<Result<Vec<_>>>()?;
     let mut bu = DMatrix::zeros(sys.m(), dofs.len());
@@ -125,7 +134,8 @@ pub fn to_force_estimate(
     est.timings.total = res.timings.total;
     est.warnings.extend(res.notes.iter().cloned());
     if res.status != HorizonStatus::Solved {
-        est.warnings.push(format!("horizon status: {:?}", res.status));
+        est.warnings
+            .push(format!("horizon status: {:?}", res.status));
     }
     if est.status == Status::Ok && !est.warnings.is_empty() {
         est.status = Status::Warning;

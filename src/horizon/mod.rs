@@ -332,9 +332,14 @@ pub(crate) fn assemble(
     }
     let cost = rss + lq.lambda * ws.norm_squared() + lq.mu * smooth + prior_cost(lq, s);
     let relative_residual: Vec<f64> = (0..p)
-        .map(|r| crate::metrics::ratio(residual.row(r).norm(), data.measured.row(r).norm()))
+        .map(|r| {
+            crate::metrics::ratio(
+                residual.row(r).norm_squared(),
+                data.measured.row(r).norm_squared(),
+            )
+        })
         .collect();
-    let total = crate::metrics::ratio(residual.norm(), data.measured.norm());
+    let total = crate::metrics::ratio(residual.norm_squared(), data.measured.norm_squared());
     let tr_h = cov.map_or(f64::NAN, |c| c.tr_h);
     let dof = (len * p) as f64 - tr_h;
     let variance_factor = if dof > 0.0 { rss / dof } else { f64::NAN };

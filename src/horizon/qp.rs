@@ -23,9 +23,7 @@ use super::{SelectedWeights, Solver, Timings, WeightSelection};
 use crate::error::{Result, TacitError};
 use crate::linear::SampledModel;
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{
-    DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
-};
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 use nalgebra::DMatrix;
 use std::time::Instant;
 

@@ -218,8 +218,7 @@ impl HorizonSettings {
             std_disp, std_vel, ..
         } = &self.initial
         {
-            if !(*std_disp > 0.0 && std_disp.is_finite() && *std_vel > 0.0 && std_vel.is_finite())
-            {
+            if !(*std_disp > 0.0 && std_disp.is_finite() && *std_vel > 0.0 && std_vel.is_finite()) {
                 return Err(bad(format!(
                     "initial-state prior std (disp {std_disp}, vel {std_vel}) must be finite and > 0"
                 )));

@@ -234,7 +234,12 @@ fn steady_backward(
         gemv_acc(mb.as_slice(), ns + m, pv.as_slice(), &mut tmp);
         if n_in > 0 {
             gemv_acc(z0.as_slice(), ns + m, lq.gin.column(k).as_slice(), &mut tmp);
-            gemv_acc(z1.as_slice(), ns + m, lq.gin.column(k + 1).as_slice(), &mut tmp);
+            gemv_acc(
+                z1.as_slice(),
+                ns + m,
+                lq.gin.column(k + 1).as_slice(),
+                &mut tmp,
+            );
         }
         add_data(lq, cht, k, &mut tmp[..ns]);
         pv.as_mut_slice().copy_from_slice(&tmp[..ns]);

@@ -71,7 +71,11 @@ pub fn svd_summary(operator: &str, a: &DMatrix<f64>, rtol: f64) -> SvdSummary {
         operator: operator.into(),
         rows: a.nrows(),
         cols: a.ncols(),
-        condition: if smin > 0.0 { smax / smin } else { f64::INFINITY },
+        condition: if smin > 0.0 {
+            smax / smin
+        } else {
+            f64::INFINITY
+        },
         singular_values: s,
         rank,
         rtol,
@@ -108,7 +112,10 @@ pub fn analyse(
     let mut invisible = Vec::new();
     let clean = |v: Vec<f64>| -> Vec<f64> {
         // sign: largest component positive; round tiny values
-        let big = v.iter().cloned().fold(0.0f64, |a, b| if b.abs() > a.abs() { b } else { a });
+        let big = v
+            .iter()
+            .cloned()
+            .fold(0.0f64, |a, b| if b.abs() > a.abs() { b } else { a });
         let s = if big < 0.0 { -1.0 } else { 1.0 };
         v.iter()
             .map(|x| {
@@ -156,7 +163,8 @@ pub fn analyse(
     Identifiability {
         per_sample: svd_summary("per-sample feedthrough D_y B_f", &per, rtol),
         window: wsum,
-        method_window: method_h.map(|h| svd_summary("method window operator (force unknowns)", h, rtol)),
+        method_window: method_h
+            .map(|h| svd_summary("method window operator (force unknowns)", h, rtol)),
         visible,
         invisible,
         note,

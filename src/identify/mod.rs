@@ -102,7 +102,8 @@ pub fn identify_with_progress(
         }
     }
     let method_h = force_columns(&sys, settings.method, &regular.h_theta);
-    let ident = identifiability::analyse(&sys, settings.window, Some(&method_h), settings.rank_rtol);
+    let ident =
+        identifiability::analyse(&sys, settings.window, Some(&method_h), settings.rank_rtol);
     let setup = t_build.elapsed().as_secs_f64();
     let t_run = Instant::now();
     let mut qp_almost = 0;
@@ -125,7 +126,8 @@ pub fn identify_with_progress(
         Method::Paper => "paper",
         Method::Mhe => "mhe",
     };
-    let mut est = ForceEstimate::assemble(method, prob, &sys, &out.x, &out.f, Some(out.yhat.clone()));
+    let mut est =
+        ForceEstimate::assemble(method, prob, &sys, &out.x, &out.f, Some(out.yhat.clone()));
     if settings.solver == Solver::Ls && out.failure.is_none() {
         let (std, sigma) = force_std(prob, &plan, &out);
         est.force_std = Some(std);

@@ -257,7 +257,8 @@ impl ForceEstimate {
             v: &sys.t * vr,
             a: &sys.t * ar,
         };
-        let row = |mat: &DMatrix<f64>, i: usize| -> Vec<f64> { mat.row(i).iter().copied().collect() };
+        let row =
+            |mat: &DMatrix<f64>, i: usize| -> Vec<f64> { mat.row(i).iter().copied().collect() };
         let channels = prob
             .channels
             .iter()
@@ -536,7 +537,9 @@ pub fn write_h5(est: &ForceEstimate, path: &Path) -> Result<()> {
         let file = hdf5::File::create(tmp).map_err(err("create"))?;
         let put_str = |loc: &hdf5::Location, name: &str, v: &str| -> Result<()> {
             let s = VarLenUnicode::from_str(v).map_err(|e| {
-                TacitError::Setting(format!("attribute {name}: not storable as HDF5 string: {e}"))
+                TacitError::Setting(format!(
+                    "attribute {name}: not storable as HDF5 string: {e}"
+                ))
             })?;
             loc.new_attr::<VarLenUnicode>()
                 .shape(())
@@ -582,7 +585,9 @@ pub fn write_h5(est: &ForceEstimate, path: &Path) -> Result<()> {
             put_mat(&file, "force_std", s)?;
         }
         if let Some(g) = &est.generalized {
-            let grp = file.create_group("generalized").map_err(err("generalized"))?;
+            let grp = file
+                .create_group("generalized")
+                .map_err(err("generalized"))?;
             put_mat(&grp, "force", &g.force)?;
             put_mat(&grp, "basis", &g.basis)?;
             let kept: Vec<String> = g.kept.iter().map(|d| d.to_string()).collect();
@@ -605,7 +610,11 @@ pub fn write_h5(est: &ForceEstimate, path: &Path) -> Result<()> {
         put_mat(&ch, "no_force", &stack(&|c| c.no_force.clone()))?;
         put_mat(&ch, "replay", &stack(&|c| c.replay.clone()))?;
         let res = |c: &ChannelFit| -> Vec<f64> {
-            c.measured.iter().zip(&c.predicted).map(|(m, p)| m - p).collect()
+            c.measured
+                .iter()
+                .zip(&c.predicted)
+                .map(|(m, p)| m - p)
+                .collect()
         };
         put_mat(&ch, "residual", &stack(&res))?;
         if let Some(tf) = &est.truth_fint {
@@ -638,7 +647,9 @@ pub fn write_forces_csv(est: &ForceEstimate, path: &Path) -> Result<()> {
     let mut header = vec!["time".to_string()];
     let mut cols: Vec<Vec<f64>> = vec![est.time.clone()];
     let rows = |m: &DMatrix<f64>| -> Vec<Vec<f64>> {
-        (0..m.nrows()).map(|i| m.row(i).iter().copied().collect()).collect()
+        (0..m.nrows())
+            .map(|i| m.row(i).iter().copied().collect())
+            .collect()
     };
     for (i, r) in rows(&est.force).into_iter().enumerate() {
         header.push(format!("f_{}", i + 1));
@@ -678,6 +689,117 @@ pub fn write_channels_csv(est: &ForceEstimate, path: &Path) -> Result<()> {
     write_table(path, &header, &cols)
 }
 
+/// The measured channels against the no-force linear model (`after =
+/// false`, the paper's Fig. 8) or against the identified model (`after =
+/// true`, Fig. 10), over the samples `range`.
+pub fn channel_figure(est: &ForceEstimate, after: bool, range: std::ops::Range<usize>) -> Figure {
+    let r = clamp(range, est.time.len());
+    let t = &est.time[r.clone()];
+    let panels = est
+        .channels
+        .iter()
+        .map(|c| {
+            let (label, y) = if after {
+                ("identified model", &c.predicted)
+            } else {
+                ("linear model, no force", &c.no_force)
+            };
+            let err = relative_error(&y[r.clone()], &c.measured[r.clone()]);
+            plot::time_panel(
+                &format!("{} (relative error {:.1} %)", c.name, 100.0 * err),
+                c.quantity.si_unit(),
+                t,
+                vec![
+                    (
+                        "measured".into(),
+                        c.measured[r.clone()].to_vec(),
+                        SeriesStyle::Line,
+                    ),
+                    (label.into(), y[r.clone()].to_vec(), SeriesStyle::DashedLine),
+                ],
+            )
+        })
+        .collect();
+    let what = if after { "after" } else { "before" };
+    Figure::new(
+        format!(
+            "{}: responses {what} identification ({}, {})",
+            est.model,
+            est.method,
+            span(&r)
+        ),
+        panels,
+        1,
+    )
+}
+
+/// The identified internal force per DOF (with the truth when known; the
+/// paper's Fig. 9), over the samples `range`.
+pub fn force_figure(est: &ForceEstimate, range: std::ops::Range<usize>) -> Figure {
+    let r = clamp(range, est.time.len());
+    let t = &est.time[r.clone()];
+    let mut panels = Vec::new();
+    let cut = |m: &DMatrix<f64>, i: usize| -> Vec<f64> {
+        m.row(i).columns_range(r.clone()).iter().copied().collect()
+    };
+    for i in 0..est.force.nrows() {
+        let mut series = vec![(
+            "identified".to_string(),
+            cut(&est.force, i),
+            SeriesStyle::Line,
+        )];
+        if let Some(tf) = &est.truth_fint {
+            series.push((
+                "true f_int".to_string(),
+                cut(tf, i),
+                SeriesStyle::DashedLine,
+            ));
+        }
+        panels.push(plot::time_panel(&format!("DOF {}", i + 1), "N", t, series));
+    }
+    if let Some(g) = &est.generalized {
+        for i in 0..g.force.nrows() {
+            let mut series = vec![(
+                "identified Tᵀf".to_string(),
+                cut(&g.force, i),
+                SeriesStyle::Line,
+            )];
+            if let Some(tf) = &est.truth_fint {
+                let tg = g.basis.transpose() * tf;
+                series.push((
+                    "true Tᵀf_int".to_string(),
+                    cut(&tg, i),
+                    SeriesStyle::DashedLine,
+                ));
+            }
+            panels.push(plot::time_panel(
+                &format!("generalized force at DOF {}", g.kept[i]),
+                "N",
+                t,
+                series,
+            ));
+        }
+    }
+    Figure::new(
+        format!(
+            "{}: identified internal forces ({}, {})",
+            est.model,
+            est.method,
+            span(&r)
+        ),
+        panels,
+        2,
+    )
+}
+
+fn clamp(r: std::ops::Range<usize>, n: usize) -> std::ops::Range<usize> {
+    r.start.min(n)..r.end.min(n)
+}
+
+fn span(r: &std::ops::Range<usize>) -> String {
+    format!("samples {}–{}", r.start, r.end.saturating_sub(1))
+}
+
 /// Write the figures `<prefix>before`, `<prefix>forces`, `<prefix>after`
 /// (PNG + SVG) over the samples `range`: the paper's Figs 8, 9 and 10.
 pub fn write_figures(
@@ -686,61 +808,19 @@ pub fn write_figures(
     prefix: &str,
     range: std::ops::Range<usize>,
 ) -> Result<Vec<PathBuf>> {
-    let r = range.start.min(est.time.len())..range.end.min(est.time.len());
-    let t = &est.time[r.clone()];
-    let span = format!("samples {}–{}", r.start, r.end.saturating_sub(1));
     let mut files = Vec::new();
-    let chan_fig = |after: bool| -> Figure {
-        let panels = est
-            .channels
-            .iter()
-            .map(|c| {
-                let (label, y, err) = if after {
-                    ("identified model", &c.predicted, c.error_after)
-                } else {
-                    ("linear model, no force", &c.no_force, c.error_before)
-                };
-                plot::time_panel(
-                    &format!("{} (relative error {:.1} %)", c.name, 100.0 * err),
-                    c.quantity.si_unit(),
-                    t,
-                    vec![
-                        ("measured".into(), c.measured[r.clone()].to_vec(), SeriesStyle::Line),
-                        (label.into(), y[r.clone()].to_vec(), SeriesStyle::DashedLine),
-                    ],
-                )
-            })
-            .collect();
-        let what = if after { "after" } else { "before" };
-        Figure::new(
-            format!("{}: responses {what} identification ({}, {span})", est.model, est.method),
-            panels,
-            1,
-        )
-    };
-    files.extend(plot::save(&chan_fig(false), &dir.join(format!("{prefix}before")))?);
-    let mut panels = Vec::new();
-    for i in 0..est.force.nrows() {
-        let mut series = vec![(
-            "identified".to_string(),
-            est.force.row(i).columns_range(r.clone()).iter().copied().collect(),
-            SeriesStyle::Line,
-        )];
-        if let Some(tf) = &est.truth_fint {
-            series.push((
-                "true f_int".to_string(),
-                tf.row(i).columns_range(r.clone()).iter().copied().collect(),
-                SeriesStyle::DashedLine,
-            ));
-        }
-        panels.push(plot::time_panel(&format!("DOF {}", i + 1), "N", t, series));
-    }
-    let ff = Figure::new(
-        format!("{}: identified internal forces ({}, {span})", est.model, est.method),
-        panels,
-        2,
-    );
-    files.extend(plot::save(&ff, &dir.join(format!("{prefix}forces")))?);
-    files.extend(plot::save(&chan_fig(true), &dir.join(format!("{prefix}after")))?);
+    let stem = |name: &str| dir.join(format!("{prefix}{name}"));
+    files.extend(plot::save(
+        &channel_figure(est, false, range.clone()),
+        &stem("before"),
+    )?);
+    files.extend(plot::save(
+        &force_figure(est, range.clone()),
+        &stem("forces"),
+    )?);
+    files.extend(plot::save(
+        &channel_figure(est, true, range),
+        &stem("after"),
+    )?);
     Ok(files)
 }

@@ -104,7 +104,8 @@ pub fn select(prob: &Problem, sys: &System, settings: &IdentifySettings) -> Regu
         } else {
             f64::INFINITY
         };
-        rep.residual_norm.push(if ok { rss.sqrt() } else { f64::NAN });
+        rep.residual_norm
+            .push(if ok { rss.sqrt() } else { f64::NAN });
         rep.force_norm.push(if ok { fnorm } else { f64::NAN });
         rep.effective_parameters.push(peff);
         rep.gcv.push(g);

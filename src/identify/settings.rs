@@ -192,7 +192,9 @@ pub struct IdentifySettings {
     pub smoothness: f64,
     /// MHE: weight μ of the prior on the window's start state (the previous
     /// window's estimate), relative to the output sensitivity of each state
-    /// component (≥ 0, default 1e-3).
+    /// component (≥ 0, default 1e-2). Larger values keep the reconstructed
+    /// state continuous (an exact model wants 1–10); smaller ones let each
+    /// window correct the state more (a reduced or wrong model).
     pub prior_weight: f64,
     /// MHE: weight ε pulling the start state towards zero, relative like μ
     /// (> 0, default 1e-6). It makes the directions no sensor sees (the
@@ -218,7 +220,7 @@ impl Default for IdentifySettings {
             regularization: Regularization::Fixed(1e-3),
             alpha_grid: (1e-10, 1e2, 25),
             smoothness: 0.0,
-            prior_weight: 1e-3,
+            prior_weight: 1e-2,
             leak: 1e-6,
             constraints: Constraints::default(),
             rank_rtol: 1e-6,
@@ -304,7 +306,11 @@ mod tests {
             horizon: 2,
             ..Default::default()
         };
-        assert!(s.validate().unwrap_err().to_string().contains("horizon = 2"));
+        assert!(s
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("horizon = 2"));
         let s = IdentifySettings {
             constraints: Constraints {
                 equilibrium: true,

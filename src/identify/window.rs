@@ -237,7 +237,11 @@ impl WindowOperator {
         let tol = PINV_RTOL * smax.max(f64::MIN_POSITIVE);
         let rank = sv.iter().filter(|&&s| s > tol).count();
         let smin = sv.min();
-        let condition = if smin > 0.0 { smax / smin } else { f64::INFINITY };
+        let condition = if smin > 0.0 {
+            smax / smin
+        } else {
+            f64::INFINITY
+        };
         let u = svd.u.as_ref().expect("svd u requested");
         let vt = svd.v_t.as_ref().expect("svd v_t requested");
         let mut vs = vt.transpose();

@@ -154,6 +154,51 @@ impl Record {
             .iter()
             .find(|c| c.quantity == quantity && c.dof == dof)
     }
+    /// Samples `start..end` as a new record (time of sample 0 shifted to
+    /// `t0 + start/fs`; the truth is sliced too).
+    pub fn slice(&self, start: usize, end: usize) -> Result<Record> {
+        let n = self.len();
+        if !(start < end && end <= n) {
+            return Err(TacitError::record(
+                self.source.clone(),
+                format!("slice {start}..{end} is not within the record's {n} samples"),
+            ));
+        }
+        let cut = |chs: &[Channel]| -> Vec<Channel> {
+            chs.iter()
+                .map(|c| Channel {
+                    data: c.data[start..end].to_vec(),
+                    ..c.clone()
+                })
+                .collect()
+        };
+        let rows = |m: &[Vec<f64>]| -> Vec<Vec<f64>> {
+            m.iter()
+                .map(|r| {
+                    if r.len() >= end {
+                        r[start..end].to_vec()
+                    } else {
+                        vec![]
+                    }
+                })
+                .collect()
+        };
+        Ok(Record {
+            t0: self.time(start),
+            fs: self.fs,
+            inputs: cut(&self.inputs),
+            outputs: cut(&self.outputs),
+            truth: self.truth.as_ref().map(|t| Truth {
+                u: rows(&t.u),
+                v: rows(&t.v),
+                a: rows(&t.a),
+                fint: rows(&t.fint),
+                model_toml: t.model_toml.clone(),
+            }),
+            source: self.source.clone(),
+        })
+    }
+
     /// Check the record is self-consistent: at least one sample, equal
     /// lengths, finite values, no duplicated channel, a positive rate, DOFs
     /// at least 1 (and at most `ndof` when given). Errors name the channel

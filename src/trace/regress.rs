@@ -135,10 +135,7 @@ pub fn segment_response(
 /// start: `x_{k+1} = A x_k + Σ_j N_j f_{kS+j}`, `y_k = C_y x_k + D_y f_{kS}`.
 /// A force given along one direction `dir` with scalar node history `phi`
 /// uses the projected node inputs `N_j dir` (much cheaper).
-fn node_response(
-    ctx: &Context<'_, '_>,
-    force: NodeForce<'_>,
-) -> DMatrix<f64> {
+fn node_response(ctx: &Context<'_, '_>, force: NodeForce<'_>) -> DMatrix<f64> {
     let sm = ctx.input.sampled;
     let (cy, dy) = (ctx.input.cy, ctx.input.dy);
     let s = ctx.nodes.len() - 1;
@@ -165,8 +162,12 @@ fn node_response(
             xn.gemv(1.0, &sm.a, &x, 0.0);
             for j in 0..=s {
                 match (&force, &proj) {
-                    (NodeForce::Along(_, phi), Some((bj, _))) => xn.axpy(phi[k * s + j], &bj[j], 1.0),
-                    (NodeForce::Full(f), _) => xn.gemv(1.0, &ctx.nodes[j], &f.column(k * s + j), 1.0),
+                    (NodeForce::Along(_, phi), Some((bj, _))) => {
+                        xn.axpy(phi[k * s + j], &bj[j], 1.0)
+                    }
+                    (NodeForce::Full(f), _) => {
+                        xn.gemv(1.0, &ctx.nodes[j], &f.column(k * s + j), 1.0)
+                    }
                     _ => {}
                 }
             }
@@ -244,7 +245,9 @@ impl Selection {
         };
         let th = &ginv * b;
         let s2 = self.rss.max(0.0) / (self.nobs - self.npar as f64).max(1.0);
-        let se = (0..m).map(|i| (s2 * ginv[(i, i)]).max(0.0).sqrt()).collect();
+        let se = (0..m)
+            .map(|i| (s2 * ginv[(i, i)]).max(0.0).sqrt())
+            .collect();
         (th.iter().copied().collect(), se)
     }
 }
@@ -258,7 +261,14 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
     let r0 = match input.baseline {
         Some(b) => stack(&(input.measured - b), &w),
         None => {
-            let ylin = segment_response(sm, input.cy, input.dy, Some(input.states), input.force_ext, seg);
+            let ylin = segment_response(
+                sm,
+                input.cy,
+                input.dy,
+                Some(input.states),
+                input.force_ext,
+                seg,
+            );
             stack(&(input.measured - &ylin), &w)
         }
     };
@@ -470,9 +480,14 @@ fn scan_gap(
         return None;
     }
     let ng = ctx.settings.gap_grid.max(4);
-    let gaps: Vec<f64> = (0..ng).map(|i| lo + (hi - lo) * i as f64 / (ng - 1) as f64).collect();
+    let gaps: Vec<f64> = (0..ng)
+        .map(|i| lo + (hi - lo) * i as f64 / (ng - 1) as f64)
+        .collect();
     let at = |g: f64, sims: &mut usize| {
-        let c = Candidate { gap: Some(g), ..cand.clone() };
+        let c = Candidate {
+            gap: Some(g),
+            ..cand.clone()
+        };
         evaluate(&c, ctx, sel, r, sims).map(|e| (c, e))
     };
     let mut best: Option<(usize, Candidate, Eval)> = None;
@@ -534,7 +549,11 @@ fn score(
     } else {
         (cand.clone(), evaluate(cand, ctx, sel, r, sims)?, None)
     };
-    let gain = if sel.rss > 0.0 { 1.0 - rss / sel.rss } else { 0.0 };
+    let gain = if sel.rss > 0.0 {
+        1.0 - rss / sel.rss
+    } else {
+        0.0
+    };
     let bic = sel.nobs * (rss.max(1e-300) / sel.rss.max(1e-300)).ln()
         + cand.nparams() as f64 * sel.nobs.ln();
     let dof = (sel.nobs - (sel.npar + cand.nparams()) as f64).max(1.0);

@@ -236,7 +236,8 @@ mod tests {
     #[test]
     fn pcd_is_zero_for_equal_data_and_sign_blind() {
         let y = DMatrix::from_fn(3, 50, |r, k| {
-            ((k as f64) * 0.2).sin() * (r as f64 + 1.0) + ((k as f64) * 0.7).cos() * (r as f64 - 1.0)
+            ((k as f64) * 0.2).sin() * (r as f64 + 1.0)
+                + ((k as f64) * 0.7).cos() * (r as f64 - 1.0)
         });
         let r = pcd_residual(&y, &y, 0.9999).unwrap();
         assert!(r.amax() < 1e-10);

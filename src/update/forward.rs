@@ -80,7 +80,9 @@ pub fn simulate(
                 let proj = compiled.proj.as_ref().unwrap_or(tt);
                 let ua = proj * DVector::from_column_slice(&seg.u0);
                 let va = proj * DVector::from_column_slice(&seg.v0);
-                compiled.integ.run(fa.as_view(), ua.as_slice(), va.as_slice())
+                compiled
+                    .integ
+                    .run(fa.as_view(), ua.as_slice(), va.as_slice())
             }
         };
         count += 1;
@@ -148,7 +150,9 @@ fn compile(problem: &Problem, model: &Model) -> std::result::Result<Compiled, Fa
         .into_iter()
         .map(|e| remap(e, &pos))
         .collect::<Option<Vec<_>>>()
-        .ok_or_else(|| fail("a nonlinear element acts on a DOF outside the reduced model".into()))?;
+        .ok_or_else(|| {
+            fail("a nonlinear element acts on a DOF outside the reduced model".into())
+        })?;
     let cr = red.project(&c);
     let tm = red.t.transpose() * &m;
     let proj = red
@@ -157,8 +161,15 @@ fn compile(problem: &Problem, model: &Model) -> std::result::Result<Compiled, Fa
         .cholesky()
         .map(|ch| ch.solve(&tm))
         .ok_or_else(|| fail("the reduced mass matrix is not positive definite".into()))?;
-    let integ = Integrator::from_matrices(red.m.clone(), cr, red.k.clone(), els, problem.fs, problem.sim)
-        .map_err(|e| fail(format!("reduced model could not be compiled: {e}")))?;
+    let integ = Integrator::from_matrices(
+        red.m.clone(),
+        cr,
+        red.k.clone(),
+        els,
+        problem.fs,
+        problem.sim,
+    )
+    .map_err(|e| fail(format!("reduced model could not be compiled: {e}")))?;
     Ok(Compiled {
         integ,
         tt: Some(red.t.transpose()),

@@ -128,7 +128,13 @@ pub fn report(
         _ => f64::INFINITY,
     };
     let all_determined = parameters.iter().all(|p| p.determined);
-    let verdict = verdict(&parameters, &weakest_direction, noise_level, tol, all_determined);
+    let verdict = verdict(
+        &parameters,
+        &weakest_direction,
+        noise_level,
+        tol,
+        all_determined,
+    );
     Identifiability {
         singular_values: sv,
         condition,
@@ -160,10 +166,7 @@ fn verdict(
         .collect();
     let mut combo: Vec<&(String, f64)> = weakest.iter().filter(|(_, c)| c.abs() > 0.2).collect();
     combo.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
-    let combo: Vec<String> = combo
-        .iter()
-        .map(|(n, c)| format!("{c:+.2}·{n}"))
-        .collect();
+    let combo: Vec<String> = combo.iter().map(|(n, c)| format!("{c:+.2}·{n}")).collect();
     format!(
         "the data do not determine {} (scaled standard deviation at {:.3} % noise above {tol}); least determined combination: {}",
         bad.join(", "),

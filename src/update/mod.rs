@@ -77,7 +77,7 @@ pub struct FittedParameter {
     pub lower: f64,
     /// Upper bound.
     pub upper: f64,
-    /// True when the value sits on a bound.
+    /// True when the value is within 1e-6 (scaled) of a bound.
     pub at_bound: bool,
 }
 
@@ -194,7 +194,7 @@ pub fn fit(problem: &Problem, settings: &FitSettings) -> Result<FitResult> {
                 percent_change: p.percent(value),
                 lower: p.lower,
                 upper: p.upper,
-                at_bound: x <= p.to_x(p.lower) || x >= p.to_x(p.upper),
+                at_bound: x <= p.to_x(p.lower) + 1e-6 || x >= p.to_x(p.upper) - 1e-6,
             }
         })
         .collect();

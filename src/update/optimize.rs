@@ -292,7 +292,14 @@ impl State<'_, '_, '_> {
         }
     }
 
-    fn outcome(&self, x: Vec<f64>, cost: f64, history: Vec<f64>, t: Termination, it: usize) -> Outcome {
+    fn outcome(
+        &self,
+        x: Vec<f64>,
+        cost: f64,
+        history: Vec<f64>,
+        t: Termination,
+        it: usize,
+    ) -> Outcome {
         Outcome {
             x,
             cost,
@@ -332,7 +339,11 @@ impl State<'_, '_, '_> {
             }
             let jac = match jacobian(self.ev, &x, &r, self.lo, self.hi, self.s.fd_step) {
                 Ok(j) => j,
-                Err(f) => break Termination::Stalled { reason: f.to_string() },
+                Err(f) => {
+                    break Termination::Stalled {
+                        reason: f.to_string(),
+                    }
+                }
             };
             let g = jac.transpose() * &r;
             if projected(&g, &x, self.lo, self.hi).amax() * 2.0 <= self.s.g_tol {
@@ -408,7 +419,11 @@ impl State<'_, '_, '_> {
                 *lambda *= 10.0;
                 continue;
             };
-            let xn = clamp(&(0..n).map(|i| x[i] + d[i]).collect::<Vec<_>>(), self.lo, self.hi);
+            let xn = clamp(
+                &(0..n).map(|i| x[i] + d[i]).collect::<Vec<_>>(),
+                self.lo,
+                self.hi,
+            );
             if small_step(&xn, x, self.s.x_tol * 1e-3) {
                 return Step::Tiny;
             }
@@ -430,7 +445,11 @@ impl State<'_, '_, '_> {
         };
         let mut t = 1.0;
         while t >= 1.0 / 1024.0 {
-            let xn = clamp(&(0..n).map(|i| x[i] + t * d[i]).collect::<Vec<_>>(), self.lo, self.hi);
+            let xn = clamp(
+                &(0..n).map(|i| x[i] + t * d[i]).collect::<Vec<_>>(),
+                self.lo,
+                self.hi,
+            );
             if small_step(&xn, x, self.s.x_tol * 1e-3) {
                 return Step::Tiny;
             }
@@ -446,7 +465,8 @@ impl State<'_, '_, '_> {
 
     /// Cost and centered-difference gradient of J at x.
     fn cost_grad(&mut self, x: &[f64], r: &DVector<f64>) -> Result<DVector<f64>, String> {
-        let jac = jacobian(self.ev, x, r, self.lo, self.hi, self.s.fd_step).map_err(|f| f.to_string())?;
+        let jac =
+            jacobian(self.ev, x, r, self.lo, self.hi, self.s.fd_step).map_err(|f| f.to_string())?;
         Ok(jac.transpose() * r * 2.0)
     }
 
@@ -459,7 +479,9 @@ impl State<'_, '_, '_> {
         let mut history = vec![cost];
         let mut g = match self.cost_grad(&x, &r) {
             Ok(g) => g,
-            Err(reason) => return self.outcome(x, cost, history, Termination::Stalled { reason }, 0),
+            Err(reason) => {
+                return self.outcome(x, cost, history, Termination::Stalled { reason }, 0)
+            }
         };
         // initial inverse Hessian from the Gauss-Newton diagonal scale
         let mut h = DMatrix::identity(n, n) * (1.0 / g.amax().max(1e-300)) * 0.1;
@@ -467,7 +489,9 @@ impl State<'_, '_, '_> {
         let term = loop {
             let pg = projected(&g, &x, self.lo, self.hi);
             if pg.amax() <= self.s.g_tol {
-                break Termination::Converged { criterion: "gradient".into() };
+                break Termination::Converged {
+                    criterion: "gradient".into(),
+                };
             }
             if it >= self.s.max_iterations {
                 break Termination::IterationLimit;
@@ -508,10 +532,14 @@ impl State<'_, '_, '_> {
             cost = cn;
             history.push(cost);
             if small {
-                break Termination::Converged { criterion: "step".into() };
+                break Termination::Converged {
+                    criterion: "step".into(),
+                };
             }
             if flat {
-                break Termination::Converged { criterion: "cost".into() };
+                break Termination::Converged {
+                    criterion: "cost".into(),
+                };
             }
         };
         let _ = r;
@@ -529,7 +557,11 @@ impl State<'_, '_, '_> {
         let n = x.len();
         let mut t = 1.0;
         for _ in 0..40 {
-            let xn = clamp(&(0..n).map(|i| x[i] + t * d[i]).collect::<Vec<_>>(), self.lo, self.hi);
+            let xn = clamp(
+                &(0..n).map(|i| x[i] + t * d[i]).collect::<Vec<_>>(),
+                self.lo,
+                self.hi,
+            );
             let dec: f64 = (0..n).map(|i| g[i] * (xn[i] - x[i])).sum();
             if let Some(rn) = self.eval(&xn) {
                 if rn.norm_squared() <= cost + 1e-4 * dec {
@@ -583,12 +615,19 @@ impl State<'_, '_, '_> {
             let (best, worst) = (pts[0].1, pts[n].1);
             let size = pts[1..]
                 .iter()
-                .map(|p| p.0.iter().zip(&pts[0].0).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max))
+                .map(|p| {
+                    p.0.iter()
+                        .zip(&pts[0].0)
+                        .map(|(a, b)| (a - b).abs())
+                        .fold(0.0, f64::max)
+                })
                 .fold(0.0, f64::max);
             if size <= self.s.x_tol * (1.0 + pts[0].0.iter().fold(0.0f64, |a, v| a.max(v.abs())))
                 && worst - best <= self.s.f_tol * best.max(f64::MIN_POSITIVE)
             {
-                break Termination::Converged { criterion: "simplex".into() };
+                break Termination::Converged {
+                    criterion: "simplex".into(),
+                };
             }
             if it >= self.s.max_iterations {
                 break Termination::IterationLimit;
@@ -614,7 +653,9 @@ impl State<'_, '_, '_> {
             .map(|i| pts[..n].iter().map(|p| p.0[i]).sum::<f64>() / n as f64)
             .collect();
         let along = |t: f64, w: &[f64]| -> Vec<f64> {
-            (0..n).map(|i| centroid[i] + t * (w[i] - centroid[i])).collect()
+            (0..n)
+                .map(|i| centroid[i] + t * (w[i] - centroid[i]))
+                .collect()
         };
         let worst = pts[n].0.clone();
         let xr = clamp(&along(-1.0, &worst), self.lo, self.hi);
@@ -635,8 +676,16 @@ impl State<'_, '_, '_> {
         }
         // contraction: outside if the reflection beat the worst, else inside
         let outside = fr.is_some_and(|f| f < pts[n].1);
-        let xc = clamp(&along(if outside { -0.5 } else { 0.5 }, &worst), self.lo, self.hi);
-        let limit = if outside { fr.unwrap_or(f64::INFINITY) } else { pts[n].1 };
+        let xc = clamp(
+            &along(if outside { -0.5 } else { 0.5 }, &worst),
+            self.lo,
+            self.hi,
+        );
+        let limit = if outside {
+            fr.unwrap_or(f64::INFINITY)
+        } else {
+            pts[n].1
+        };
         if let Some(fc) = self.cost_at(&xc) {
             if fc < limit {
                 pts[n] = (xc, fc);

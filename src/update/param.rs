@@ -58,17 +58,15 @@ impl Target {
                 .masses
                 .get(i)
                 .ok_or_else(|| missing("masses", i, model.masses.len()))?,
-            Target::DampingRatio => match &model.damping {
-                Damping::Modal {
-                    ratio: Some(z), ..
-                } => *z,
-                _ => {
-                    return Err(TacitError::Setting(
+            Target::DampingRatio => {
+                match &model.damping {
+                    Damping::Modal { ratio: Some(z), .. } => *z,
+                    _ => return Err(TacitError::Setting(
                         "parameter zeta: the model's damping is not modal with a single `ratio`"
                             .into(),
-                    ))
+                    )),
                 }
-            },
+            }
             Target::ContactGap(i) => {
                 model
                     .contacts
@@ -123,9 +121,7 @@ impl Target {
     /// cubic coefficient, which may take either sign.
     pub fn physical_floor(&self) -> Option<f64> {
         match self {
-            Target::SpringStiffness(_) | Target::Mass(_) | Target::ContactStiffness(_) => {
-                Some(0.0)
-            }
+            Target::SpringStiffness(_) | Target::Mass(_) | Target::ContactStiffness(_) => Some(0.0),
             Target::DampingRatio | Target::ContactGap(_) | Target::FrictionLevel(_) => Some(0.0),
             Target::CubicK3(_) => None,
         }
@@ -406,7 +402,11 @@ fn parse_one(raw: &str, model: &Model) -> Result<Vec<Target>> {
         };
     }
     match lower.as_str() {
-        "springs" => return Ok((0..model.springs.len()).map(Target::SpringStiffness).collect()),
+        "springs" => {
+            return Ok((0..model.springs.len())
+                .map(Target::SpringStiffness)
+                .collect())
+        }
         "masses" => return Ok((0..model.ndof()).map(Target::Mass).collect()),
         "zeta" | "damping" => return Ok(vec![Target::DampingRatio]),
         "cubic" | "cubics" => {
@@ -430,9 +430,24 @@ fn parse_one(raw: &str, model: &Model) -> Result<Vec<Target>> {
     let checks: [(&str, usize, fn(usize) -> Target, &str); 5] = [
         ("m", model.ndof(), Target::Mass, "DOFs"),
         ("gap", model.contacts.len(), Target::ContactGap, "contacts"),
-        ("kc", model.contacts.len(), Target::ContactStiffness, "contacts"),
-        ("friction", model.frictions.len(), Target::FrictionLevel, "friction elements"),
-        ("cubic", model.cubics.len(), Target::CubicK3, "cubic elements"),
+        (
+            "kc",
+            model.contacts.len(),
+            Target::ContactStiffness,
+            "contacts",
+        ),
+        (
+            "friction",
+            model.frictions.len(),
+            Target::FrictionLevel,
+            "friction elements",
+        ),
+        (
+            "cubic",
+            model.cubics.len(),
+            Target::CubicK3,
+            "cubic elements",
+        ),
     ];
     for (prefix, count, make, what) in checks {
         if let Some(i) = numbered(prefix) {
@@ -492,10 +507,22 @@ k3 = 1e6
         let p = parse_free("k1..k2,cubic", &m).unwrap();
         let names: Vec<_> = p.iter().map(|p| p.name.as_str()).collect();
         assert_eq!(names, ["k1", "k2", "cubic1"]);
-        assert!(parse_free("k3", &m).unwrap_err().to_string().contains("'k3'"));
-        assert!(parse_free("k1,k1", &m).unwrap_err().to_string().contains("repeats"));
-        assert!(parse_free(" , ", &m).unwrap_err().to_string().contains("empty"));
-        assert!(parse_free("gap1", &m).unwrap_err().to_string().contains("0 contacts"));
+        assert!(parse_free("k3", &m)
+            .unwrap_err()
+            .to_string()
+            .contains("'k3'"));
+        assert!(parse_free("k1,k1", &m)
+            .unwrap_err()
+            .to_string()
+            .contains("repeats"));
+        assert!(parse_free(" , ", &m)
+            .unwrap_err()
+            .to_string()
+            .contains("empty"));
+        assert!(parse_free("gap1", &m)
+            .unwrap_err()
+            .to_string()
+            .contains("0 contacts"));
         assert!(parse_free("zeta", &m).is_err());
     }
 

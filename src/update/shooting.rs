@@ -52,7 +52,12 @@ where
             break;
         }
         let (u0, v0) = state(start)?;
-        out.push(Segment { start, len: l, u0, v0 });
+        out.push(Segment {
+            start,
+            len: l,
+            u0,
+            v0,
+        });
         start += l;
     }
     Ok(out)

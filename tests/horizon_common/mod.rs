@@ -22,7 +22,11 @@ pub fn sampled() -> SampledModel {
 
 /// Accelerations at DOFs 1, 5, 6.
 pub fn channels() -> Vec<(Quantity, usize)> {
-    vec![(Quantity::Accel, 0), (Quantity::Accel, 4), (Quantity::Accel, 5)]
+    vec![
+        (Quantity::Accel, 0),
+        (Quantity::Accel, 4),
+        (Quantity::Accel, 5),
+    ]
 }
 
 /// A linear record: known random force at DOF 1 (20 N RMS), unknown
