@@ -45,7 +45,11 @@ fn run(residue: Residue, name: &str, fig: &str) -> anyhow::Result<()> {
         "identified (friction + noise + shaker suspension)",
         5,
     )?;
-    for (tag, data) in [("exact", &exact), ("identified", &ident), ("shaker", &shaker)] {
+    for (tag, data) in [
+        ("exact", &exact),
+        ("identified", &ident),
+        ("shaker", &shaker),
+    ] {
         let mut results: Vec<(String, UpdateResult)> = Vec::new();
         for (dname, dofs) in [("1,4,7", vec![1, 4, 7]), ("all 8", all.clone())] {
             let t = data.restrict(&dofs)?;

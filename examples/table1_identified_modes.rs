@@ -85,12 +85,31 @@ fn main() -> anyhow::Result<()> {
     println!("\nTable 1 of the paper (measured, hammer tests with averaging)");
     println!("mode | nominal Hz  damping % | damaged Hz  damping %");
     for (i, r) in PAPER.iter().enumerate() {
-        println!("{:>4} | {:>10.1} {:>10.1} | {:>10.1} {:>10.1}", i + 1, r.0, r.1, r.2, r.3);
+        println!(
+            "{:>4} | {:>10.1} {:>10.1} | {:>10.1} {:>10.1}",
+            i + 1,
+            r.0,
+            r.1,
+            r.2,
+            r.3
+        );
     }
     let mn = tacit::modal::solve(&nominal.mass_matrix(), &nominal.stiffness_matrix())?;
     let md = tacit::modal::solve(&damaged.mass_matrix(), &damaged.stiffness_matrix())?;
     println!("\nModel frequencies (Hz), flexible modes:");
-    println!("  nominal {:?}", mn.freq_hz[1..].iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>());
-    println!("  damaged {:?}", md.freq_hz[1..].iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>());
+    println!(
+        "  nominal {:?}",
+        mn.freq_hz[1..]
+            .iter()
+            .map(|f| format!("{f:.2}"))
+            .collect::<Vec<_>>()
+    );
+    println!(
+        "  damaged {:?}",
+        md.freq_hz[1..]
+            .iter()
+            .map(|f| format!("{f:.2}"))
+            .collect::<Vec<_>>()
+    );
     Ok(())
 }

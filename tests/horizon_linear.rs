@@ -77,6 +77,10 @@ fn no_false_force_on_a_linear_record() {
         .map(|i| rms(r.force.row(i).transpose().as_slice()))
         .collect();
     let worst = per_dof.iter().cloned().fold(0.0, f64::max);
+    for c in &r.weights.candidates {
+        eprintln!("  λ {:.2e} rss {:.4e} |w|² {:.3e}", c.lambda, c.rss, c.force_norm2);
+    }
+    eprintln!("status {:?} {:?} rel.res {:?}", r.status, r.notes, r.diagnostics.relative_residual);
     eprintln!(
         "false force RMS per DOF (N): {per_dof:.3?}; λ = {:.3e}",
         r.weights.lambda

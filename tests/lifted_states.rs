@@ -13,7 +13,7 @@ use tacit::diagnose::lifted::{reconstruct, LiftedResult, LiftedSettings};
 use tacit::integrate::SimSettings;
 use tacit::linear::SampledModel;
 use tacit::model::Model;
-use tacit::record::{Quantity, Record};
+use tacit::record::Quantity;
 use tacit::simulate::{simulate_record, RecordSpec};
 use tacit::trace::regress::segment_response;
 
@@ -25,7 +25,6 @@ fn model(name: &str) -> Model {
 /// A simulated record and its linear sampled model (40 sub-steps, as the
 /// simulator).
 struct Case {
-    rec: Record,
     sm: SampledModel,
     channels: Vec<(Quantity, usize)>,
     measured: DMatrix<f64>,
@@ -66,7 +65,6 @@ fn case(name: &str, samples: usize, sensors: &[usize], noise: f64, seed: u64) ->
         }
     });
     Case {
-        rec,
         sm,
         channels,
         measured,
@@ -217,5 +215,23 @@ fn table() {
             }
         }
     }
-    let _ = Quantity::Accel;
+}
+
+#[test]
+#[ignore]
+fn explore_dump() {
+    let r: usize = std::env::var("R").ok().and_then(|s| s.parse().ok()).unwrap_or(8);
+    let lam: f64 = std::env::var("LAM").ok().and_then(|s| s.parse().ok()).unwrap_or(1e-2);
+    let c = case("lanl8dof-contact", 1024, &ALL, 0.0, 3);
+    let (res, f) = run(&c, r, lam);
+    eprintln!("R={r} lam={lam}: u5-u6 {:.3} v {:.3} shooting {:.3} {}", f.rel, f.v, f.shooting, res.status);
+    let mut s = String::new();
+    for k in 0..c.truth.ncols() {
+        let row: Vec<String> = (0..16).map(|i| format!("{:e}", c.truth[(i, k)]))
+            .chain((0..16).map(|i| format!("{:e}", res.states[(i, k)])))
+            .chain((0..8).map(|i| format!("{:e}", res.force[(i, k)]))).collect();
+        s += &row.join(",");
+        s += "\n";
+    }
+    std::fs::write(format!("/tmp/lifted_{r}.csv"), s).unwrap();
 }

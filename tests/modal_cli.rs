@@ -39,7 +39,11 @@ fn correlation_and_update_from_a_test_modes_file() {
         .output()
         .unwrap();
     let s = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{s}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{s}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(s.contains("MAC %") && s.contains("-14.00%"), "{s}");
     assert!(dir.path().join("fig_mac.png").exists());
     assert!(dir.path().join("fig_update.svg").exists());

@@ -48,7 +48,10 @@ fn wrong_lengths_and_unknown_dofs_are_errors() {
     )
     .unwrap_err()
     .to_string();
-    assert!(bad.contains("mode 1") && bad.contains("2 values for 3 DOFs"), "{bad}");
+    assert!(
+        bad.contains("mode 1") && bad.contains("2 values for 3 DOFs"),
+        "{bad}"
+    );
     let bad = TestModes::new(
         "t",
         vec![1, 9],

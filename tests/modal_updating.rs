@@ -74,11 +74,15 @@ fn settings() {
     let r = correlate::update_stiffness(&model, &t, &s).unwrap();
     assert!(r.change[1] > -0.14 && r.change[1] < 0.0, "{:?}", r.change);
     s.springs = vec![8];
-    let e = correlate::update_stiffness(&model, &t, &s).unwrap_err().to_string();
+    let e = correlate::update_stiffness(&model, &t, &s)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("spring 8") && e.contains("1..=7"), "{e}");
     let mut s = UpdateSettings::new(Residue::Hybrid);
     s.regularization = -1.0;
-    let e = correlate::update_stiffness(&model, &t, &s).unwrap_err().to_string();
+    let e = correlate::update_stiffness(&model, &t, &s)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("regularization"), "{e}");
 }
 

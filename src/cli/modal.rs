@@ -6,8 +6,8 @@
 use super::DofList;
 use std::path::{Path, PathBuf};
 use tacit::correlate::{
-    self, report, CorrelationSettings, Expansion, FitSettings, FrfSettings, Residue,
-    TestModes, UpdateSettings,
+    self, report, CorrelationSettings, Expansion, FitSettings, FrfSettings, Residue, TestModes,
+    UpdateSettings,
 };
 use tacit::model::Model;
 

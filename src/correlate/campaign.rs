@@ -137,9 +137,7 @@ impl ModalTest {
     /// Simulate the records (record r with seed `seed + r − 1`).
     pub fn simulate(&self, model: &Model) -> Result<Vec<Record>> {
         if self.records < 1 {
-            return Err(TacitError::Setting(
-                "a modal test needs >= 1 record".into(),
-            ));
+            return Err(TacitError::Setting("a modal test needs >= 1 record".into()));
         }
         let structure = self.structure(model);
         structure.validate(&structure.name)?;

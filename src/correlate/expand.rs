@@ -89,10 +89,9 @@ pub fn expand(
 
 fn with_mode(e: TacitError, r: usize, f: f64) -> TacitError {
     match e {
-        TacitError::Numerical(m) => TacitError::Numerical(format!(
-            "expansion of test mode {} ({f:.2} Hz): {m}",
-            r + 1
-        )),
+        TacitError::Numerical(m) => {
+            TacitError::Numerical(format!("expansion of test mode {} ({f:.2} Hz): {m}", r + 1))
+        }
         other => other,
     }
 }

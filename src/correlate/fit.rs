@@ -304,9 +304,7 @@ fn stabilisation(
             Some(poles) => {
                 let phys: Vec<(f64, f64)> = poles
                     .into_iter()
-                    .filter(|&(f, z)| {
-                        f >= s.band_hz.0 && f <= fhi && z > 0.0 && z < s.max_damping
-                    })
+                    .filter(|&(f, z)| f >= s.band_hz.0 && f <= fhi && z > 0.0 && z < s.max_damping)
                     .collect();
                 for &(f, z) in &phys {
                     let stable = prev.iter().any(|&(fp, zp)| {
@@ -335,12 +333,7 @@ fn stabilisation(
 
 /// Poles (frequency Hz, damping ratio) of the order-`p` LSCF denominator;
 /// `None` when the reduced normal equations are singular.
-fn lscf_poles(
-    r: &DMatrix<f64>,
-    st: &[OutputBlocks],
-    p: usize,
-    dt: f64,
-) -> Option<Vec<(f64, f64)>> {
+fn lscf_poles(r: &DMatrix<f64>, st: &[OutputBlocks], p: usize, dt: f64) -> Option<Vec<(f64, f64)>> {
     let n = p + 1;
     let rp = r.view((0, 0), (n, n)).into_owned();
     let mut m = DMatrix::<f64>::zeros(n, n);

@@ -224,11 +224,7 @@ pub fn pair_modes(mac: &[Vec<f64>], settings: &CorrelationSettings) -> Vec<Optio
                 .map(|(i, j)| (mac[i][j], i, j))
                 .filter(|c| c.0 >= settings.min_mac)
                 .collect();
-            cand.sort_by(|a, b| {
-                b.0.total_cmp(&a.0)
-                    .then(a.1.cmp(&b.1))
-                    .then(a.2.cmp(&b.2))
-            });
+            cand.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
             let mut used = vec![false; nm];
             for (_, i, j) in cand {
                 if pair[i].is_none() && !used[j] {
@@ -249,11 +245,7 @@ mod tests {
     fn mac_basics() {
         let a = [1.0, 2.0, -1.0];
         approx::assert_relative_eq!(mac(&a, &a).unwrap(), 1.0, epsilon = 1e-15);
-        approx::assert_relative_eq!(
-            mac(&a, &[-2.0, -4.0, 2.0]).unwrap(),
-            1.0,
-            epsilon = 1e-15
-        );
+        approx::assert_relative_eq!(mac(&a, &[-2.0, -4.0, 2.0]).unwrap(), 1.0, epsilon = 1e-15);
         assert_eq!(mac(&a, &[1.0, 0.0, 1.0]).unwrap(), 0.0);
         assert_eq!(mac(&a, &[0.0; 3]).unwrap(), 0.0);
         let e = mac(&a, &[1.0, 2.0]).unwrap_err().to_string();

@@ -110,9 +110,14 @@ pub fn adjustment_table(results: &[(&str, &UpdateResult)]) -> String {
         s.push('\n');
     }
     for (title, f) in [
-        ("evals", &(|r: &UpdateResult| r.evaluations.to_string()) as &dyn Fn(&UpdateResult) -> String),
+        (
+            "evals",
+            &(|r: &UpdateResult| r.evaluations.to_string()) as &dyn Fn(&UpdateResult) -> String,
+        ),
         ("status", &|r: &UpdateResult| r.status.to_string()),
-        ("cond.", &|r: &UpdateResult| format!("{:.1e}", r.condition())),
+        ("cond.", &|r: &UpdateResult| {
+            format!("{:.1e}", r.condition())
+        }),
         ("resid.", &|r: &UpdateResult| {
             format!("{:.1e}->{:.1e}", r.residual_initial, r.residual_final)
         }),
@@ -161,7 +166,12 @@ pub fn adjustment_figure(title: &str, results: &[(String, &UpdateResult)]) -> Fi
 }
 
 /// FRF magnitudes (log10) above the stabilisation diagram.
-pub fn stabilisation_figure(title: &str, frf: &Frf, fit: &FitResult, band_hz: (f64, f64)) -> Figure {
+pub fn stabilisation_figure(
+    title: &str,
+    frf: &Frf,
+    fit: &FitResult,
+    band_hz: (f64, f64),
+) -> Figure {
     let lines: Vec<usize> = (0..frf.freq_hz.len())
         .filter(|&l| frf.freq_hz[l] >= band_hz.0 && frf.freq_hz[l] <= band_hz.1)
         .collect();
@@ -204,11 +214,7 @@ pub fn stabilisation_figure(title: &str, frf: &Frf, fit: &FitResult, band_hz: (f
     let hi = fit.poles.iter().map(|p| p.order).max().unwrap_or(1) as f64;
     for (i, m) in fit.modes.iter().enumerate() {
         let label = if i == 0 { "identified" } else { "" };
-        series.push(Series::dashed(
-            label,
-            vec![m.frequency_hz; 2],
-            vec![lo, hi],
-        ));
+        series.push(Series::dashed(label, vec![m.frequency_hz; 2], vec![lo, hi]));
     }
     let bottom = Panel::xy(
         "stabilisation diagram (LSCF)",

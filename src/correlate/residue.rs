@@ -623,7 +623,13 @@ pub fn update_stiffness(
                 j
             });
             let mut sv: Vec<f64> = jp
-                .map(|j| j.svd(false, false).singular_values.iter().copied().collect())
+                .map(|j| {
+                    j.svd(false, false)
+                        .singular_values
+                        .iter()
+                        .copied()
+                        .collect()
+                })
                 .unwrap_or_default();
             sv.sort_by(|a, b| b.total_cmp(a));
             (r.norm(), sv)

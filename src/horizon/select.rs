@@ -14,7 +14,8 @@
 //!   variance, or the GCV estimate `‖r‖²_W / (N p − tr H)`; refined by
 //!   bisection on log α.
 //!
-//! Candidates whose solve reports numerical trouble are skipped.
+//! Candidates whose solve reports numerical trouble (other than a
+//! rank-deficient initial state) are skipped.
 
 use super::settings::{HorizonSettings, NoiseLevel, WeightSelection};
 use super::{solve, Candidate, HorizonData, HorizonStatus, SelectedWeights};
@@ -35,7 +36,13 @@ impl Search<'_> {
         let a = 10f64.powf(t);
         let (l, mu) = (a * self.settings.lambda, a * self.settings.mu);
         let r = solve(self.model, self.data, self.settings, l, mu, cov)?;
-        if r.status != HorizonStatus::Solved {
+        // a rank-deficient initial state still gives a valid (minimum-norm)
+        // answer; other trouble skips the candidate
+        let usable = matches!(
+            r.status,
+            HorizonStatus::Solved | HorizonStatus::RankDeficient { .. }
+        );
+        if !usable || !r.diagnostics.rss.is_finite() {
             return Ok(None);
         }
         let np = self.data.measured.len() as f64;

@@ -137,8 +137,9 @@ pub struct HorizonSettings {
     pub mu: f64,
     /// Channel noise that defines `W`. Default 1 % of each channel's RMS.
     pub noise: ChannelNoise,
-    /// Initial state. Default: estimated, zero mean, σ_u = 1 m,
-    /// σ_v = 10 m/s (weak).
+    /// Initial state. Default: estimated, zero mean, σ_u = 10 mm,
+    /// σ_v = 1 m/s (weak for a laboratory structure, yet enough to keep
+    /// the rigid-body position of a free-free model determined).
     pub initial: InitialState,
     /// Weight selection. Default [`WeightSelection::Fixed`].
     pub selection: WeightSelection,
@@ -173,8 +174,8 @@ impl Default for HorizonSettings {
             noise: ChannelNoise::RmsFraction { fraction: 0.01 },
             initial: InitialState::Estimate {
                 mean: vec![],
-                std_disp: 1.0,
-                std_vel: 10.0,
+                std_disp: 1e-2,
+                std_vel: 1.0,
             },
             selection: WeightSelection::Fixed,
             selection_decades: 4.0,

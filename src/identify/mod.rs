@@ -84,7 +84,7 @@ pub fn identify_with_progress(
     let regular = &plan.ops[0];
     let radius = regular.info.spectral_radius;
     if let Some(r) = radius {
-        if !(r < 1.0) {
+        if r.is_nan() || r >= 1.0 {
             let nw = plan.windows.len() as f64;
             warnings.push(format!(
                 "closed-loop spectral radius {r:.4} >= 1: errors can grow by ×{r:.4} per window, up to ×{:.3e} over the {} windows of this record",

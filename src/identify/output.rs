@@ -488,7 +488,7 @@ fn divergence(x: &DMatrix<f64>, xnf: &DMatrix<f64>) -> Option<(usize, f64)> {
     let refn = (0..xnf.ncols())
         .map(|k| xnf.column(k).norm())
         .fold(0.0, f64::max);
-    if !(refn > 0.0) {
+    if refn.is_nan() || refn <= 0.0 {
         return None;
     }
     let norms: Vec<f64> = (0..x.ncols()).map(|k| x.column(k).norm()).collect();

@@ -166,5 +166,6 @@ mod tests {
             .max_by(|&i, &j| k[i].abs().partial_cmp(&k[j].abs()).unwrap())
             .unwrap();
         assert_eq!(best, 4, "{k:?}");
+        assert!(k[4] > 0.0, "the corner has positive curvature: {k:?}");
     }
 }

@@ -312,3 +312,70 @@ impl WindowOperator {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identify::{Problem, Reduce};
+    use crate::record::{Channel, Quantity, Record};
+
+    /// The window sensitivities reproduce a step-by-step simulation of the
+    /// sampled model, and the paper gain reproduces a direct solve.
+    #[test]
+    fn sensitivities_match_simulation_and_gain_matches_direct_solve() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let model = crate::model::Model::from_file(std::path::Path::new(p)).unwrap();
+        let ns = 12;
+        let ch = |d| Channel::new(Quantity::Accel, d, vec![0.0; ns]);
+        let rec = Record {
+            t0: 0.0,
+            fs: 512.0,
+            inputs: vec![Channel::new(Quantity::Force, 1, vec![0.0; ns])],
+            outputs: vec![ch(1), ch(5), ch(6)],
+            truth: None,
+            source: Default::default(),
+        };
+        let prob = Problem::new(&model, &rec, &[1, 5, 6]).unwrap();
+        for red in [Reduce::None, Reduce::Serep] {
+            let sys = System::new(&prob, red, 10).unwrap();
+            let len = 5;
+            let raw = RawWindow::build(&sys, len);
+            let nz = raw.nz();
+            let z = DVector::from_fn(nz, |i, _| ((i * 7919) % 13) as f64 / 13.0 - 0.5);
+            let x0 = z.rows(0, raw.ns).into_owned();
+            let f = DMatrix::from_fn(raw.n, len + 1, |i, j| z[raw.col_f(j) + i]);
+            let e = DMatrix::from_fn(raw.ne, len + 1, |i, j| z[raw.col_e(j) + i]);
+            let (xs, ys) = sys.simulate(&x0, &f, &e);
+            for j in 0..=len {
+                let xj = &raw.x[j] * &z;
+                let yj = &raw.y[j] * &z;
+                assert!((xj - xs.column(j)).amax() < 1e-9 * (1.0 + xs.amax()));
+                assert!((yj - ys.column(j)).amax() < 1e-9 * (1.0 + ys.amax()));
+            }
+            // paper window: gain equals the normal-equation solution
+            let alpha = 0.3;
+            let op = WindowOperator::new(&raw, crate::identify::paper::param(&raw, alpha, 0.0));
+            let d = DVector::from_fn(op.nd, |i, _| ((i * 31) % 17) as f64 / 17.0 - 0.4);
+            let r = &op.gain * &d;
+            let nfit = op.nfit;
+            let (yfit, c, ee) = (
+                d.rows(0, nfit),
+                d.rows(nfit, op.param.nc),
+                d.rows(nfit + op.param.nc, op.nee),
+            );
+            let h = &op.h_theta;
+            // rebuild H_c c + H_e e from the raw window
+            let mut rhs = yfit.into_owned();
+            for (i, &j) in op.param.fit.iter().enumerate() {
+                let xf = raw.y[j].columns(0, raw.nxf()) * (&op.param.s_c * c);
+                let ef = raw.y[j].columns(raw.nxf(), op.nee) * ee;
+                let mut blk = rhs.rows_mut(i * raw.p, raw.p);
+                blk -= xf + ef;
+            }
+            let nn = h.transpose() * h + DMatrix::identity(raw.n, raw.n) * alpha;
+            let g = nn.lu().solve(&(h.transpose() * rhs)).unwrap();
+            let got = r.rows(raw.col_f(1), raw.n);
+            assert!((got - &g).amax() < 1e-8 * (1.0 + g.amax()), "{red:?}");
+        }
+    }
+}

@@ -211,8 +211,11 @@ pub fn pcd_residual(
     Ok(DVector::from_vec(out))
 }
 
+/// (U, σ, Vᵀ) of a thin SVD.
+type Svd = (DMatrix<f64>, Vec<f64>, DMatrix<f64>);
+
 /// Thin SVD with descending singular values: (U, σ, Vᵀ).
-fn svd(a: &DMatrix<f64>) -> Result<(DMatrix<f64>, Vec<f64>, DMatrix<f64>), String> {
+fn svd(a: &DMatrix<f64>) -> Result<Svd, String> {
     let svd = a
         .clone()
         .try_svd(true, true, 1e-14, 500)

@@ -388,6 +388,9 @@ pub fn parse_free(spec: &str, model: &Model) -> Result<Vec<Parameter>> {
         .collect()
 }
 
+/// (name prefix, number of entries, target constructor, entries' noun).
+type Numbered = (&'static str, usize, fn(usize) -> Target, &'static str);
+
 fn parse_one(raw: &str, model: &Model) -> Result<Vec<Target>> {
     let unknown = |why: String| TacitError::Setting(format!("free parameter '{raw}': {why}"));
     let lower = raw.to_ascii_lowercase();
@@ -427,7 +430,7 @@ fn parse_one(raw: &str, model: &Model) -> Result<Vec<Target>> {
             .filter(|&i| i >= 1)
             .map(|i| i - 1)
     };
-    let checks: [(&str, usize, fn(usize) -> Target, &str); 5] = [
+    let checks: [Numbered; 5] = [
         ("m", model.ndof(), Target::Mass, "DOFs"),
         ("gap", model.contacts.len(), Target::ContactGap, "contacts"),
         (

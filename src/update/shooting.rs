@@ -25,7 +25,7 @@ pub struct Segment {
 }
 
 /// Cut `samples` into consecutive segments of `len` samples (the last one
-/// may be longer, to absorb a remainder shorter than `len / 2`, or shorter
+/// may be longer, to absorb a remainder of at most `len / 2`, or shorter
 /// otherwise), each started from `state(start)`.
 pub fn uniform<F>(samples: usize, len: usize, mut state: F) -> Result<Vec<Segment>>
 where
@@ -45,7 +45,7 @@ where
     let mut start = 0;
     while start + 1 < samples {
         let mut l = len.min(samples - start);
-        if samples - (start + l) < len / 2 {
+        if samples - (start + l) <= len / 2 {
             l = samples - start;
         }
         if l < 2 {
