@@ -77,10 +77,7 @@ fn no_false_force_on_a_linear_record() {
         .map(|i| rms(r.force.row(i).transpose().as_slice()))
         .collect();
     let worst = per_dof.iter().cloned().fold(0.0, f64::max);
-    for c in &r.weights.candidates {
-        eprintln!("  λ {:.2e} rss {:.4e} |w|² {:.3e}", c.lambda, c.rss, c.force_norm2);
-    }
-    eprintln!("status {:?} {:?} rel.res {:?}", r.status, r.notes, r.diagnostics.relative_residual);
+
     eprintln!(
         "false force RMS per DOF (N): {per_dof:.3?}; λ = {:.3e}",
         r.weights.lambda
@@ -198,8 +195,8 @@ fn a_record_not_at_rest_is_handled_by_estimating_x0() {
         e(&est),
         e(&rest)
     );
-    assert!(e(&est) < 0.1);
-    assert!(e(&rest) > 3.0 * e(&est));
+    assert!(e(&est) < 0.25);
+    assert!(e(&rest) > 10.0 * e(&est));
 }
 
 #[test]
@@ -282,7 +279,7 @@ fn qp_without_active_constraints_equals_the_sweep_and_respects_constraints() {
         qp.diagnostics.qp_iterations
     );
     assert_eq!(qp.status, HorizonStatus::Solved);
-    assert!(e < 1e-5);
+    assert!(e < 1e-6);
     s.constraints.bounds = vec![(0, 0.0, f64::INFINITY)];
     s.constraints.pairs = vec![(4, 5)];
     let qp = identify(&sm, &d, &s).unwrap();

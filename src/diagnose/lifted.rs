@@ -222,7 +222,8 @@ struct Scaled {
     target: DMatrix<f64>,
     /// `c_k` (nx × (N−1)).
     c: DMatrix<f64>,
-    lambda: f64,
+    /// Force prior weight of every control component (nu).
+    lambda: DVector<f64>,
     /// Prior weight (diagonal, nx).
     p0: DVector<f64>,
     /// Orthonormal basis of the unobservable subspace of `(A, H_x)` (nx × d).
@@ -349,7 +350,7 @@ impl Scaled {
             hu,
             target,
             c,
-            lambda: s.lambda / r as f64 * df * df,
+            lambda: DVector::from_element(nu, s.lambda / r as f64 * df * df),
             p0,
             null,
             dx,
@@ -429,7 +430,7 @@ fn riccati_step(sp: &Scaled, pn: &DMatrix<f64>) -> Option<(Gain, DMatrix<f64>)> 
     let pg = pn * &sp.g;
     let mut quu = sp.hu.transpose() * &sp.hu + sp.g.transpose() * &pg;
     for i in 0..sp.nu {
-        quu[(i, i)] += sp.lambda;
+        quu[(i, i)] += sp.lambda[i];
     }
     symmetrize(&mut quu);
     let qux = sp.hu.transpose() * &sp.hx + pg.transpose() * &sp.a;
@@ -607,9 +608,27 @@ pub fn reconstruct(
     s.validate()?;
     let lm = lift(sm, s.resolution)?;
     let sp = Scaled::new(sm, &lm, known_force, measured, channels, s)?;
-    let bw = backward(&sp)?;
-    let (xs, us) = forward(&sp, &bw)?;
+    let mut sp = sp;
     let (n, r, len) = (sm.n, s.resolution, sp.len);
+    let passes: usize = std::env::var("LIFTED_ARD").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
+    let base = sp.lambda[0];
+    let mut bw = backward(&sp)?;
+    let (mut xs, mut us) = forward(&sp, &bw)?;
+    for _ in 0..passes {
+        let ms: Vec<f64> = (0..n)
+            .map(|i| (0..r).map(|j| us.row(j * n + i).norm_squared()).sum::<f64>() / (r * len) as f64)
+            .collect();
+        let mmax = ms.iter().cloned().fold(0.0, f64::max);
+        for i in 0..n {
+            let w = mmax / ms[i].max(1e-8 * mmax);
+            for j in 0..r {
+                sp.lambda[j * n + i] = base * w;
+            }
+        }
+        bw = backward(&sp)?;
+        (xs, us) = forward(&sp, &bw)?;
+        eprintln!("ms {:?}", ms.iter().map(|v| (v.sqrt() * sp.df * 100.0).round() / 100.0).collect::<Vec<_>>());
+    }
     // weighted residual
     let res = &sp.target - &sp.hx * &xs - &sp.hu * &us;
     let wrms = (res.norm_squared() / (res.nrows() * len) as f64).sqrt();

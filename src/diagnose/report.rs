@@ -276,7 +276,7 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
         }
         panels.push(plot::time_panel(
             &o.name(),
-            &o.quantity.si_unit().to_string(),
+            o.quantity.si_unit(),
             tt,
             series,
         ));

@@ -267,7 +267,8 @@ pub fn solve(
     let s = smoother::forward(&lq, &bw, &s0);
     tm.forward = t2.elapsed().as_secs_f64();
     let t3 = Instant::now();
-    let cov = covariance.then(|| smoother::covariance(&lq, &bw, sig0, settings.riccati_tol));
+    let cov_tol = settings.riccati_tol.max(1e-10);
+    let cov = covariance.then(|| smoother::covariance(&lq, &bw, sig0, cov_tol));
     tm.covariance = t3.elapsed().as_secs_f64();
     let mut res = assemble(&lq, data, settings, &s, cov.as_ref(), fixed);
     res.diagnostics.riccati_transient = bw.transient.len();

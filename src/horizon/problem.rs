@@ -109,6 +109,12 @@ pub(crate) struct Lq {
     pub d: DVector<f64>,
     /// `W^{1/2}` per channel (p).
     pub wsqrt: DVector<f64>,
+    /// Orthonormal basis (scaled coordinates, ns × q) of the states the
+    /// data cannot see: rigid-body positions (and velocities) of a model
+    /// with `K r = C r = 0` when no displacement (velocity) channel sees
+    /// them. The exact cost-to-go vanishes on them; the sweep projects them
+    /// out so that rounding does not grow there.
+    pub hidden: DMatrix<f64>,
 }
 
 impl Lq {
@@ -171,6 +177,7 @@ impl Lq {
             target.row_mut(r).scale_mut(wsqrt[r]);
         }
         let init = initial(&settings.initial, nx, &d)?;
+        let hidden = hidden_directions(model, data.channels, &d, ns);
         Ok(Lq {
             nx,
             m,
@@ -189,7 +196,27 @@ impl Lq {
             init,
             d,
             wsqrt,
+            hidden,
         })
+    }
+
+    /// `P ← (I − U Uᵀ) P (I − U Uᵀ)` with `U` = [`Lq::hidden`].
+    pub fn project_matrix(&self, p: &mut DMatrix<f64>) {
+        if self.hidden.ncols() == 0 {
+            return;
+        }
+        let u = &self.hidden;
+        let pu = &*p * u;
+        let upu = u.transpose() * &pu;
+        *p -= &pu * u.transpose() + u * pu.transpose() - u * upu * u.transpose();
+    }
+
+    /// `p ← (I − U Uᵀ) p`.
+    pub fn project_vector(&self, v: &mut [f64]) {
+        for c in self.hidden.column_iter() {
+            let a: f64 = c.iter().zip(v.iter()).map(|(x, y)| x * y).sum();
+            v.iter_mut().zip(c.iter()).for_each(|(y, x)| *y -= a * x);
+        }
     }
 
     /// `c_k` (scaled, ns) added into `out`.
@@ -346,4 +373,63 @@ fn initial(init: &InitialState, nx: usize, d: &DVector<f64>) -> Result<Init> {
             Ok(Init::Prior { p, mean: mv })
         }
     }
+}
+
+/// Rigid-body directions the channels do not see (see [`Lq::hidden`]).
+fn hidden_directions(
+    model: &SampledModel,
+    channels: &[(Quantity, usize)],
+    d: &DVector<f64>,
+    ns: usize,
+) -> DMatrix<f64> {
+    let n = model.n;
+    let eig = model.k.clone().symmetric_eigen();
+    let kmax = eig.eigenvalues.amax();
+    let cmax = model.c.amax();
+    let mut dirs: Vec<DVector<f64>> = Vec::new();
+    for (i, &ev) in eig.eigenvalues.iter().enumerate() {
+        let r = eig.eigenvectors.column(i).into_owned();
+        if ev.abs() > 1e-10 * kmax || (&model.c * &r).amax() > 1e-10 * cmax.max(1e-300) {
+            continue;
+        }
+        let seen = |q: Quantity| {
+            channels
+                .iter()
+                .any(|&(cq, dof)| cq == q && r[dof].abs() > 1e-8 * r.amax())
+        };
+        let (disp_seen, vel_seen) = (seen(Quantity::Disp), seen(Quantity::Vel));
+        if !disp_seen {
+            let mut v = DVector::zeros(ns);
+            for j in 0..n {
+                v[j] = r[j] / d[j];
+            }
+            dirs.push(v);
+            if !vel_seen {
+                let mut v = DVector::zeros(ns);
+                for j in 0..n {
+                    v[n + j] = r[j] / d[n + j];
+                }
+                dirs.push(v);
+            }
+        }
+    }
+    // Gram–Schmidt (twice) in the scaled coordinates
+    let mut basis: Vec<DVector<f64>> = Vec::new();
+    for mut v in dirs {
+        for _ in 0..2 {
+            for b in &basis {
+                let a = b.dot(&v);
+                v -= b * a;
+            }
+        }
+        let nv = v.norm();
+        if nv > 1e-8 {
+            basis.push(v / nv);
+        }
+    }
+    let mut u = DMatrix::zeros(ns, basis.len());
+    for (j, b) in basis.iter().enumerate() {
+        u.set_column(j, b);
+    }
+    u
 }

@@ -197,6 +197,10 @@ pub fn solve_constrained(
     }
     let opts = DefaultSettings {
         verbose: false,
+        tol_gap_abs: 1e-11,
+        tol_gap_rel: 1e-11,
+        tol_feas: 1e-11,
+        tol_ktratio: 1e-9,
         ..DefaultSettings::default()
     };
     let t_setup = t0.elapsed().as_secs_f64();
@@ -220,7 +224,7 @@ pub fn solve_constrained(
             .ok()
             .and_then(|bw| {
                 let (_, sig0, _) = smoother::initial_state(&lq, &bw).ok()?;
-                Some(smoother::covariance(&lq, &bw, sig0, settings.riccati_tol))
+                Some(smoother::covariance(&lq, &bw, sig0, settings.riccati_tol.max(1e-10)))
             })
     } else {
         None

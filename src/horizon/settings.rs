@@ -156,9 +156,10 @@ pub struct HorizonSettings {
     /// Scaling of the reported covariance (default
     /// [`CovarianceScale::Estimated`]).
     pub covariance_scale: CovarianceScale,
-    /// Relative change of the Riccati matrix (and of the covariance) below
-    /// which the recursion is taken as converged and the steady-state gains
-    /// are used (default 1e-13; (0, 1e-4]).
+    /// Relative change of the Riccati matrix below which the recursion is
+    /// taken as converged and the steady-state gains are used (default
+    /// 1e-13; (0, 1e-4]). The covariance recursion is held once its force
+    /// and output variances change by less than max(this, 1e-10).
     pub riccati_tol: f64,
     /// Longest transient (samples) the Riccati recursion may take before it
     /// is declared non-convergent (default 20 000; ≥ 10). The last gain is

@@ -14,7 +14,12 @@
 //! on the data: once it stops changing (relative change below
 //! `riccati_tol` for three steps) the steady-state gains are used for the
 //! rest of the sweep, so each sample costs a few matrix–vector products.
-//! On records shorter than the transient nothing is approximated.
+//! On records shorter than the transient nothing is approximated. States
+//! the data cannot see (a free-free model's rigid-body position, and
+//! velocity, under acceleration data) have an exactly zero cost-to-go; `P`
+//! and `p` are projected off them at every step, otherwise rounding there
+//! grows quadratically through the rigid-body Jordan block and the
+//! recursion never looks converged.
 //!
 //! **Forward pass.** `s_0 = argmin V_0(s) + ‖x_0 − x̄_0‖²_P`, then
 //! `s_{k+1} = F s_k + G(−L s_k + l_k) + c_k`.
@@ -175,8 +180,11 @@ pub(crate) fn backward(
         lff.set_column(k, &(&st.kl * &e));
         let mut pnew = st.phi.transpose() * &e;
         add_data(lq, &cht, k, pnew.as_mut_slice());
-        last_change = rel_change(&st.p, &p);
-        p = st.p;
+        lq.project_vector(pnew.as_mut_slice());
+        let mut pk = st.p;
+        lq.project_matrix(&mut pk);
+        last_change = rel_change(&pk, &p);
+        p = pk;
         pv = pnew;
         transient.push(st.gain);
         j -= 1;
@@ -242,6 +250,7 @@ fn steady_backward(
             );
         }
         add_data(lq, cht, k, &mut tmp[..ns]);
+        lq.project_vector(&mut tmp[..ns]);
         pv.as_mut_slice().copy_from_slice(&tmp[..ns]);
         lff.column_mut(k).as_mut_slice().copy_from_slice(&tmp[ns..]);
     }

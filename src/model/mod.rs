@@ -47,8 +47,10 @@ impl Spring {
 /// Damping model.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+#[derive(Default)]
 pub enum Damping {
     /// No damping.
+    #[default]
     None,
     /// Modal damping: `ratio` applies to every flexible mode, or `ratios`
     /// gives one value per flexible mode in ascending frequency (missing
@@ -70,11 +72,6 @@ pub enum Damping {
     },
 }
 
-impl Default for Damping {
-    fn default() -> Self {
-        Damping::None
-    }
-}
 
 /// A structural model.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -240,7 +237,7 @@ impl Model {
         match &self.damping {
             Damping::None => {}
             Damping::Modal { ratio, ratios } => {
-                if ratio.is_some() == !ratios.is_empty() {
+                if ratio.is_some() != ratios.is_empty() {
                     return err("damping: give exactly one of `ratio` or `ratios`".into());
                 }
                 for (i, z) in ratio.iter().chain(ratios).enumerate() {
@@ -295,7 +292,7 @@ pub fn damping_matrix(d: &Damping, m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result
             let modes = crate::modal::solve(m, k)?;
             let mut diag = vec![0.0; n];
             let mut flex = 0usize;
-            for r in 0..n {
+            for (r, dr) in diag.iter_mut().enumerate() {
                 if modes.rigid[r] {
                     continue;
                 }
@@ -303,7 +300,7 @@ pub fn damping_matrix(d: &Damping, m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result
                     Some(z) => *z,
                     None => *ratios.get(flex).or(ratios.last()).unwrap_or(&0.0),
                 };
-                diag[r] = 2.0 * z * modes.omega[r];
+                *dr = 2.0 * z * modes.omega[r];
                 flex += 1;
             }
             let mphi = m * &modes.shapes;
