@@ -58,6 +58,17 @@ fn bench(c: &mut Criterion) {
             black_box(run(&full, &prob, &fplan, &mut s, &mut |_, _| {}))
         })
     });
+    let contact = Constraints {
+        pairs: vec![(5, 6)],
+        push_apart: true,
+        ..Default::default()
+    };
+    c.bench_function("paper_full_order_qp_pair_pushapart_4096", |b| {
+        b.iter(|| {
+            let mut s = QpSolver::new(contact.clone(), 8, fplan.ops.len());
+            black_box(run(&full, &prob, &fplan, &mut s, &mut |_, _| {}))
+        })
+    });
     // the default: MHE, horizon 24, SEREP
     let mhe = IdentifySettings::default();
     let mplan = build_plan(&sys, prob.len(), &mhe, 1e-3);

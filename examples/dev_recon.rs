@@ -1,53 +1,33 @@
-//! Development check: reconstruction quality against the truth.
-use tacit::diagnose::{prepare, DiagnoseSettings};
+//! Development check: how good are the reconstructed start states for
+//! multiple shooting? Exact model from reconstructed vs true states.
+use tacit::diagnose::{prepare, DiagnoseSettings, StatesSource};
+use tacit::integrate::SimSettings;
 use tacit::model::Model;
 fn main() {
-    let rec = tacit::record::read(std::path::Path::new(&std::env::args().nth(1).unwrap())).unwrap();
-    let model = Model::from_file(std::path::Path::new("data/lanl8dof.toml")).unwrap();
+    let path = std::env::args().nth(1).unwrap();
+    let rec = tacit::record::read(std::path::Path::new(&path)).unwrap();
+    let lin = Model::from_file(std::path::Path::new("data/lanl8dof.toml")).unwrap();
+    let exact = Model::from_file(std::path::Path::new("data/lanl8dof-contact.toml")).unwrap();
     let truth = rec.truth.clone().unwrap();
-    for lam in [1e-2, 1.0, 1e2, 1e4] {
+    for (name, src, res) in [("lifted r8", StatesSource::Lifted, 8), ("lifted r16", StatesSource::Lifted, 16), ("horizon", StatesSource::Reconstructed, 0), ("truth", StatesSource::Truth, 0)] {
         let mut s = DiagnoseSettings::default();
-        s.horizon.lambda = lam;
-        let p = prepare(&model, &rec, None, &s).unwrap();
+        s.states = src;
+        if res > 0 { s.lifted.resolution = res; }
+        let p = prepare(&lin, &rec, None, &s).unwrap();
         let st = &p.recon.states;
-        let n = 8;
-        let mut e = vec![];
-        for (name, rows, off) in [("u", &truth.u, 0), ("v", &truth.v, n)] {
-            let (mut num, mut den) = (0.0, 0.0);
-            for i in 0..n {
-                for k in 0..rec.len() {
-                    let d = if i == 4 {
-                        (st[(off + 4, k)] - st[(off + 5, k)]) - (rows[4][k] - rows[5][k])
-                    } else {
-                        st[(off + i, k)] - rows[i][k]
-                    };
-                    num += d * d;
-                    den += rows[i][k] * rows[i][k];
-                }
-            }
-            e.push(format!("{name}: {:.3}", (num / den).sqrt()));
-        }
         let (mut num, mut den) = (0.0, 0.0);
+        let (mut nv, mut dv) = (0.0, 0.0);
         for k in 0..rec.len() {
             let d = (st[(4, k)] - st[(5, k)]) - (truth.u[4][k] - truth.u[5][k]);
             num += d * d;
             den += (truth.u[4][k] - truth.u[5][k]).powi(2);
+            let d = (st[(12, k)] - st[(13, k)]) - (truth.v[4][k] - truth.v[5][k]);
+            nv += d * d;
+            dv += (truth.v[4][k] - truth.v[5][k]).powi(2);
         }
-        let y = tacit::trace::regress::segment_response(
-            &p.sampled,
-            &p.sampled.outputs(&p.channels).unwrap().0,
-            &p.sampled.outputs(&p.channels).unwrap().1,
-            Some(st),
-            &p.comparison.force,
-            p.segment,
-        );
-        let err = p.comparison.total_error(&y);
-        println!(
-            "lambda {lam}: {} | u5-u6 rel err {:.3} | lin seg err {:.3} | {}",
-            e.join(" "),
-            (num / den).sqrt(),
-            err,
-            p.recon.status
-        );
+        let sim = SimSettings { substeps: 40, ..Default::default() };
+        let e_exact = p.comparison.errors(&exact, sim);
+        let e_lin = p.comparison.errors(&lin, sim);
+        println!("{name}: u5-u6 err {:.3}, v5-v6 err {:.3} | exact model seg err {:?} | linear {:?} | {:.2}s", (num / den).sqrt(), (nv / dv).sqrt(), e_exact.relative_error, e_lin.relative_error, p.recon.elapsed_s);
     }
 }

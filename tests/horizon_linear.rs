@@ -278,7 +278,7 @@ fn qp_without_active_constraints_equals_the_sweep_and_respects_constraints() {
         "QP with inactive bounds vs sweep: {e:.2e}; {} iterations",
         qp.diagnostics.qp_iterations
     );
-    assert_eq!(qp.status, HorizonStatus::Solved);
+    assert_eq!(qp.status, HorizonStatus::Solved, "{:?}", qp.notes);
     assert!(e < 1e-6);
     s.constraints.bounds = vec![(0, 0.0, f64::INFINITY)];
     s.constraints.pairs = vec![(4, 5)];

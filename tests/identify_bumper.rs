@@ -151,4 +151,5 @@ fn mhe_nothing_grows_over_40960_samples() {
     assert_eq!(est.status, Status::Ok, "{:?}", est.warnings);
     assert!(a < 0.05);
     assert!(growth(&est.diagnostics.force_rms_by_tenth) < 3.0);
+    assert!(growth(&est.diagnostics.state_ratio_by_tenth) < 3.0);
 }

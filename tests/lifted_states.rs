@@ -5,8 +5,9 @@
 //! multiple-shooting error is what the true states give.
 //!
 //! The full table (R ∈ {1, 4, 8}, noise 0 and 1 %, sensors all / 1, 5, 6,
-//! 4096 samples) with timings:
-//! `cargo test --release --test lifted_states -- --ignored --nocapture`.
+//! quadratic and sparse force prior, 4096 samples) with timings:
+//! `cargo test --release --test lifted_states -- --ignored --nocapture`
+//! (`LIFTED_SAMPLES=1024` for a shorter record).
 
 use nalgebra::DMatrix;
 use tacit::diagnose::lifted::{reconstruct, LiftedResult, LiftedSettings};
@@ -73,10 +74,16 @@ fn case(name: &str, samples: usize, sensors: &[usize], noise: f64, seed: u64) ->
     }
 }
 
-/// Errors of reconstructed states: (u5 − u6, v, shooting error).
+/// Errors of reconstructed states against the truth.
 struct Figures {
+    /// Relative error of u5 − u6.
     rel: f64,
+    /// Relative error of all velocities.
     v: f64,
+    /// Relative error of the velocities relative to the mass-weighted mean
+    /// (the rigid-body velocity, which accelerations do not see, removed).
+    v_flex: f64,
+    /// Linear model's multiple-shooting error (51-sample segments).
     shooting: f64,
 }
 
@@ -95,20 +102,27 @@ fn shooting(c: &Case, states: &DMatrix<f64>) -> f64 {
 fn figures(c: &Case, states: &DMatrix<f64>) -> Figures {
     let n = c.sm.n;
     let d = |x: &DMatrix<f64>| DMatrix::from_fn(1, x.ncols(), |_, k| x[(4, k)] - x[(5, k)]);
+    let v = |x: &DMatrix<f64>| x.rows(n, n).into_owned();
+    let mtot: f64 = (0..n).map(|i| c.sm.m[(i, i)]).sum();
+    let flex = |x: &DMatrix<f64>| {
+        DMatrix::from_fn(n, x.ncols(), |i, k| {
+            let mean: f64 = (0..n).map(|j| c.sm.m[(j, j)] * x[(n + j, k)]).sum::<f64>() / mtot;
+            x[(n + i, k)] - mean
+        })
+    };
     Figures {
         rel: rel(&d(states), &d(&c.truth)),
-        v: rel(
-            &states.rows(n, n).into_owned(),
-            &c.truth.rows(n, n).into_owned(),
-        ),
+        v: rel(&v(states), &v(&c.truth)),
+        v_flex: rel(&flex(states), &flex(&c.truth)),
         shooting: shooting(c, states),
     }
 }
 
-fn run(c: &Case, resolution: usize, lambda: f64) -> (LiftedResult, Figures) {
+fn run(c: &Case, resolution: usize, lambda: f64, passes: usize) -> (LiftedResult, Figures) {
     let s = LiftedSettings {
         resolution,
         lambda,
+        reweight_passes: passes,
         ..Default::default()
     };
     let res = reconstruct(&c.sm, &c.known, &c.measured, &c.channels, &s).unwrap();
@@ -122,65 +136,52 @@ const ALL: [usize; 8] = [1, 2, 3, 4, 5, 6, 7, 8];
 fn linear_record_states_are_exact() {
     for sensors in [&ALL[..], &[1, 5, 6]] {
         let c = case("lanl8dof", 1024, sensors, 0.0, 3);
-        for r in [1, 8] {
-            let (res, f) = run(&c, r, 1e-2);
+        for (r, passes) in [(1, 0), (8, 0), (8, 2)] {
+            let (res, f) = run(&c, r, 1e-2, passes);
             eprintln!(
-                "linear {sensors:?} R={r}: u5-u6 {:.2e} v {:.2e} shooting {:.2e} ({})",
+                "linear {sensors:?} R={r} passes={passes}: u5-u6 {:.2e} v {:.2e} shooting {:.2e} ({})",
                 f.rel, f.v, f.shooting, res.status
             );
-            assert!(
-                f.rel < 0.01,
-                "R = {r}, sensors {sensors:?}: u5-u6 error {}",
-                f.rel
-            );
+            assert!(f.rel < 0.01, "R = {r}, sensors {sensors:?}: u5-u6 error {}", f.rel);
+            assert!(f.v < 0.01, "R = {r}, sensors {sensors:?}: v error {}", f.v);
             assert!(f.shooting < 0.01, "shooting error {}", f.shooting);
             // no force where there is none
             let frms = (res.force.norm_squared() / res.force.len() as f64).sqrt();
-            assert!(
-                frms < 0.1,
-                "identified force RMS {frms} N on a linear record"
-            );
+            assert!(frms < 0.1, "identified force RMS {frms} N on a linear record");
         }
     }
 }
 
+/// All 8 accelerations, noise-free: the quadratic prior gets the linear
+/// model's segment error right but not u5 − u6 (it removes the contact
+/// force's mean); the sparse prior gets both.
 #[test]
 fn contact_record_states_resolve_the_impacts() {
     let c = case("lanl8dof-contact", 1024, &ALL, 0.0, 3);
     let truth = figures(&c, &c.truth);
-    let (res1, f1) = run(&c, 1, 1e-2);
-    let (res8, f8) = run(&c, 8, 1e-2);
     eprintln!("truth shooting {:.3}", truth.shooting);
-    for (r, res, f) in [(1, &res1, &f1), (8, &res8, &f8)] {
+    let mut out = vec![];
+    for (r, passes) in [(1, 0), (8, 0), (8, 4)] {
+        let (res, f) = run(&c, r, 1e-2, passes);
         eprintln!(
-            "contact R={r}: u5-u6 {:.3} v {:.3} shooting {:.3} ({:.3} s; {})",
-            f.rel, f.v, f.shooting, res.elapsed_s, res.status
+            "contact R={r} passes={passes}: u5-u6 {:.3} v {:.3} v_flex {:.3} shooting {:.3} ({:.3} s; {})",
+            f.rel, f.v, f.v_flex, f.shooting, res.elapsed_s, res.status
         );
+        out.push((res, f));
     }
-    assert!(f8.rel < 0.1, "u5-u6 error {}", f8.rel);
-    assert!(
-        f8.rel < 0.5 * f1.rel,
-        "R = 8 {} vs R = 1 {}",
-        f8.rel,
-        f1.rel
-    );
-    assert!(
-        (f8.shooting - truth.shooting).abs() < 0.1 * truth.shooting,
-        "shooting {} vs {} from the true states",
-        f8.shooting,
-        truth.shooting
-    );
-    // the force localises at the bumper: DOFs 5 and 6 carry most of it
-    let rms = |i: usize| (res8.force.row(i).norm_squared() / res8.force.ncols() as f64).sqrt();
-    let rest = (0..8)
-        .filter(|i| *i != 4 && *i != 5)
-        .map(rms)
-        .fold(0.0, f64::max);
-    assert!(
-        rms(4) > 5.0 * rest && rms(5) > 5.0 * rest,
-        "{:?}",
-        (0..8).map(rms).collect::<Vec<_>>()
-    );
+    let close = |f: &Figures| (f.shooting - truth.shooting).abs() < 0.05 * truth.shooting;
+    assert!(!close(&out[0].1), "R = 1 should miss: {}", out[0].1.shooting);
+    assert!(close(&out[1].1), "R = 8: {} vs {}", out[1].1.shooting, truth.shooting);
+    assert!(close(&out[2].1), "R = 8 sparse: {} vs {}", out[2].1.shooting, truth.shooting);
+    let (res, f) = &out[2];
+    assert!(f.rel < 0.05, "u5-u6 error {}", f.rel);
+    assert!(f.v_flex < 0.15, "flexible velocity error {}", f.v_flex);
+    // the force localises at the bumper, equal and opposite
+    let rms = |i: usize| (res.force.row(i).norm_squared() / res.force.ncols() as f64).sqrt();
+    let rest = (0..8).filter(|i| *i != 4 && *i != 5).map(rms).fold(0.0, f64::max);
+    assert!(rms(4) > 20.0 * rest && rms(5) > 20.0 * rest, "{:?}", (0..8).map(rms).collect::<Vec<_>>());
+    let pair = (res.force.row(4) + res.force.row(5)).norm() / res.force.row(4).norm();
+    assert!(pair < 0.1, "f5 + f6 = {pair} of f5");
 }
 
 /// The report table (release, 4096 samples).
@@ -191,24 +192,24 @@ fn table() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(4096);
-    println!("record  noise sensors  R  lambda  u5-u6  v  shooting  (truth shooting)  seconds");
+    println!("record           noise sensors R passes lambda | u5-u6    v   v_flex shooting (truth) | seconds");
     for name in ["lanl8dof", "lanl8dof-contact"] {
         for noise in [0.0, 0.01] {
             for sensors in [&ALL[..], &[1, 5, 6]] {
                 let c = case(name, samples, sensors, noise, 3);
                 let t = figures(&c, &c.truth);
-                for r in [1, 4, 8] {
-                    for lambda in [1e-4, 1e-2, 1.0] {
-                        let (res, f) = run(&c, r, lambda);
+                for (r, passes) in [(1, 0), (4, 0), (8, 0), (1, 4), (4, 4), (8, 4)] {
+                    for lambda in [1e-2] {
+                        let (res, f) = run(&c, r, lambda, passes);
                         println!(
-                            "{name:16} {noise:.2} {:8} {r} {lambda:.0e} {:7.3} {:7.3} {:7.3} ({:.3}) {:.3}  [{}]",
+                            "{name:16} {noise:.2}  {:7} {r}   {passes}   {lambda:.0e} | {:6.3} {:6.3} {:6.3} {:6.3} ({:.3}) | {:.3}",
                             if sensors.len() == 8 { "all" } else { "1,5,6" },
                             f.rel,
                             f.v,
+                            f.v_flex,
                             f.shooting,
                             t.shooting,
                             res.elapsed_s,
-                            res.status
                         );
                     }
                 }
@@ -217,21 +218,3 @@ fn table() {
     }
 }
 
-#[test]
-#[ignore]
-fn explore_dump() {
-    let r: usize = std::env::var("R").ok().and_then(|s| s.parse().ok()).unwrap_or(8);
-    let lam: f64 = std::env::var("LAM").ok().and_then(|s| s.parse().ok()).unwrap_or(1e-2);
-    let c = case("lanl8dof-contact", 1024, &ALL, 0.0, 3);
-    let (res, f) = run(&c, r, lam);
-    eprintln!("R={r} lam={lam}: u5-u6 {:.3} v {:.3} shooting {:.3} {}", f.rel, f.v, f.shooting, res.status);
-    let mut s = String::new();
-    for k in 0..c.truth.ncols() {
-        let row: Vec<String> = (0..16).map(|i| format!("{:e}", c.truth[(i, k)]))
-            .chain((0..16).map(|i| format!("{:e}", res.states[(i, k)])))
-            .chain((0..8).map(|i| format!("{:e}", res.force[(i, k)]))).collect();
-        s += &row.join(",");
-        s += "\n";
-    }
-    std::fs::write(format!("/tmp/lifted_{r}.csv"), s).unwrap();
-}

@@ -60,7 +60,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         states: if a.truth_states {
             diagnose::StatesSource::Truth
         } else {
-            diagnose::StatesSource::Reconstructed
+            diagnose::StatesSource::Lifted
         },
         ..Default::default()
     };

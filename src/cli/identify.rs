@@ -62,7 +62,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1e-2)]
     prior_weight: f64,
     /// MHE leak ε towards a zero start state (relative, > 0).
-    #[arg(long, default_value_t = 1e-6)]
+    #[arg(long, default_value_t = 1e-4)]
     leak: f64,
     /// QP: lower bound DOF:VALUE (N), repeatable.
     #[arg(long, value_parser = parse_bound)]

@@ -65,15 +65,23 @@ pub struct DiagnoseSettings {
     /// squared multiple-shooting error, or it is withdrawn (default 0.05,
     /// the trace's threshold).
     pub min_improvement: f64,
-    /// Where the states come from (default: reconstructed).
+    /// Where the states come from (default: the lifted smoother).
     pub states: StatesSource,
+    /// Settings of the lifted smoother.
+    #[serde(skip)]
+    pub lifted: lifted::LiftedSettings,
 }
 
 /// Source of the states the trace and the segments use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum StatesSource {
-    /// Reconstructed from the record by the identification.
+    /// Reconstructed by the sub-sample ("lifted") smoother
+    /// ([`lifted::reconstruct`]): the unknown force piecewise constant on
+    /// sub-intervals of each sample, so impacts between samples are seen.
+    Lifted,
+    /// Reconstructed by the full-horizon smoother ([`crate::horizon`]), the
+    /// unknown force linear between samples.
     Reconstructed,
     /// The truth stored with a simulated record (for validation of the
     /// later steps only; an error on a record without truth).
@@ -101,7 +109,8 @@ impl Default for DiagnoseSettings {
             omega_h: 0.15,
             max_substeps: 80,
             min_improvement: 0.05,
-            states: StatesSource::Reconstructed,
+            states: StatesSource::Lifted,
+            lifted: lifted::LiftedSettings::default(),
         }
     }
 }
@@ -209,7 +218,19 @@ pub fn prepare(
     let force = crate::signal::force_matrix(rec, n);
     let measured = DMatrix::from_fn(outs.len(), rec.len(), |c, k| outs[c].data[k]);
     let sampled = SampledModel::from_model(&model.linear_part(), rec.fs, settings.substeps)?;
-    let mut recon = reconstruct(&sampled, &force, &measured, &channels, &settings.horizon)?;
+    let mut recon = if settings.states == StatesSource::Lifted {
+        let r = lifted::reconstruct(&sampled, &force, &measured, &channels, &settings.lifted)?;
+        Reconstruction {
+            states: r.states,
+            force: -r.force,
+            force_std: None,
+            lambda: settings.lifted.lambda,
+            status: format!("lifted smoother, {} sub-intervals per sample: {}", settings.lifted.resolution, r.status),
+            elapsed_s: r.elapsed_s,
+        }
+    } else {
+        reconstruct(&sampled, &force, &measured, &channels, &settings.horizon)?
+    };
     if settings.states == StatesSource::Truth {
         let t = rec.truth.as_ref().ok_or_else(|| {
             TacitError::record(
@@ -230,7 +251,7 @@ pub fn prepare(
         let v = (0..n).map(|i| recon.states[(n + i, k)]).collect();
         Ok((u, v))
     };
-    let segments = shooting::uniform(rec.len(), segment, state)?;
+    let segments = quiet_segments(rec.len(), segment, &recon.force, state)?;
     let (u0, v0) = state(0)?;
     let observations = outs
         .iter()
@@ -259,6 +280,51 @@ pub fn prepare(
         sampled,
         segment,
     })
+}
+
+/// Consecutive segments of about `len` samples whose boundaries are moved
+/// (by at most a quarter segment) to where the identified force has been
+/// quiet for a few samples: a start state estimated just after an impact
+/// carries the impulse's error (the impact happens between samples), one
+/// estimated in free motion does not.
+pub fn quiet_segments<F>(
+    samples: usize,
+    len: usize,
+    force: &DMatrix<f64>,
+    mut state: F,
+) -> Result<Vec<Segment>>
+where
+    F: FnMut(usize) -> Result<(Vec<f64>, Vec<f64>)>,
+{
+    let nominal = shooting::uniform(samples, len, |_| Ok((vec![], vec![])))?;
+    let level: Vec<f64> = (0..samples).map(|k| force.column(k).amax()).collect();
+    let window = 4usize;
+    let quiet = |k: usize| -> f64 {
+        let a = k.saturating_sub(window);
+        level[a..=k.min(samples - 1)].iter().copied().fold(0.0, f64::max)
+    };
+    let mut starts = vec![0usize];
+    for seg in nominal.iter().skip(1) {
+        let b = seg.start;
+        let r = len / 4;
+        let lo = (b.saturating_sub(r)).max(starts.last().unwrap() + len / 2);
+        let hi = (b + r).min(samples.saturating_sub(len / 2 + 1));
+        let best = if lo <= hi {
+            (lo..=hi).min_by(|&x, &y| quiet(x).total_cmp(&quiet(y)).then(x.abs_diff(b).cmp(&y.abs_diff(b)))).unwrap_or(b)
+        } else {
+            b
+        };
+        starts.push(best);
+    }
+    starts.push(samples);
+    let mut out = vec![];
+    for w in starts.windows(2) {
+        if w[1] > w[0] + 1 {
+            let (u0, v0) = state(w[0])?;
+            out.push(Segment { start: w[0], len: w[1] - w[0], u0, v0 });
+        }
+    }
+    Ok(out)
 }
 
 /// Reconstruct states and the internal force with the full-horizon
@@ -487,7 +553,8 @@ pub fn diagnose(
         let eff = effects::add(&mut trial, &best);
         let mut all: Vec<AddedEffect> = added.iter().map(|a| a.0.clone()).collect();
         all.push(eff.clone());
-        let (fitted, note, fit_sims) = fit_effects(&trial, &all, cmp, rec.fs, settings)?;
+        let (fitted, note, fit_sims) =
+            fit_effects(&trial, &all, cmp, &prep.recon.states, rec.fs, settings)?;
         sims += fit_sims;
         let sub = auto_substeps(
             &fitted,
@@ -595,7 +662,7 @@ pub fn diagnose(
         simulations: sims,
         trace_simulations: trace_sims,
         identification: format!(
-            "full-horizon smoother, full-order model, unknown force at every DOF, λ = {:.3e}: {}",
+            "full-order model, unknown force at every DOF, λ = {:.3e}: {}",
             prep.recon.lambda, prep.recon.status
         ),
         timings,
@@ -605,12 +672,68 @@ pub fn diagnose(
     })
 }
 
+/// Gap and stiffness starts of a contact from a scan of the
+/// multiple-shooting error with the nonlinear model (CONTEXT fact 6: the
+/// cost is rough in the gap): gaps at upper quantiles of the reconstructed
+/// relative displacement, stiffnesses at multiples of the stiffest spring
+/// the pair touches. Returns the best `keep` (gap, stiffness) pairs and
+/// the evaluations spent.
+fn scan_contact(
+    trial: &Model,
+    ci: usize,
+    states: &DMatrix<f64>,
+    cmp: &Comparison,
+    segments: &[Segment],
+    fs: f64,
+    settings: &DiagnoseSettings,
+    keep: usize,
+) -> (Vec<(f64, f64)>, usize) {
+    let c = &trial.contacts[ci];
+    let n = trial.ndof();
+    let (i, j) = (c.dofs[0] - 1, c.dofs.get(1).map(|d| d - 1));
+    let _ = n;
+    let mut d: Vec<f64> = (0..states.ncols())
+        .map(|k| states[(i, k)] - j.map_or(0.0, |j| states[(j, k)]))
+        .collect();
+    d.sort_by(f64::total_cmp);
+    let q = |f: f64| d[((d.len() - 1) as f64 * f) as usize].max(0.0);
+    let kspring = trial
+        .springs
+        .iter()
+        .filter(|s| s.dofs.contains(&c.dofs[0]) || c.dofs.get(1).is_some_and(|j| s.dofs.contains(j)))
+        .map(|s| s.stiffness)
+        .fold(0.0, f64::max)
+        .max(1.0);
+    let mut scored = vec![];
+    let mut evals = 0;
+    for &kc in &[10.0 * kspring, 40.0 * kspring] {
+        for f in [0.8, 0.88, 0.93, 0.96, 0.98, 0.99, 0.995] {
+            let g = q(f);
+            let mut m = trial.clone();
+            m.contacts[ci].gap = g;
+            m.contacts[ci].stiffness = kc;
+            let sub = auto_substeps(&m, fs, settings.substeps, settings.omega_h, settings.max_substeps);
+            let sim = SimSettings {
+                substeps: sub,
+                ..Default::default()
+            };
+            evals += 1;
+            if let Ok(y) = cmp.predict(&m, segments, sim) {
+                scored.push((cmp.total_error(&y), g, kc));
+            }
+        }
+    }
+    scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+    (scored.into_iter().take(keep).map(|s| (s.1, s.2)).collect(), evals)
+}
+
 /// Fit the parameters of all added effects jointly; returns the fitted
 /// model, a note on how the fit ended and the simulations spent.
 fn fit_effects(
     trial: &Model,
     all: &[AddedEffect],
     cmp: &Comparison,
+    states: &DMatrix<f64>,
     fs: f64,
     settings: &DiagnoseSettings,
 ) -> Result<(Model, String, usize)> {
@@ -618,37 +741,38 @@ fn fit_effects(
     for e in all {
         params.extend(effects::parameters(trial, e)?);
     }
-    let sub = auto_substeps(
-        trial,
-        fs,
-        settings.substeps,
-        settings.omega_h,
-        settings.max_substeps,
-    );
-    let mut problem = cmp.problem(
-        trial,
-        spread(&cmp.segments, settings.fit_segments),
-        SimSettings {
-            substeps: sub,
-            ..Default::default()
-        },
-    );
+    let segments = spread(&cmp.segments, settings.fit_segments);
+    let mut problem = cmp.problem(trial, segments.clone(), SimSettings::default());
     problem.parameters = params;
-    // several starts for a contact: its gap cost is rough (CONTEXT fact 6)
     let np = problem.parameters.len();
     let mut starts = vec![vec![0.0; np]];
+    let mut sims = 0;
+    let mut stiffest = trial.clone();
+    // a contact: starts from a scan of gap and stiffness (CONTEXT fact 6)
     if let Some(last) = all.last() {
         if last.candidate.kind == crate::trace::EffectKind::Contact {
-            for (dg, dk) in [(0.25, 1.0), (0.5, 2.0)] {
+            let ci = trial.contacts.len() - 1;
+            let (best, evals) = scan_contact(trial, ci, states, cmp, &segments, fs, settings, 2);
+            sims += evals * segments.len();
+            let (pg, pk) = (&problem.parameters[np - 2], &problem.parameters[np - 1]);
+            for (g, kc) in best {
                 let mut s = vec![0.0; np];
-                s[np - 2] = dg;
-                s[np - 1] = dk;
+                s[np - 2] = pg.to_x(g.clamp(pg.lower, pg.upper));
+                s[np - 1] = pk.to_x(kc.clamp(pk.lower, pk.upper));
                 starts.push(s);
+                if kc > stiffest.contacts[ci].stiffness {
+                    stiffest.contacts[ci].stiffness = kc;
+                }
             }
         }
     }
+    let sub = auto_substeps(&stiffest, fs, settings.substeps, settings.omega_h, settings.max_substeps);
+    problem.sim = SimSettings {
+        substeps: sub,
+        ..Default::default()
+    };
     let (best, results) = crate::update::fit_multistart(&problem, &settings.fit, &starts)?;
-    let sims: usize = results.iter().map(|r| r.simulations).sum();
+    sims += results.iter().map(|r| r.simulations).sum::<usize>();
     match best {
         Some(i) => {
             let r = &results[i];

@@ -289,6 +289,12 @@ pub fn solve(
             "{dropped} direction(s) of the initial state are determined neither by the data nor by the prior; minimum-norm values used"
         ));
     }
+    if lq.hidden.ncols() > 0 {
+        res.notes.push(format!(
+            "{} rigid-body direction(s) of the state are not seen by the channels: they are set by the initial-state prior",
+            lq.hidden.ncols()
+        ));
+    }
     if let Some(c) = &cov {
         if !c.undetermined.is_empty() {
             res.notes.push(format!(

@@ -197,10 +197,9 @@ pub fn solve_constrained(
     }
     let opts = DefaultSettings {
         verbose: false,
-        tol_gap_abs: 1e-11,
-        tol_gap_rel: 1e-11,
-        tol_feas: 1e-11,
-        tol_ktratio: 1e-9,
+        tol_gap_abs: 1e-10,
+        tol_gap_rel: 1e-10,
+        tol_feas: 1e-10,
         ..DefaultSettings::default()
     };
     let t_setup = t0.elapsed().as_secs_f64();

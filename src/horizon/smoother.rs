@@ -30,11 +30,13 @@
 //! and `w_{k+1} | s_k ~ N(−L s_k + l_k, R^{-1})`, so
 //! `Σ_{k+1} = Φ Σ_k Φᵀ + G R^{-1} Gᵀ`, `Φ = F − G L` — the
 //! Rauch–Tung–Striebel smoothed covariance, obtained without a filter. It
-//! is run until its force and output blocks stop changing and then held
-//! over the steady region. States the data do not determine (a free-free
-//! model's rigid-body position and velocity under acceleration data) have
-//! a variance that keeps growing; they are flagged and reported as NaN
-//! from that point.
+//! is run until its force variances stop changing and then held over the
+//! steady region. The closed loop leaves the hidden directions `U`
+//! (rigid-body position/velocity the channels cannot see) invariant and
+//! `L U = Ĉ U = 0`, so the force and output covariances do not depend on
+//! them, while their own variance grows without bound: states whose
+//! variance still changes when the covariance is held are flagged and
+//! reported as NaN from there on.
 
 use super::problem::{Init, Lq};
 use nalgebra::{DMatrix, DVector};
@@ -366,13 +368,13 @@ pub(crate) struct Covariance {
 }
 
 /// Force variances, output variances and their trace.
-fn watch(lq: &Lq, sig: &DMatrix<f64>) -> (DVector<f64>, f64) {
+fn watch(lq: &Lq, chp: &DMatrix<f64>, sig: &DMatrix<f64>) -> (DVector<f64>, f64) {
     let (nx, m, p) = (lq.nx, lq.m, lq.p);
-    let cs = &lq.ch * sig;
+    let cs = chp * sig;
     let mut v = DVector::zeros(m + p);
     let mut tr = 0.0;
     for r in 0..p {
-        let d = cs.row(r).dot(&lq.ch.row(r));
+        let d = cs.row(r).dot(&chp.row(r));
         v[m + r] = d;
         tr += d;
     }
@@ -407,8 +409,11 @@ pub(crate) fn covariance(lq: &Lq, bw: &Backward, sig0: DMatrix<f64>, tol: f64) -
     };
     let phi_ss = &lq.f - &lq.g * &bw.steady.l;
     let gq_ss = &lq.g * &bw.steady.rinv * lq.g.transpose();
+    // Ĉ U = 0 exactly: project so that the growing variance of the hidden
+    // states does not leak into the output variances through rounding
+    let chp = &lq.ch - &lq.ch * &lq.hidden * lq.hidden.transpose();
     let mut sig = sig0;
-    let (mut w_old, tr0) = watch(lq, &sig);
+    let (mut w_old, tr0) = watch(lq, &chp, &sig);
     record(lq, &sig, 0, &mut cov, tr0);
     let (mut calm, mut k) = (0usize, 0usize);
     while k + 1 < len {
@@ -419,13 +424,17 @@ pub(crate) fn covariance(lq: &Lq, bw: &Backward, sig0: DMatrix<f64>, tol: f64) -
             let phi = &lq.f - &lq.g * &gn.l;
             &phi * &sig * phi.transpose() + &lq.g * &gn.rinv * lq.g.transpose()
         };
-        let (w_new, tr) = watch(lq, &new);
+        let (w_new, tr) = watch(lq, &chp, &new);
+        // hold on the force variances: the output variances carry rounding
+        // from the growing hidden-state variance (ε Σ_hh, small at the hold)
         let change = w_new
             .iter()
             .zip(w_old.iter())
+            .take(m)
             .map(|(a, b)| (a - b).abs() / a.abs().max(b.abs()).max(f64::MIN_POSITIVE))
             .fold(0.0, f64::max);
         calm = if change <= tol { calm + 1 } else { 0 };
+        if k % 2000 == 0 { eprintln!("DEBUG k {k} change {change:e} var {:e} hid {:e}", w_new[0], sig.amax()); }
         let hold = calm >= 3 && k + 2 < bw.j0;
         if hold {
             for i in 0..nx {
@@ -451,3 +460,4 @@ pub(crate) fn covariance(lq: &Lq, bw: &Backward, sig0: DMatrix<f64>, tol: f64) -
     }
     cov
 }
+

@@ -107,6 +107,15 @@ pub fn run(
     let nwin = plan.windows.len();
     let step = (nwin / 100).max(1);
     let mut d = DVector::zeros(0);
+    let mut r = DVector::zeros(0);
+    let m = sys.m();
+    let mut sc = Scratch {
+        we: &sys.be * &prob.e,
+        x: DVector::zeros(ns),
+        xn: DVector::zeros(ns),
+        w: DVector::zeros(m),
+        wn: DVector::zeros(m),
+    };
     for (wi, &(s, oi)) in plan.windows.iter().enumerate() {
         let op = &plan.ops[oi];
         if d.len() != op.nd {
@@ -122,7 +131,9 @@ pub fn run(
                     .copy_from(&prob.e.column(s + j));
             }
         }
-        let mut r = DVector::zeros(op.r_theta.nrows());
+        if r.len() != op.r_theta.nrows() {
+            r = DVector::zeros(op.r_theta.nrows());
+        }
         let fail = |message: String| RunFailure {
             window: wi,
             sample: s,
@@ -141,7 +152,7 @@ pub fn run(
             )));
             break;
         }
-        c = propagate(sys, prob, op, s, &r, &c, &mut out);
+        propagate(sys, op, s, &r, &mut c, &mut sc, &mut out);
         out.windows += 1;
         if wi % step == 0 || wi + 1 == nwin {
             progress(wi + 1, nwin);
@@ -150,47 +161,55 @@ pub fn run(
     out
 }
 
+/// Scratch buffers of the propagation (no allocation per sample).
+struct Scratch {
+    /// `B_e e_k` for every sample (m × N).
+    we: DMatrix<f64>,
+    x: DVector<f64>,
+    xn: DVector<f64>,
+    w: DVector<f64>,
+    wn: DVector<f64>,
+}
+
 /// Propagate a window's solution over its samples, store the committed
-/// ones and return the next carried vector.
+/// ones and update the carried vector `c` in place.
 fn propagate(
     sys: &System,
-    prob: &Problem,
     op: &WindowOperator,
     s: usize,
     r: &DVector<f64>,
-    c: &DVector<f64>,
+    c: &mut DVector<f64>,
+    sc: &mut Scratch,
     out: &mut RunOutput,
-) -> DVector<f64> {
+) {
     let (ns, n) = (2 * sys.m(), sys.n());
     let prm = &op.param;
-    let mut x = r.rows(0, ns).into_owned();
-    let force = |j: usize| -> &[f64] { &r.as_slice()[ns + j * n..ns + (j + 1) * n] };
-    let e_at = |k: usize| -> Vec<f64> { prob.e.column(k).iter().copied().collect() };
-    let mut next = c.clone();
-    let mut w = sys.gen_force(force(0), &e_at(s));
-    let mut xn = DVector::zeros(ns);
+    let force = |j: usize| r.rows(ns + j * n, n);
+    sc.x.copy_from(&r.rows(0, ns));
+    sc.w.copy_from(&sc.we.column(s));
+    sc.w.gemv(1.0, &sys.bf, &force(0), 1.0);
     for j in 0..=op.last_needed {
-        let fj = force(j);
         if prm.commit.contains(&j) {
-            out.x.set_column(s + j, &x);
-            out.f.column_mut(s + j).copy_from_slice(fj);
-            let y = &sys.cy * &x + &sys.dy * &w;
-            out.yhat.set_column(s + j, &y);
+            out.x.set_column(s + j, &sc.x);
+            out.f.set_column(s + j, &force(j));
+            let mut y = out.yhat.column_mut(s + j);
+            y.gemv(1.0, &sys.cy, &sc.x, 0.0);
+            y.gemv(1.0, &sys.dy, &sc.w, 1.0);
         }
         if prm.next == Some(j) {
-            next.rows_mut(0, ns).copy_from(&x);
+            c.rows_mut(0, ns).copy_from(&sc.x);
         }
         if prm.carry_force == j {
-            next.rows_mut(ns, n).copy_from_slice(fj);
+            c.rows_mut(ns, n).copy_from(&force(j));
         }
         if j < op.last_needed {
-            let wn = sys.gen_force(force(j + 1), &e_at(s + j + 1));
-            xn.gemv(1.0, &sys.sm.a, &x, 0.0);
-            xn.gemv(1.0, &sys.sm.b0, &w, 1.0);
-            xn.gemv(1.0, &sys.sm.b1, &wn, 1.0);
-            std::mem::swap(&mut x, &mut xn);
-            w = wn;
+            sc.wn.copy_from(&sc.we.column(s + j + 1));
+            sc.wn.gemv(1.0, &sys.bf, &force(j + 1), 1.0);
+            sc.xn.gemv(1.0, &sys.sm.a, &sc.x, 0.0);
+            sc.xn.gemv(1.0, &sys.sm.b0, &sc.w, 1.0);
+            sc.xn.gemv(1.0, &sys.sm.b1, &sc.wn, 1.0);
+            std::mem::swap(&mut sc.x, &mut sc.xn);
+            std::mem::swap(&mut sc.w, &mut sc.wn);
         }
     }
-    next
 }

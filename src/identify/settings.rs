@@ -197,7 +197,7 @@ pub struct IdentifySettings {
     /// window correct the state more (a reduced or wrong model).
     pub prior_weight: f64,
     /// MHE: weight ε pulling the start state towards zero, relative like μ
-    /// (> 0, default 1e-6). It makes the directions no sensor sees (the
+    /// (> 0, default 1e-4). It makes the directions no sensor sees (the
     /// rigid-body motion of a free-free model under acceleration data)
     /// decay by μ/(μ+ε) per window instead of drifting.
     pub leak: f64,
@@ -221,7 +221,7 @@ impl Default for IdentifySettings {
             alpha_grid: (1e-10, 1e2, 25),
             smoothness: 0.0,
             prior_weight: 1e-2,
-            leak: 1e-6,
+            leak: 1e-4,
             constraints: Constraints::default(),
             rank_rtol: 1e-6,
         }
