@@ -44,7 +44,10 @@
 //!    p = (H_x − H_u L)ᵀ r_k + (A − G L)ᵀ e,\quad
 //!    l_k = Q_{uu}^{-1}(H_uᵀ r_k + Gᵀ e), $$
 //!
-//! and `u_k = −L x_k + l_k`. `P` does not depend on the data: once it stops
+//! and `u_k = −L x_k + l_k`. With `Z = [H_u; G]`, `S = diag(I, P')`,
+//! `M = Z Λ⁻¹ Zᵀ` (`Λ` the diagonal force weights), the push-through
+//! identity `Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹` reduces every solve to size
+//! `p + 2n` whatever `R` is. `P` does not depend on the data: once it stops
 //! changing the steady gains are used, so a sample costs a few
 //! matrix–vector products. States the outputs never see (the unobservable
 //! subspace `N` of `(A, C_y)`: a free-free model's rigid-body displacement
@@ -246,6 +249,10 @@ struct Scaled {
     g: DMatrix<f64>,
     hx: DMatrix<f64>,
     hu: DMatrix<f64>,
+    /// `[H_u; G]` ((p + nx) × nu).
+    z: DMatrix<f64>,
+    /// `[H_x; A]` ((p + nx) × nx).
+    y: DMatrix<f64>,
     /// `r_k` (p × N).
     target: DMatrix<f64>,
     /// `c_k` (nx × (N−1)).
@@ -366,6 +373,12 @@ impl Scaled {
             c.row_mut(i).scale_mut(1.0 / dx[i]);
         }
         let null = unobservable(&a, &hx);
+        let mut z = DMatrix::zeros(p + nx, nu);
+        z.rows_mut(0, p).copy_from(&hu);
+        z.rows_mut(p, nx).copy_from(&g);
+        let mut y = DMatrix::zeros(p + nx, nx);
+        y.rows_mut(0, p).copy_from(&hx);
+        y.rows_mut(p, nx).copy_from(&a);
         let (su, sv) = s.x0_std;
         let p0 = DVector::from_fn(nx, |i, _| {
             let sd = if i < n { su } else { sv };
@@ -379,6 +392,8 @@ impl Scaled {
             g,
             hx,
             hu,
+            z,
+            y,
             target,
             c,
             lambda: DVector::from_element(nu, s.lambda / r as f64 * df * df),
@@ -458,31 +473,43 @@ fn symmetrize(p: &mut DMatrix<f64>) {
 /// One Riccati step from `P' = pn`: the gains and `P`. `None` when `Q_uu`
 /// is not positive definite.
 fn riccati_step(sp: &Scaled, pn: &DMatrix<f64>, k: usize) -> Option<(Gain, DMatrix<f64>)> {
-    let pa = pn * &sp.a;
-    let pg = pn * &sp.g;
-    let mut quu = sp.hu.transpose() * &sp.hu + sp.g.transpose() * &pg;
-    for i in 0..sp.nu {
-        quu[(i, i)] += sp.lambda[i] * sp.lam_k.as_ref().map_or(1.0, |m| m[(i % m.nrows(), k)]);
+    // Q_uu = Λ + Zᵀ S Z with Z = [H_u; G], S = diag(I, P'), Y = [H_x; A]:
+    // Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹, M = Z Λ⁻¹ Zᵀ, so every solve is of
+    // size p + 2n instead of nR.
+    let (p, nu) = (sp.hx.nrows(), sp.nu);
+    let q = sp.z.nrows();
+    let mut zl = sp.z.clone();
+    for i in 0..nu {
+        let lam = sp.lambda[i] * sp.lam_k.as_ref().map_or(1.0, |m| m[(i % m.nrows(), k)]);
+        zl.column_mut(i).scale_mut(1.0 / lam);
     }
-    symmetrize(&mut quu);
-    let qux = sp.hu.transpose() * &sp.hx + pg.transpose() * &sp.a;
-    let chol = quu.cholesky()?;
-    let l = chol.solve(&qux);
-    let kr = chol.solve(&sp.hu.transpose());
-    let ke = chol.solve(&sp.g.transpose());
-    let mut p = sp.hx.transpose() * &sp.hx + sp.a.transpose() * pa - qux.transpose() * &l;
-    symmetrize(&mut p);
-    let mt = (&sp.hx - &sp.hu * &l).transpose();
-    let phit = (&sp.a - &sp.g * &l).transpose();
+    let m = &zl * sp.z.transpose();
+    let mut ism = m.clone();
+    let low = pn * m.rows(p, q - p);
+    ism.rows_mut(p, q - p).copy_from(&low);
+    for i in 0..q {
+        ism[(i, i)] += 1.0;
+    }
+    // K = Λ⁻¹ Zᵀ (I + S M)⁻¹ = ((I + S M)^{-T} Λ⁻¹ Z)ᵀ
+    let kt = ism.transpose().lu().solve(&zl)?;
+    let kmat = kt.transpose();
+    let mut sy = sp.y.clone();
+    let pa = pn * &sp.a;
+    sy.rows_mut(p, q - p).copy_from(&pa);
+    let l = &kmat * &sy;
+    let zlm = &sp.z * &l;
+    let mut pk = sp.y.transpose() * &sy - sy.transpose() * &zlm;
+    symmetrize(&mut pk);
+    let closed = &sp.y - &zlm;
     Some((
         Gain {
             l,
-            kr,
-            ke,
-            mt,
-            phit,
+            kr: kmat.columns(0, p).into_owned(),
+            ke: kmat.columns(p, q - p).into_owned(),
+            mt: closed.rows(0, p).transpose(),
+            phit: closed.rows(p, q - p).transpose(),
         },
-        p,
+        pk,
     ))
 }
 
@@ -521,7 +548,7 @@ fn backward(sp: &Scaled) -> Result<Backward> {
     let mut k = len;
     let trouble = |k: usize| {
         TacitError::Numerical(format!(
-            "lifted reconstruction: the force weight matrix is not positive definite at sample {k}"
+            "lifted reconstruction: the Riccati system I + S M is singular at sample {k}"
         ))
     };
     // transient: full Riccati steps until P stops changing

@@ -65,6 +65,11 @@ pub struct DiagnoseSettings {
     /// squared multiple-shooting error, or it is withdrawn (default 0.05,
     /// the trace's threshold).
     pub min_improvement: f64,
+    /// An added effect must also lower the multiple-shooting relative error
+    /// by at least this much in absolute terms (default 0.02, i.e. two
+    /// percentage points, twice a 1 % noise level): integration error and
+    /// noise are not effects.
+    pub min_error_drop: f64,
     /// Where the states come from (default: the lifted smoother).
     pub states: StatesSource,
     /// Settings of the lifted smoother.
@@ -109,6 +114,7 @@ impl Default for DiagnoseSettings {
             omega_h: 0.15,
             max_substeps: 80,
             min_improvement: 0.05,
+            min_error_drop: 0.02,
             states: StatesSource::Lifted,
             lifted: lifted::LiftedSettings::default(),
         }
@@ -571,7 +577,9 @@ pub fn diagnose(
         sims += cmp.segments.len();
         let new_err = pred.as_ref().ok().map(|y| cmp.total_error(y));
         let pays = match (current_err, new_err) {
-            (Some(a), Some(b)) => b * b < a * a * (1.0 - settings.min_improvement),
+            (Some(a), Some(b)) => {
+                b * b < a * a * (1.0 - settings.min_improvement) && a - b >= settings.min_error_drop
+            }
             (None, Some(_)) => true,
             _ => false,
         };
@@ -586,8 +594,9 @@ pub fn diagnose(
                 )
             } else {
                 format!(
-                    "withdrawn: the fitted effect does not remove {:.0} % of the squared multiple-shooting error ({:.4} → {:.4})",
+                    "withdrawn: the fitted effect does not remove {:.0} % of the squared multiple-shooting error and {:.1} points of it ({:.4} → {:.4})",
                     100.0 * settings.min_improvement,
+                    100.0 * settings.min_error_drop,
                     current_err.unwrap_or(f64::NAN),
                     new_err.unwrap_or(f64::NAN)
                 )
