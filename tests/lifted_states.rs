@@ -142,12 +142,19 @@ fn linear_record_states_are_exact() {
                 "linear {sensors:?} R={r} passes={passes}: u5-u6 {:.2e} v {:.2e} shooting {:.2e} ({})",
                 f.rel, f.v, f.shooting, res.status
             );
-            assert!(f.rel < 0.01, "R = {r}, sensors {sensors:?}: u5-u6 error {}", f.rel);
+            assert!(
+                f.rel < 0.01,
+                "R = {r}, sensors {sensors:?}: u5-u6 error {}",
+                f.rel
+            );
             assert!(f.v < 0.01, "R = {r}, sensors {sensors:?}: v error {}", f.v);
             assert!(f.shooting < 0.01, "shooting error {}", f.shooting);
             // no force where there is none
             let frms = (res.force.norm_squared() / res.force.len() as f64).sqrt();
-            assert!(frms < 0.1, "identified force RMS {frms} N on a linear record");
+            assert!(
+                frms < 0.1,
+                "identified force RMS {frms} N on a linear record"
+            );
         }
     }
 }
@@ -170,16 +177,37 @@ fn contact_record_states_resolve_the_impacts() {
         out.push((res, f));
     }
     let close = |f: &Figures| (f.shooting - truth.shooting).abs() < 0.05 * truth.shooting;
-    assert!(!close(&out[0].1), "R = 1 should miss: {}", out[0].1.shooting);
-    assert!(close(&out[1].1), "R = 8: {} vs {}", out[1].1.shooting, truth.shooting);
-    assert!(close(&out[2].1), "R = 8 sparse: {} vs {}", out[2].1.shooting, truth.shooting);
+    assert!(
+        !close(&out[0].1),
+        "R = 1 should miss: {}",
+        out[0].1.shooting
+    );
+    assert!(
+        close(&out[1].1),
+        "R = 8: {} vs {}",
+        out[1].1.shooting,
+        truth.shooting
+    );
+    assert!(
+        close(&out[2].1),
+        "R = 8 sparse: {} vs {}",
+        out[2].1.shooting,
+        truth.shooting
+    );
     let (res, f) = &out[2];
     assert!(f.rel < 0.05, "u5-u6 error {}", f.rel);
     assert!(f.v_flex < 0.15, "flexible velocity error {}", f.v_flex);
     // the force localises at the bumper, equal and opposite
     let rms = |i: usize| (res.force.row(i).norm_squared() / res.force.ncols() as f64).sqrt();
-    let rest = (0..8).filter(|i| *i != 4 && *i != 5).map(rms).fold(0.0, f64::max);
-    assert!(rms(4) > 20.0 * rest && rms(5) > 20.0 * rest, "{:?}", (0..8).map(rms).collect::<Vec<_>>());
+    let rest = (0..8)
+        .filter(|i| *i != 4 && *i != 5)
+        .map(rms)
+        .fold(0.0, f64::max);
+    assert!(
+        rms(4) > 20.0 * rest && rms(5) > 20.0 * rest,
+        "{:?}",
+        (0..8).map(rms).collect::<Vec<_>>()
+    );
     let pair = (res.force.row(4) + res.force.row(5)).norm() / res.force.row(4).norm();
     assert!(pair < 0.1, "f5 + f6 = {pair} of f5");
 }
@@ -192,6 +220,10 @@ fn table() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(4096);
+    let lambda: f64 = std::env::var("LIFTED_LAMBDA")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1e-2);
     println!("record           noise sensors R passes lambda | u5-u6    v   v_flex shooting (truth) | seconds");
     for name in ["lanl8dof", "lanl8dof-contact"] {
         for noise in [0.0, 0.01] {
@@ -199,22 +231,19 @@ fn table() {
                 let c = case(name, samples, sensors, noise, 3);
                 let t = figures(&c, &c.truth);
                 for (r, passes) in [(1, 0), (4, 0), (8, 0), (1, 4), (4, 4), (8, 4)] {
-                    for lambda in [1e-2] {
-                        let (res, f) = run(&c, r, lambda, passes);
-                        println!(
-                            "{name:16} {noise:.2}  {:7} {r}   {passes}   {lambda:.0e} | {:6.3} {:6.3} {:6.3} {:6.3} ({:.3}) | {:.3}",
-                            if sensors.len() == 8 { "all" } else { "1,5,6" },
-                            f.rel,
-                            f.v,
-                            f.v_flex,
-                            f.shooting,
-                            t.shooting,
-                            res.elapsed_s,
-                        );
-                    }
+                    let (res, f) = run(&c, r, lambda, passes);
+                    println!(
+                        "{name:16} {noise:.2}  {:7} {r}   {passes}   {lambda:.0e} | {:6.3} {:6.3} {:6.3} {:6.3} ({:.3}) | {:.3}",
+                        if sensors.len() == 8 { "all" } else { "1,5,6" },
+                        f.rel,
+                        f.v,
+                        f.v_flex,
+                        f.shooting,
+                        t.shooting,
+                        res.elapsed_s,
+                    );
                 }
             }
         }
     }
 }
-

@@ -82,9 +82,10 @@ pub struct LiftedSettings {
     /// its RMS; defines `W` (default 0.01; > 0).
     pub noise_fraction: f64,
     /// Prior standard deviations of the initial displacements (m) and
-    /// velocities (m/s), zero mean (default (1.0, 10.0): weak; finite and
-    /// > 0, so that states the data do not see — a free-free model's
-    /// rigid-body motion under acceleration data — stay determined).
+    /// velocities (m/s), zero mean (default (1.0, 10.0): weak; both must be
+    /// finite and positive, so that states the data do not see — a
+    /// free-free model's rigid-body motion under acceleration data — stay
+    /// determined).
     pub x0_std: (f64, f64),
     /// Passes of iteratively reweighted least squares that turn the
     /// quadratic force prior into a sparsity prior over DOFs and samples
@@ -857,7 +858,7 @@ mod tests {
         // dense: z = [x0; u_0; …; u_{N−1}]
         let (nx, nu) = (2 * n, n * r);
         let nz = nx + nu * len;
-        let w = channel_weights(&measured, s.noise_fraction).unwrap();
+        let w = channel_weights(measured, s.noise_fraction).unwrap();
         // x_k = X_k z + x_k^c
         let mut xm = DMatrix::zeros(nx, nz);
         xm.columns_mut(0, nx).fill_with_identity();

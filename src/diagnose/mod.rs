@@ -65,11 +65,10 @@ pub struct DiagnoseSettings {
     /// squared multiple-shooting error, or it is withdrawn (default 0.05,
     /// the trace's threshold).
     pub min_improvement: f64,
-    /// An added effect must also lower the multiple-shooting relative error
-    /// by at least this much in absolute terms (default 0.02, i.e. two
-    /// percentage points, twice a 1 % noise level): integration error and
-    /// noise are not effects.
-    pub min_error_drop: f64,
+    /// Multiple-shooting relative error at or below which the model is taken
+    /// to explain the record up to noise and integration error, and no
+    /// effect is sought (default 0.025: 2.5 × a 1 % noise level).
+    pub noise_floor: f64,
     /// Where the states come from (default: the lifted smoother).
     pub states: StatesSource,
     /// Settings of the lifted smoother.
@@ -114,7 +113,7 @@ impl Default for DiagnoseSettings {
             omega_h: 0.15,
             max_substeps: 80,
             min_improvement: 0.05,
-            min_error_drop: 0.02,
+            noise_floor: 0.025,
             states: StatesSource::Lifted,
             lifted: lifted::LiftedSettings::default(),
         }
@@ -520,6 +519,20 @@ pub fn diagnose(
     let mut trace_sims = 0;
     let t_loop = Instant::now();
     for round in 0..settings.max_effects {
+        if current_err.is_some_and(|e| e <= settings.noise_floor) {
+            rounds.push(Round {
+                proposed: None,
+                kept: false,
+                note: format!(
+                    "the model explains the record up to noise and integration error (multiple-shooting error {:.2} % ≤ {:.2} %)",
+                    100.0 * current_err.unwrap_or(f64::NAN),
+                    100.0 * settings.noise_floor
+                ),
+                fit: None,
+                simulations: 0,
+            });
+            break;
+        }
         progress(&format!("trace, round {}", round + 1));
         let exclude: Vec<_> = added.iter().map(|a| a.0.candidate.clone()).collect();
         let input = TraceInput {
@@ -577,9 +590,7 @@ pub fn diagnose(
         sims += cmp.segments.len();
         let new_err = pred.as_ref().ok().map(|y| cmp.total_error(y));
         let pays = match (current_err, new_err) {
-            (Some(a), Some(b)) => {
-                b * b < a * a * (1.0 - settings.min_improvement) && a - b >= settings.min_error_drop
-            }
+            (Some(a), Some(b)) => b * b < a * a * (1.0 - settings.min_improvement),
             (None, Some(_)) => true,
             _ => false,
         };
@@ -594,9 +605,8 @@ pub fn diagnose(
                 )
             } else {
                 format!(
-                    "withdrawn: the fitted effect does not remove {:.0} % of the squared multiple-shooting error and {:.1} points of it ({:.4} → {:.4})",
+                    "withdrawn: the fitted effect does not remove {:.0} % of the squared multiple-shooting error ({:.4} → {:.4})",
                     100.0 * settings.min_improvement,
-                    100.0 * settings.min_error_drop,
                     current_err.unwrap_or(f64::NAN),
                     new_err.unwrap_or(f64::NAN)
                 )

@@ -325,18 +325,21 @@ pub(crate) fn assemble(
         residual.row_mut(r).scale_mut(1.0 / lq.wsqrt[r]);
     }
     let predicted = data.measured - &residual;
+    let dx = lq.d.rows(0, nx);
     let mut states = s.rows(0, nx).into_owned();
-    for i in 0..nx {
-        states.row_mut(i).scale_mut(lq.d[i]);
+    for mut c in states.column_iter_mut() {
+        c.component_mul_assign(&dx);
     }
     let dw = lq.d[nx];
-    let ws = s.rows(nx, m);
-    let force = ws * dw;
+    let ws = s.rows(nx, m).into_owned();
+    let force = &ws * dw;
     let dof_force = data.unknown * &force;
-    let mut smooth = 0.0;
-    for k in 0..len - 1 {
-        smooth += (ws.column(k + 1) - ws.column(k)).norm_squared();
-    }
+    let wsl = ws.as_slice();
+    let smooth: f64 = wsl[m..]
+        .iter()
+        .zip(&wsl[..wsl.len() - m])
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum();
     let cost = rss + lq.lambda * ws.norm_squared() + lq.mu * smooth + prior_cost(lq, s);
     let relative_residual: Vec<f64> = (0..p)
         .map(|r| {
@@ -359,8 +362,8 @@ pub(crate) fn assemble(
     let force_std = cov.map(|c| c.var_w.map(|v| sd(v) * dw));
     let state_std = cov.map(|c| {
         let mut out = c.var_x.map(sd);
-        for i in 0..nx {
-            out.row_mut(i).scale_mut(lq.d[i]);
+        for mut col in out.column_iter_mut() {
+            col.component_mul_assign(&dx);
         }
         out
     });

@@ -386,14 +386,17 @@ fn watch(lq: &Lq, chp: &DMatrix<f64>, sig: &DMatrix<f64>) -> (DVector<f64>, f64)
 }
 
 fn record(lq: &Lq, sig: &DMatrix<f64>, k: usize, cov: &mut Covariance, tr: f64) {
-    for i in 0..lq.m {
-        cov.var_w[(i, k)] = sig[(lq.nx + i, lq.nx + i)];
+    let nx = lq.nx;
+    let cw = cov.var_w.column_mut(k);
+    for (i, v) in cw.into_iter().enumerate() {
+        *v = sig[(nx + i, nx + i)];
     }
-    for i in 0..lq.nx {
-        cov.var_x[(i, k)] = sig[(i, i)];
+    let mut cx = cov.var_x.column_mut(k);
+    for (i, v) in cx.iter_mut().enumerate() {
+        *v = sig[(i, i)];
     }
     for &i in &cov.undetermined {
-        cov.var_x[(i, k)] = f64::NAN;
+        cx[i] = f64::NAN;
     }
     cov.tr_h += tr;
 }
