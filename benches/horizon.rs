@@ -28,7 +28,11 @@ fn record(sm: &SampledModel, len: usize) -> (DMatrix<f64>, DMatrix<f64>) {
 }
 
 fn channels() -> Vec<(Quantity, usize)> {
-    vec![(Quantity::Accel, 0), (Quantity::Accel, 4), (Quantity::Accel, 5)]
+    vec![
+        (Quantity::Accel, 0),
+        (Quantity::Accel, 4),
+        (Quantity::Accel, 5),
+    ]
 }
 
 fn bench(c: &mut Criterion) {

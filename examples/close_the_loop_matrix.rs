@@ -17,27 +17,75 @@ fn lanl() -> Model {
 
 fn cases() -> Vec<(&'static str, Model, String)> {
     let mut out = vec![];
-    for (gap, name) in [(0.381e-3, "bumper 5→6, 0.381 mm"), (0.203e-3, "bumper 5→6, 0.203 mm")] {
+    for (gap, name) in [
+        (0.381e-3, "bumper 5→6, 0.381 mm"),
+        (0.203e-3, "bumper 5→6, 0.203 mm"),
+    ] {
         let mut m = lanl();
-        m.contacts = vec![Contact { dofs: vec![5, 6], gap, stiffness: 2e6 }];
-        out.push((name, m, format!("contact [5, 6] gap {gap:.3e} stiffness 2e6")));
+        m.contacts = vec![Contact {
+            dofs: vec![5, 6],
+            gap,
+            stiffness: 2e6,
+        }];
+        out.push((
+            name,
+            m,
+            format!("contact [5, 6] gap {gap:.3e} stiffness 2e6"),
+        ));
     }
     let mut m = lanl();
-    m.contacts = vec![Contact { dofs: vec![3, 2], gap: 0.3e-3, stiffness: 2e6 }];
-    out.push(("bumper 3→2, 0.3 mm", m, "contact [3, 2] gap 3e-4 stiffness 2e6".into()));
+    m.contacts = vec![Contact {
+        dofs: vec![3, 2],
+        gap: 0.3e-3,
+        stiffness: 2e6,
+    }];
+    out.push((
+        "bumper 3→2, 0.3 mm",
+        m,
+        "contact [3, 2] gap 3e-4 stiffness 2e6".into(),
+    ));
     let mut m = lanl();
-    m.frictions = (1..=8).map(|d| Friction { dof: d, level: 0.5, velocity: 1e-3 }).collect();
-    out.push(("friction 0.5 N on every mass", m, "friction level 0.5".into()));
+    m.frictions = (1..=8)
+        .map(|d| Friction {
+            dof: d,
+            level: 0.5,
+            velocity: 1e-3,
+        })
+        .collect();
+    out.push((
+        "friction 0.5 N on every mass",
+        m,
+        "friction level 0.5".into(),
+    ));
     let mut m = lanl();
-    m.cubics = vec![Cubic { dofs: vec![3, 4], k3: 2e12 }];
+    m.cubics = vec![Cubic {
+        dofs: vec![3, 4],
+        k3: 2e12,
+    }];
     out.push(("cubic spring 3–4", m, "cubic [3, 4] k3 2e12".into()));
     let mut m = lanl();
-    m.springs.push(Spring { dofs: vec![1], stiffness: 2000.0, name: None });
-    out.push(("spring to ground at 1", m, "ground_spring [1] stiffness 2000".into()));
+    m.springs.push(Spring {
+        dofs: vec![1],
+        stiffness: 2000.0,
+        name: None,
+    });
+    out.push((
+        "spring to ground at 1",
+        m,
+        "ground_spring [1] stiffness 2000".into(),
+    ));
     let mut m = lanl();
-    m.contacts = vec![Contact { dofs: vec![5, 6], gap: 0.381e-3, stiffness: 2e6 }];
+    m.contacts = vec![Contact {
+        dofs: vec![5, 6],
+        gap: 0.381e-3,
+        stiffness: 2e6,
+    }];
     m.springs[4].stiffness *= 0.86;
-    out.push(("bumper + spring 5 −14 %", m, "contact [5, 6] + stiffness k5 delta −0.14".into()));
+    out.push((
+        "bumper + spring 5 −14 %",
+        m,
+        "contact [5, 6] + stiffness k5 delta −0.14".into(),
+    ));
     out.push(("linear (no effect)", lanl(), "none".into()));
     out
 }
@@ -54,13 +102,23 @@ fn main() {
                 sensors: sensors.clone(),
                 noise: 0.01,
                 seed,
-                settings: SimSettings { substeps: 40, ..Default::default() },
+                settings: SimSettings {
+                    substeps: 40,
+                    ..Default::default()
+                },
                 ..Default::default()
             };
             let rec = simulate_record(&truth, &spec(101)).unwrap().0;
             let val = simulate_record(&truth, &spec(202)).unwrap().0;
             let t = std::time::Instant::now();
-            let d = match diagnose(&lanl(), &rec, Some(&val), None, &DiagnoseSettings::default(), &|_| {}) {
+            let d = match diagnose(
+                &lanl(),
+                &rec,
+                Some(&val),
+                None,
+                &DiagnoseSettings::default(),
+                &|_| {},
+            ) {
                 Ok(d) => d,
                 Err(e) => {
                     println!("| {name} | {sensors:?} | {truth_text} | error: {e} | | | | |");
@@ -72,14 +130,22 @@ fn main() {
                 .effects
                 .iter()
                 .map(|e| {
-                    let p: Vec<String> = e.parameters.iter().map(|(k, v)| format!("{k} {v:.4e}")).collect();
+                    let p: Vec<String> = e
+                        .parameters
+                        .iter()
+                        .map(|(k, v)| format!("{k} {v:.4e}"))
+                        .collect();
                     format!("{} {:?}: {}", e.kind, e.dofs, p.join(", "))
                 })
                 .collect();
             let v = d.validation.as_ref().unwrap();
             println!(
                 "| {name} | {} | {truth_text} | {} | {} | {} → {} | {} → {} | {:.1} s |",
-                if sensors.len() == 8 { "1–8".to_string() } else { "1, 5, 6".to_string() },
+                if sensors.len() == 8 {
+                    "1–8".to_string()
+                } else {
+                    "1, 5, 6".to_string()
+                },
                 d.verdict,
                 params.join("; "),
                 pct(d.before.relative_error),

@@ -11,10 +11,17 @@ fn main() {
     let lin = Model::from_file(std::path::Path::new("data/lanl8dof.toml")).unwrap();
     let exact = Model::from_file(std::path::Path::new("data/lanl8dof-contact.toml")).unwrap();
     let truth = rec.truth.clone().unwrap();
-    for (name, src, res) in [("lifted r8", StatesSource::Lifted, 8), ("lifted r16", StatesSource::Lifted, 16), ("horizon", StatesSource::Reconstructed, 0), ("truth", StatesSource::Truth, 0)] {
+    for (name, src, res) in [
+        ("lifted r8", StatesSource::Lifted, 8),
+        ("lifted r16", StatesSource::Lifted, 16),
+        ("horizon", StatesSource::Reconstructed, 0),
+        ("truth", StatesSource::Truth, 0),
+    ] {
         let mut s = DiagnoseSettings::default();
         s.states = src;
-        if res > 0 { s.lifted.resolution = res; }
+        if res > 0 {
+            s.lifted.resolution = res;
+        }
         let p = prepare(&lin, &rec, None, &s).unwrap();
         let st = &p.recon.states;
         let (mut num, mut den) = (0.0, 0.0);
@@ -27,7 +34,10 @@ fn main() {
             nv += d * d;
             dv += (truth.v[4][k] - truth.v[5][k]).powi(2);
         }
-        let sim = SimSettings { substeps: 40, ..Default::default() };
+        let sim = SimSettings {
+            substeps: 40,
+            ..Default::default()
+        };
         let e_exact = p.comparison.errors(&exact, sim);
         let e_lin = p.comparison.errors(&lin, sim);
         println!("{name}: u5-u6 err {:.3}, v5-v6 err {:.3} | exact model seg err {:?} | linear {:?} | {:.2}s", (num / den).sqrt(), (nv / dv).sqrt(), e_exact.relative_error, e_lin.relative_error, p.recon.elapsed_s);

@@ -15,7 +15,11 @@ fn lanl() -> Model {
     Model::from_file(std::path::Path::new(p)).unwrap()
 }
 
-fn records(truth: &Model, sensors: &[usize], seed: u64) -> (tacit::record::Record, tacit::record::Record) {
+fn records(
+    truth: &Model,
+    sensors: &[usize],
+    seed: u64,
+) -> (tacit::record::Record, tacit::record::Record) {
     let spec = |seed| RecordSpec {
         samples: 2048,
         sensors: sensors.to_vec(),
@@ -52,15 +56,25 @@ fn run(truth: &Model, sensors: &[usize], seed: u64) -> Diagnosis {
 }
 
 fn assert_improved(d: &Diagnosis) {
-    let (b, a) = (d.before.relative_error.unwrap(), d.after.relative_error.unwrap());
+    let (b, a) = (
+        d.before.relative_error.unwrap(),
+        d.after.relative_error.unwrap(),
+    );
     assert!(a <= b / 5.0, "relative_error {b} → {a}");
     let v = d.validation.as_ref().unwrap();
-    let (b, a) = (v.before.relative_error.unwrap(), v.after.relative_error.unwrap());
+    let (b, a) = (
+        v.before.relative_error.unwrap(),
+        v.after.relative_error.unwrap(),
+    );
     assert!(a <= b / 5.0, "validation relative_error {b} → {a}");
 }
 
 fn param(d: &Diagnosis, kind: &str, name: &str) -> f64 {
-    let e = d.effects.iter().find(|e| e.kind == kind).unwrap_or_else(|| panic!("no {kind} in {}", d.verdict));
+    let e = d
+        .effects
+        .iter()
+        .find(|e| e.kind == kind)
+        .unwrap_or_else(|| panic!("no {kind} in {}", d.verdict));
     e.parameters[name]
 }
 
@@ -70,7 +84,11 @@ fn within(x: f64, truth: f64, tol: f64) {
 
 fn bumper_case(gap: f64, sensors: &[usize], seed: u64) {
     let mut truth = lanl();
-    truth.contacts = vec![Contact { dofs: vec![5, 6], gap, stiffness: 2e6 }];
+    truth.contacts = vec![Contact {
+        dofs: vec![5, 6],
+        gap,
+        stiffness: 2e6,
+    }];
     let d = run(&truth, sensors, seed);
     assert_eq!(d.effects[0].kind, "contact");
     assert_eq!(d.effects[0].dofs, vec![5, 6]);
@@ -100,14 +118,26 @@ fn linear_record_gives_no_effect() {
 #[test]
 fn friction_on_every_mass() {
     let mut fr = lanl();
-    fr.frictions = (1..=8).map(|d| Friction { dof: d, level: 0.5, velocity: 1e-3 }).collect();
+    fr.frictions = (1..=8)
+        .map(|d| Friction {
+            dof: d,
+            level: 0.5,
+            velocity: 1e-3,
+        })
+        .collect();
     let d = run(&fr, &[1, 2, 3, 4, 5, 6, 7, 8], 41);
     within(param(&d, "friction", "level"), 0.5, 0.1);
     // the issue asks 1/5 on both records; measured 4.3× on the record, 5.2× on validation
-    let (b, a) = (d.before.relative_error.unwrap(), d.after.relative_error.unwrap());
+    let (b, a) = (
+        d.before.relative_error.unwrap(),
+        d.after.relative_error.unwrap(),
+    );
     assert!(a <= b / 4.0, "relative_error {b} → {a}");
     let v = d.validation.as_ref().unwrap();
-    let (b, a) = (v.before.relative_error.unwrap(), v.after.relative_error.unwrap());
+    let (b, a) = (
+        v.before.relative_error.unwrap(),
+        v.after.relative_error.unwrap(),
+    );
     assert!(a <= b / 5.0, "validation relative_error {b} → {a}");
 }
 
@@ -115,7 +145,10 @@ fn friction_on_every_mass() {
 #[ignore = "not met yet: with reconstructed states the trace prefers a stiffness change of spring 3–4 to the cubic (see the issue note)"]
 fn cubic_spring_between_masses() {
     let mut cu = lanl();
-    cu.cubics = vec![Cubic { dofs: vec![3, 4], k3: 2e12 }];
+    cu.cubics = vec![Cubic {
+        dofs: vec![3, 4],
+        k3: 2e12,
+    }];
     let d = run(&cu, &[1, 2, 3, 4, 5, 6, 7, 8], 42);
     assert_eq!(d.effects[0].dofs, vec![3, 4]);
     within(param(&d, "cubic", "k3"), 2e12, 0.1);
@@ -126,7 +159,11 @@ fn cubic_spring_between_masses() {
 #[ignore = "not met yet: with sensors 1, 5, 6 the trace prefers a cubic spring to ground at DOF 1 (see the issue note)"]
 fn ground_spring_at_dof_1() {
     let mut gs = lanl();
-    gs.springs.push(Spring { dofs: vec![1], stiffness: 2000.0, name: None });
+    gs.springs.push(Spring {
+        dofs: vec![1],
+        stiffness: 2000.0,
+        name: None,
+    });
     let d = run(&gs, &[1, 5, 6], 43);
     assert_eq!(d.effects[0].dofs, vec![1]);
     within(param(&d, "ground_spring", "stiffness"), 2000.0, 0.1);
@@ -137,7 +174,11 @@ fn ground_spring_at_dof_1() {
 #[ignore = "not met yet: the contact is found but the 14 % softer spring 5 is not (see the issue note)"]
 fn bumper_with_softer_spring_5() {
     let mut truth = lanl();
-    truth.contacts = vec![Contact { dofs: vec![5, 6], gap: 0.381e-3, stiffness: 2e6 }];
+    truth.contacts = vec![Contact {
+        dofs: vec![5, 6],
+        gap: 0.381e-3,
+        stiffness: 2e6,
+    }];
     truth.springs[4].stiffness *= 0.86;
     let d = run(&truth, &[1, 2, 3, 4, 5, 6, 7, 8], 51);
     within(param(&d, "contact", "gap"), 0.381e-3, 0.1);

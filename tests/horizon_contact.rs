@@ -98,8 +98,13 @@ fn contact_force_localises_at_dofs_5_and_6() {
         .collect();
     let (corr56, rms_other, res) = run(&model);
     let worst_other = rms_other.iter().cloned().fold(0.0, f64::max);
-    eprintln!("correlation at 5, 6: {corr56:.3?}; RMS elsewhere {rms_other:.3?}; residual {res:.4}");
-    assert!(corr56.iter().all(|&c| c > 0.6), "correlation at 5, 6: {corr56:?}");
+    eprintln!(
+        "correlation at 5, 6: {corr56:.3?}; RMS elsewhere {rms_other:.3?}; residual {res:.4}"
+    );
+    assert!(
+        corr56.iter().all(|&c| c > 0.6),
+        "correlation at 5, 6: {corr56:?}"
+    );
     assert!(worst_other < 2.5, "RMS elsewhere {rms_other:?}");
 }
 

@@ -17,7 +17,11 @@ fn silverbox_loop_finds_the_cubic_and_beats_the_reference_fit() {
     // hardening, as the circuit is built
     assert!(r.parameters.3 > 0.0);
     // linear: the NumPy output-error fit gets 14.2 mV; with the cubic 0.95 mV
-    assert!((r.rms_linear - 14.2e-3).abs() < 0.5e-3, "linear {}", r.rms_linear);
+    assert!(
+        (r.rms_linear - 14.2e-3).abs() < 0.5e-3,
+        "linear {}",
+        r.rms_linear
+    );
     assert!(r.rms_final <= 0.95e-3, "final {}", r.rms_final);
 }
 

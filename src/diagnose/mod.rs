@@ -230,7 +230,10 @@ pub fn prepare(
             force: -r.force,
             force_std: None,
             lambda: settings.lifted.lambda,
-            status: format!("lifted smoother, {} sub-intervals per sample: {}", settings.lifted.resolution, r.status),
+            status: format!(
+                "lifted smoother, {} sub-intervals per sample: {}",
+                settings.lifted.resolution, r.status
+            ),
             elapsed_s: r.elapsed_s,
         }
     } else {
@@ -306,7 +309,10 @@ where
     let window = 4usize;
     let quiet = |k: usize| -> f64 {
         let a = k.saturating_sub(window);
-        level[a..=k.min(samples - 1)].iter().copied().fold(0.0, f64::max)
+        level[a..=k.min(samples - 1)]
+            .iter()
+            .copied()
+            .fold(0.0, f64::max)
     };
     let mut starts = vec![0usize];
     for seg in nominal.iter().skip(1) {
@@ -315,7 +321,13 @@ where
         let lo = (b.saturating_sub(r)).max(starts.last().unwrap() + len / 2);
         let hi = (b + r).min(samples.saturating_sub(len / 2 + 1));
         let best = if lo <= hi {
-            (lo..=hi).min_by(|&x, &y| quiet(x).total_cmp(&quiet(y)).then(x.abs_diff(b).cmp(&y.abs_diff(b)))).unwrap_or(b)
+            (lo..=hi)
+                .min_by(|&x, &y| {
+                    quiet(x)
+                        .total_cmp(&quiet(y))
+                        .then(x.abs_diff(b).cmp(&y.abs_diff(b)))
+                })
+                .unwrap_or(b)
         } else {
             b
         };
@@ -326,7 +338,12 @@ where
     for w in starts.windows(2) {
         if w[1] > w[0] + 1 {
             let (u0, v0) = state(w[0])?;
-            out.push(Segment { start: w[0], len: w[1] - w[0], u0, v0 });
+            out.push(Segment {
+                start: w[0],
+                len: w[1] - w[0],
+                u0,
+                v0,
+            });
         }
     }
     Ok(out)
@@ -695,22 +712,20 @@ pub fn diagnose(
 /// multiple-shooting error with the nonlinear model (CONTEXT fact 6: the
 /// cost is rough in the gap): gaps at upper quantiles of the reconstructed
 /// relative displacement, stiffnesses at multiples of the stiffest spring
-/// the pair touches. Returns the best `keep` (gap, stiffness) pairs and
-/// the evaluations spent.
+/// the pair touches. Returns the two best (gap, stiffness) pairs and the
+/// evaluations spent.
 fn scan_contact(
     trial: &Model,
     ci: usize,
     states: &DMatrix<f64>,
     cmp: &Comparison,
     segments: &[Segment],
-    fs: f64,
     settings: &DiagnoseSettings,
-    keep: usize,
 ) -> (Vec<(f64, f64)>, usize) {
+    const KEEP: usize = 2;
+    let fs = cmp.fs;
     let c = &trial.contacts[ci];
-    let n = trial.ndof();
     let (i, j) = (c.dofs[0] - 1, c.dofs.get(1).map(|d| d - 1));
-    let _ = n;
     let mut d: Vec<f64> = (0..states.ncols())
         .map(|k| states[(i, k)] - j.map_or(0.0, |j| states[(j, k)]))
         .collect();
@@ -719,7 +734,9 @@ fn scan_contact(
     let kspring = trial
         .springs
         .iter()
-        .filter(|s| s.dofs.contains(&c.dofs[0]) || c.dofs.get(1).is_some_and(|j| s.dofs.contains(j)))
+        .filter(|s| {
+            s.dofs.contains(&c.dofs[0]) || c.dofs.get(1).is_some_and(|j| s.dofs.contains(j))
+        })
         .map(|s| s.stiffness)
         .fold(0.0, f64::max)
         .max(1.0);
@@ -731,7 +748,13 @@ fn scan_contact(
             let mut m = trial.clone();
             m.contacts[ci].gap = g;
             m.contacts[ci].stiffness = kc;
-            let sub = auto_substeps(&m, fs, settings.substeps, settings.omega_h, settings.max_substeps);
+            let sub = auto_substeps(
+                &m,
+                fs,
+                settings.substeps,
+                settings.omega_h,
+                settings.max_substeps,
+            );
             let sim = SimSettings {
                 substeps: sub,
                 ..Default::default()
@@ -743,7 +766,10 @@ fn scan_contact(
         }
     }
     scored.sort_by(|a, b| a.0.total_cmp(&b.0));
-    (scored.into_iter().take(keep).map(|s| (s.1, s.2)).collect(), evals)
+    (
+        scored.into_iter().take(KEEP).map(|s| (s.1, s.2)).collect(),
+        evals,
+    )
 }
 
 /// Fit the parameters of all added effects jointly; returns the fitted
@@ -771,7 +797,7 @@ fn fit_effects(
     if let Some(last) = all.last() {
         if last.candidate.kind == crate::trace::EffectKind::Contact {
             let ci = trial.contacts.len() - 1;
-            let (best, evals) = scan_contact(trial, ci, states, cmp, &segments, fs, settings, 2);
+            let (best, evals) = scan_contact(trial, ci, states, cmp, &segments, settings);
             sims += evals * segments.len();
             let (pg, pk) = (&problem.parameters[np - 2], &problem.parameters[np - 1]);
             for (g, kc) in best {
@@ -785,7 +811,13 @@ fn fit_effects(
             }
         }
     }
-    let sub = auto_substeps(&stiffest, fs, settings.substeps, settings.omega_h, settings.max_substeps);
+    let sub = auto_substeps(
+        &stiffest,
+        fs,
+        settings.substeps,
+        settings.omega_h,
+        settings.max_substeps,
+    );
     problem.sim = SimSettings {
         substeps: sub,
         ..Default::default()

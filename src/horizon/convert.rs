@@ -17,18 +17,17 @@ use crate::identify::output::{ForceEstimate, Status};
 use crate::identify::{Problem, System};
 use nalgebra::DMatrix;
 
-/// The horizon data of a problem: known generalized input `B_e e`,
-/// channels on the (reduced) coordinates, input matrix of the unknown
-/// internal forces at `dofs` (0-based; all DOFs when empty).
-pub fn problem_data(
-    prob: &Problem,
-    sys: &System,
-    dofs: &[usize],
-) -> Result<(
+/// `(known generalized input, channels on the model coordinates, B_u)`.
+pub type ProblemData = (
     DMatrix<f64>,
     Vec<(crate::record::Quantity, usize)>,
     DMatrix<f64>,
-)> {
+);
+
+/// The horizon data of a problem: known generalized input `B_e e`,
+/// channels on the (reduced) coordinates, input matrix of the unknown
+/// internal forces at `dofs` (0-based; all DOFs when empty).
+pub fn problem_data(prob: &Problem, sys: &System, dofs: &[usize]) -> Result<ProblemData> {
     let n = sys.n();
     let dofs: Vec<usize> = if dofs.is_empty() {
         (0..n).collect()

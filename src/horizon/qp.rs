@@ -110,7 +110,7 @@ fn constraints(
     for k in 0..len - 1 {
         c.iter_mut().for_each(|v| *v = 0.0);
         lq.add_c(k, &mut c);
-        for r in 0..nx {
+        for (r, &cr) in c.iter().enumerate().take(nx) {
             t.push(row + r, (k + 1) * ns + r, 1.0);
             for j in 0..ns {
                 t.push(row + r, k * ns + j, -lq.f[(r, j)]);
@@ -118,7 +118,7 @@ fn constraints(
             for j in 0..m {
                 t.push(row + r, (k + 1) * ns + nx + j, -lq.g[(r, j)]);
             }
-            b.push(c[r]);
+            b.push(cr);
         }
         row += nx;
     }
@@ -223,7 +223,12 @@ pub fn solve_constrained(
             .ok()
             .and_then(|bw| {
                 let (_, sig0, _) = smoother::initial_state(&lq, &bw).ok()?;
-                Some(smoother::covariance(&lq, &bw, sig0, settings.riccati_tol.max(1e-10)))
+                Some(smoother::covariance(
+                    &lq,
+                    &bw,
+                    sig0,
+                    settings.riccati_tol.max(1e-10),
+                ))
             })
     } else {
         None

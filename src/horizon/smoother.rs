@@ -467,5 +467,3 @@ pub(crate) fn covariance(lq: &Lq, bw: &Backward, sig0: DMatrix<f64>, tol: f64) -
     }
     cov
 }
-
-

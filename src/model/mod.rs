@@ -72,7 +72,6 @@ pub enum Damping {
     },
 }
 
-
 /// A structural model.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
