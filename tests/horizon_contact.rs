@@ -30,7 +30,7 @@ fn run(model: &tacit::model::Model) -> (Vec<f64>, Vec<f64>, f64) {
         },
         ..RecordSpec::default()
     };
-    let (rec, _) = simulate_record(&model, &spec).unwrap();
+    let (rec, _) = simulate_record(model, &spec).unwrap();
     let len = rec.len();
     let sm = SampledModel::from_model(&model.linear_part(), rec.fs, substeps).unwrap();
     let g = tacit::signal::force_matrix(&rec, 8);
