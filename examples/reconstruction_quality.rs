@@ -17,8 +17,10 @@ fn main() {
         ("horizon", StatesSource::Reconstructed, 0),
         ("truth", StatesSource::Truth, 0),
     ] {
-        let mut s = DiagnoseSettings::default();
-        s.states = src;
+        let mut s = DiagnoseSettings {
+            states: src,
+            ..Default::default()
+        };
         if res > 0 {
             s.lifted.resolution = res;
         }

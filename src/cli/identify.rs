@@ -10,6 +10,26 @@ use tacit::identify::{
 use tacit::model::Model;
 use tacit::record;
 
+/// Identification method on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum CliMethod {
+    /// The published sequential windows.
+    Paper,
+    /// Moving-horizon estimation (default).
+    Mhe,
+    /// Full-horizon optimal control (Riccati smoother; QP with constraints).
+    Horizon,
+}
+
+/// Weight rule of the full-horizon method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum WeightRule {
+    Fixed,
+    Gcv,
+    Lcurve,
+    Discrepancy,
+}
+
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
 enum AlphaRule {
     Gcv,
@@ -43,9 +63,26 @@ pub struct Args {
     /// Window solver: least squares or QP (Clarabel, with constraints).
     #[arg(long, value_enum, default_value = "ls")]
     solver: Solver,
-    /// Scheme: the published sequential windows, or moving-horizon estimation.
+    /// Scheme: the published sequential windows, moving-horizon estimation,
+    /// or the full-horizon optimal-control formulation.
     #[arg(long, value_enum, default_value = "mhe")]
-    method: Method,
+    method: CliMethod,
+    /// Horizon method: weight rule for λ, μ (default: discrepancy principle
+    /// with the --noise level).
+    #[arg(long, value_enum, default_value = "discrepancy")]
+    weights: WeightRule,
+    /// Horizon method: λ, weight of Σ‖f_k‖² (start of the weight search).
+    #[arg(long, default_value_t = 1e-2)]
+    lambda: f64,
+    /// Horizon method: μ, weight of Σ‖f_{k+1} − f_k‖².
+    #[arg(long, default_value_t = 0.0)]
+    mu: f64,
+    /// Horizon method: channel noise as a fraction of each channel's RMS.
+    #[arg(long, default_value_t = 0.01)]
+    noise: f64,
+    /// Horizon method: the record starts at rest (x0 = 0 instead of estimated).
+    #[arg(long)]
+    at_rest: bool,
     /// Tikhonov weight α (SI units: (output unit / N)²). Default 1e-3.
     #[arg(long, conflicts_with = "alpha_select")]
     alpha: Option<f64>,
@@ -137,8 +174,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         (Some(v), None) => Regularization::Fixed(v),
         (None, None) => IdentifySettings::default().regularization,
     };
+    if a.method == CliMethod::Horizon {
+        return run_horizon(&a, &model, &rec);
+    }
     let settings = IdentifySettings {
-        method: a.method,
+        method: if a.method == CliMethod::Paper {
+            Method::Paper
+        } else {
+            Method::Mhe
+        },
         solver: a.solver,
         reduce: a.reduce,
         window: a.window,
@@ -175,6 +219,56 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         bar.set_position(done as u64);
     })?;
     bar.finish_and_clear();
+    let files = identify::output::write_all(&est, &a.output, !a.no_figures)?;
+    report(&est);
+    for f in files {
+        println!("wrote {}", f.display());
+    }
+    Ok(())
+}
+
+/// `--method horizon`: the full-horizon formulation through the same
+/// outputs as the window methods.
+fn run_horizon(a: &Args, model: &Model, rec: &record::Record) -> anyhow::Result<()> {
+    use tacit::horizon;
+    let prob = Problem::new(&model.linear_part(), rec, &a.sensors.0)?;
+    let sys = identify::System::new(&prob, a.reduce, a.substeps)?;
+    let mut bounds: Vec<(usize, f64, f64)> = vec![];
+    for &(d, v) in &a.lower {
+        bounds.push((d - 1, v, f64::INFINITY));
+    }
+    for &(d, v) in &a.upper {
+        match bounds.iter_mut().find(|b| b.0 == d - 1) {
+            Some(b) => b.2 = v,
+            None => bounds.push((d - 1, f64::NEG_INFINITY, v)),
+        }
+    }
+    let hs = horizon::HorizonSettings {
+        lambda: a.lambda,
+        mu: a.mu,
+        noise: horizon::ChannelNoise::RmsFraction { fraction: a.noise },
+        initial: if a.at_rest {
+            horizon::InitialState::Rest
+        } else {
+            horizon::HorizonSettings::default().initial
+        },
+        selection: match a.weights {
+            WeightRule::Fixed => horizon::WeightSelection::Fixed,
+            WeightRule::Gcv => horizon::WeightSelection::Gcv,
+            WeightRule::Lcurve => horizon::WeightSelection::LCurve,
+            WeightRule::Discrepancy => horizon::WeightSelection::Discrepancy {
+                noise: horizon::NoiseLevel::Known,
+                tau: 1.0,
+            },
+        },
+        constraints: horizon::ForceConstraints {
+            bounds,
+            equilibrium: a.equilibrium,
+            pairs: a.pair.iter().map(|&(i, j)| (i - 1, j - 1)).collect(),
+        },
+        ..Default::default()
+    };
+    let (_, est) = horizon::convert::identify_problem(&prob, &sys, &[], &hs)?;
     let files = identify::output::write_all(&est, &a.output, !a.no_figures)?;
     report(&est);
     for f in files {
