@@ -1,0 +1,215 @@
+//! End-to-end through the `tacit` binary: simulate, modal, diagnose, and
+//! bad input (clear message, non-zero exit, no output file).
+
+use std::process::Command;
+
+fn tacit(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_tacit"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap()
+}
+
+fn text(o: &std::process::Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+#[test]
+fn simulate_writes_hdf5_and_csv_with_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let h5 = dir.path().join("rec.h5");
+    let o = tacit(&[
+        "simulate",
+        "--model",
+        "data/lanl8dof-contact.toml",
+        "--samples",
+        "512",
+        "--sensors",
+        "1,5,6",
+        "--noise",
+        "0.01",
+        "--seed",
+        "3",
+        "-o",
+        h5.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let rec = tacit::record::read(&h5).unwrap();
+    assert_eq!(rec.len(), 512);
+    assert_eq!(rec.outputs.len(), 3);
+    let truth = rec.truth.as_ref().unwrap();
+    // the bumper was active: internal force at 5 and 6, equal and opposite
+    let f5: f64 = truth.fint[4].iter().map(|x| x.abs()).sum();
+    let f56: f64 = truth.fint[4]
+        .iter()
+        .zip(&truth.fint[5])
+        .map(|(a, b)| (a + b).abs())
+        .sum();
+    assert!(f5 > 0.0 && f56 < 1e-9 * f5);
+    // same seed, same record
+    let h5b = dir.path().join("rec2.h5");
+    let o = tacit(&[
+        "simulate",
+        "--model",
+        "data/lanl8dof-contact.toml",
+        "--samples",
+        "512",
+        "--sensors",
+        "1,5,6",
+        "--noise",
+        "0.01",
+        "--seed",
+        "3",
+        "-o",
+        h5b.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    assert_eq!(tacit::record::read(&h5b).unwrap().outputs, rec.outputs);
+    let csv = dir.path().join("rec.csv");
+    let o = tacit(&[
+        "simulate",
+        "--model",
+        "data/lanl8dof.toml",
+        "--samples",
+        "256",
+        "-o",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(dir.path().join("rec-truth.csv").exists());
+    assert_eq!(tacit::record::read(&csv).unwrap().outputs.len(), 8);
+}
+
+#[test]
+fn bad_input_is_a_clear_error_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.h5");
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "masses = [1.0]\n[[spring]]\ndofs = [1]\nstifness = 3.0\n",
+    )
+    .unwrap();
+    for (args, needle) in [
+        (
+            vec![
+                "simulate",
+                "--model",
+                bad.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            "stifness",
+        ),
+        (
+            vec![
+                "simulate",
+                "--model",
+                "data/lanl8dof.toml",
+                "--sensors",
+                "1,9",
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            "DOF 9",
+        ),
+        (
+            vec![
+                "simulate",
+                "--model",
+                "missing.toml",
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            "missing.toml",
+        ),
+        (
+            vec![
+                "simulate",
+                "--model",
+                "data/lanl8dof.toml",
+                "--band",
+                "5,400",
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            "band",
+        ),
+        (
+            vec![
+                "diagnose",
+                "--model",
+                "data/lanl8dof.toml",
+                "--record",
+                "nope.h5",
+                "-o",
+                dir.path().join("d").to_str().unwrap(),
+            ],
+            "nope.h5",
+        ),
+    ] {
+        let o = tacit(&args);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        let t = text(&o);
+        assert!(t.contains(needle), "{args:?}: {t}");
+        assert!(!t.contains("panicked"), "{t}");
+        assert!(!out.exists());
+    }
+}
+
+#[test]
+fn modal_prints_the_testbed_frequencies() {
+    let o = tacit(&["modal", "--model", "data/lanl8dof.toml", "--json"]);
+    assert!(o.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let f = v["modes"][1]["frequency_hz"].as_f64().unwrap();
+    assert!((f - 21.97).abs() < 0.02, "{f}");
+}
+
+#[test]
+fn diagnose_writes_the_report_on_a_linear_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("lin.h5");
+    let o = tacit(&[
+        "simulate",
+        "--model",
+        "data/lanl8dof.toml",
+        "--samples",
+        "1024",
+        "--sensors",
+        "1,5,6",
+        "--noise",
+        "0.01",
+        "--seed",
+        "5",
+        "-o",
+        rec.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = dir.path().join("report");
+    let o = tacit(&[
+        "diagnose",
+        "--model",
+        "data/lanl8dof.toml",
+        "--record",
+        rec.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("no missing effect found"));
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    for key in ["before", "after", "effects", "verdict"] {
+        assert!(j.get(key).is_some(), "report.json lacks {key}");
+    }
+    let before = j["before"]["relative_error"].as_f64().unwrap();
+    assert!(before < 0.05, "linear record, linear model: {before}");
+    assert_eq!(j["effects"].as_array().unwrap().len(), 0);
+    assert!(out.join("report.md").exists() && out.join("residual.png").exists());
+}
