@@ -233,6 +233,7 @@ impl Integrator {
         let mut out_a = DMatrix::zeros(n, ns);
         let mut out_f = DMatrix::zeros(n, ns);
         let mut ws = Work::new(n);
+        ws.slopes = vec![0.0; self.elements.len()];
         ws.u.copy_from_slice(&u0[..n]);
         ws.v.copy_from_slice(&v0[..n]);
         // initial acceleration from equilibrium
@@ -273,12 +274,18 @@ impl Integrator {
             }
             done = 1;
         }
+        let mut f_prev: Vec<f64> = vec![0.0; n];
+        let mut f_next: Vec<f64> = vec![0.0; n];
         'samples: for k in 1..ns {
+            for i in 0..n {
+                f_prev[i] = force[(i, k - 1)];
+                f_next[i] = force[(i, k)];
+            }
             for sub in 0..s {
                 // force at t_n + (1+α) h, linear between samples k-1 and k
                 let frac = ((sub as f64) + 1.0 + alpha) / s as f64;
-                for i in 0..n {
-                    ws.ft[i] = force[(i, k - 1)] * (1.0 - frac) + force[(i, k)] * frac;
+                for ((ft, fp), fnx) in ws.ft.iter_mut().zip(&f_prev).zip(&f_next) {
+                    *ft = fp * (1.0 - frac) + fnx * frac;
                 }
                 // affine parts: a = a0 u + z, v = a1 u + w
                 for i in 0..n {
@@ -394,7 +401,10 @@ impl Integrator {
             for i in 0..n {
                 ws.vn[i] = a1 * ws.un[i] + ws.w[i];
             }
-            elements::internal_force(&self.elements, &ws.un, &ws.vn, &mut ws.fnl);
+            ws.fnl.iter_mut().for_each(|x| *x = 0.0);
+            for (e, s) in self.elements.iter().zip(ws.slopes.iter_mut()) {
+                *s = e.force_and_slope(&ws.un, &ws.vn, &mut ws.fnl);
+            }
             for i in 0..n {
                 scale = scale.max(c1 * ws.fnl[i].abs());
                 ws.r[i] += c1 * ws.fnl[i];
@@ -423,17 +433,11 @@ impl Integrator {
                 return Err((it, rn));
             }
             it += 1;
-            // Newton matrix
+            // Newton matrix: J0 plus the slopes of the last residual evaluation
             let mut any_tangent = false;
             ws.jac.copy_from_slice(self.j0.as_slice());
-            for e in &self.elements {
-                e.add_tangent(&ws.un, &ws.vn, c1, c1 * a1, &mut ws.jac, n);
-            }
-            for (x, y) in ws.jac.iter().zip(self.j0.as_slice()) {
-                if x != y {
-                    any_tangent = true;
-                    break;
-                }
+            for (e, &sl) in self.elements.iter().zip(&ws.slopes) {
+                any_tangent |= e.add_slope(sl, c1, c1 * a1, &mut ws.jac, n);
             }
             ws.du.copy_from_slice(&ws.r);
             let solved = match (&self.j0_chol, any_tangent) {
@@ -495,6 +499,7 @@ struct Work {
     fnl: Vec<f64>,
     rhs: Vec<f64>,
     jac: Vec<f64>,
+    slopes: Vec<f64>,
 }
 
 impl Work {
@@ -517,6 +522,7 @@ impl Work {
             fnl: z(),
             rhs: z(),
             jac: vec![0.0; n * n],
+            slopes: vec![],
         }
     }
 }

@@ -169,6 +169,51 @@ impl Element {
         }
     }
 
+    /// Add this element's internal force at (u, v) into `f` and return its
+    /// scalar slope: `∂f/∂δ` for a contact or cubic spring (0 when a contact
+    /// is open), `∂f/∂v` for friction. [`Element::add_slope`] scatters it
+    /// into a tangent without evaluating the law again.
+    #[inline]
+    pub fn force_and_slope(&self, u: &[f64], v: &[f64], f: &mut [f64]) -> f64 {
+        match *self {
+            Element::Contact { i, j, gap, k } => {
+                let p = rel(u, i, j) - gap;
+                if p > 0.0 {
+                    scatter(f, i, j, k * p);
+                    k
+                } else {
+                    0.0
+                }
+            }
+            Element::Friction { d, level, vreg } => {
+                let th = fast_tanh(v[d] / vreg);
+                f[d] += level * th;
+                level / vreg * (1.0 - th * th)
+            }
+            Element::Cubic { i, j, k3 } => {
+                let x = rel(u, i, j);
+                scatter(f, i, j, k3 * x * x * x);
+                3.0 * k3 * x * x
+            }
+        }
+    }
+
+    /// Add `c_u slope` (displacement laws) or `c_v slope` (friction) into the
+    /// column-major n×n matrix `t`; returns false when nothing was added.
+    #[inline]
+    pub fn add_slope(&self, slope: f64, cu: f64, cv: f64, t: &mut [f64], n: usize) -> bool {
+        if slope == 0.0 {
+            return false;
+        }
+        match *self {
+            Element::Contact { i, j, .. } | Element::Cubic { i, j, .. } => {
+                scatter_tangent(t, n, i, j, cu * slope)
+            }
+            Element::Friction { d, .. } => t[d * n + d] += cv * slope,
+        }
+        true
+    }
+
     /// Add `cu ∂f/∂u + cv ∂f/∂v` into the column-major n×n matrix `t`.
     #[inline]
     pub fn add_tangent(&self, u: &[f64], v: &[f64], cu: f64, cv: f64, t: &mut [f64], n: usize) {
@@ -258,6 +303,48 @@ mod tests {
         internal_force(&els, &u, &vp, &mut fp);
         internal_force(&els, &u, &vm, &mut fm);
         approx::assert_relative_eq!(tv[n + 1], (fp[1] - fm[1]) / 2e-7, max_relative = 1e-5);
+    }
+
+    #[test]
+    fn slopes_give_the_same_tangent() {
+        let els = [
+            Element::Contact {
+                i: 0,
+                j: Some(1),
+                gap: 1e-3,
+                k: 2e6,
+            },
+            Element::Friction {
+                d: 1,
+                level: 0.3,
+                vreg: 1e-2,
+            },
+            Element::Cubic {
+                i: 2,
+                j: Some(1),
+                k3: 1e9,
+            },
+            Element::Cubic {
+                i: 0,
+                j: None,
+                k3: -3e8,
+            },
+        ];
+        let n = 3;
+        let u = [3e-3, 1e-3, -2e-3];
+        let v = [0.1, 4e-3, -0.2];
+        let (mut t1, mut t2) = (vec![0.0; 9], vec![0.0; 9]);
+        let (mut f1, mut f2) = (vec![0.0; 3], vec![0.0; 3]);
+        for e in &els {
+            e.add_tangent(&u, &v, 1.3, 70.0, &mut t1, n);
+            e.add_force(&u, &v, &mut f1);
+            let s = e.force_and_slope(&u, &v, &mut f2);
+            e.add_slope(s, 1.3, 70.0, &mut t2, n);
+        }
+        assert_eq!(f1, f2);
+        for (a, b) in t1.iter().zip(&t2) {
+            approx::assert_relative_eq!(a, b, max_relative = 1e-14);
+        }
     }
 
     #[test]
