@@ -551,26 +551,32 @@ fn mat_vec_axpy(a: &DMatrix<f64>, x: &[f64], s: f64, y: &mut [f64]) {
 }
 
 /// In-place dense Cholesky of a small SPD matrix (column-major, lower
-/// triangle used and overwritten with L). Returns false if not SPD.
-/// This is the Newton step's n×n solve (n ≤ a few dozen); large problems go
-/// through faer elsewhere.
+/// triangle used and overwritten with L, whose diagonal is stored as its
+/// reciprocal so the solves multiply instead of divide). Returns false if
+/// not SPD. This is the Newton step's n×n solve (n ≤ a few dozen); large
+/// problems go through faer elsewhere.
 fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
     for j in 0..n {
-        let mut d = a[j * n + j];
+        let (done, rest) = a.split_at_mut(j * n);
+        let col_j = &mut rest[..n];
+        // col_j[i] -= Σ_k L[i,k] L[j,k]  for i ≥ j
         for k in 0..j {
-            d -= a[k * n + j] * a[k * n + j];
+            let col_k = &done[k * n..(k + 1) * n];
+            let ljk = col_k[j];
+            if ljk != 0.0 {
+                for i in j..n {
+                    col_j[i] -= col_k[i] * ljk;
+                }
+            }
         }
+        let d = col_j[j];
         if !(d > 0.0) || !d.is_finite() {
             return false;
         }
-        let d = d.sqrt();
-        a[j * n + j] = d;
-        for i in (j + 1)..n {
-            let mut s = a[j * n + i];
-            for k in 0..j {
-                s -= a[k * n + i] * a[k * n + j];
-            }
-            a[j * n + i] = s / d;
+        let inv = 1.0 / d.sqrt();
+        col_j[j] = inv;
+        for x in col_j.iter_mut().skip(j + 1) {
+            *x *= inv;
         }
     }
     true
@@ -578,19 +584,25 @@ fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
 
 /// Solve L Lᵀ x = b in place (L from [`cholesky_in_place`]).
 fn chol_solve(l: &[f64], n: usize, b: &mut [f64]) {
-    for i in 0..n {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= l[k * n + i] * b[k];
+    // forward: L y = b, column-oriented
+    for j in 0..n {
+        let col = &l[j * n..(j + 1) * n];
+        let y = b[j] * col[j];
+        b[j] = y;
+        if y != 0.0 {
+            for i in (j + 1)..n {
+                b[i] -= col[i] * y;
+            }
         }
-        b[i] = s / l[i * n + i];
     }
+    // backward: Lᵀ x = y
     for i in (0..n).rev() {
+        let col = &l[i * n..(i + 1) * n];
         let mut s = b[i];
         for k in (i + 1)..n {
-            s -= l[i * n + k] * b[k];
+            s -= col[k] * b[k];
         }
-        b[i] = s / l[i * n + i];
+        b[i] = s * col[i];
     }
 }
 
