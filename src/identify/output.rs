@@ -534,6 +534,7 @@ pub fn write_h5(est: &ForceEstimate, path: &Path) -> Result<()> {
         .map_err(|e| TacitError::Setting(format!("JSON encoding of the summary: {e}")))?;
     crate::io::write_atomic(path, |tmp| {
         let err = |w: &str| h5err(path, w);
+        crate::record::hdf5io::no_file_locking();
         let file = hdf5::File::create(tmp).map_err(err("create"))?;
         let put_str = |loc: &hdf5::Location, name: &str, v: &str| -> Result<()> {
             let s = VarLenUnicode::from_str(v).map_err(|e| {

@@ -34,8 +34,23 @@ const FORMAT: &str = "tacit-record";
 /// Layout version written and understood.
 const VERSION: i64 = 1;
 
+/// HDF5 file locking off for tacit's own processes (unless the user set
+/// `HDF5_USE_FILE_LOCKING`): records are written to a temporary file and
+/// renamed, so a lock adds nothing, and a lock still held by a writer that
+/// has not fully released the file (seen with a parent process handing a
+/// fresh record to a child) would make a read fail with EAGAIN.
+pub(crate) fn no_file_locking() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        if std::env::var_os("HDF5_USE_FILE_LOCKING").is_none() {
+            std::env::set_var("HDF5_USE_FILE_LOCKING", "FALSE");
+        }
+    });
+}
+
 /// Read an HDF5 record. Errors name the file, the channel and the sample.
 pub fn read(path: &Path) -> Result<Record> {
+    no_file_locking();
     let meta = std::fs::metadata(path).map_err(|e| TacitError::io(path, e))?;
     if meta.len() == 0 {
         return Err(TacitError::record(path, "the file is empty"));
@@ -47,6 +62,7 @@ pub fn read(path: &Path) -> Result<Record> {
 
 /// Write a record to exactly `path` (the caller handles atomicity).
 pub fn write(rec: &Record, path: &Path) -> Result<()> {
+    no_file_locking();
     write_file(rec, path).map_err(|m| TacitError::record(path, m))
 }
 
