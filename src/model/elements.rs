@@ -247,34 +247,41 @@ pub fn internal_force(elements: &[Element], u: &[f64], v: &[f64], f: &mut [f64])
 mod tests {
     use super::*;
 
+    /// Every kind of element, active, at one state of a 3-DOF system.
+    fn sample() -> ([Element; 4], [f64; 3], [f64; 3]) {
+        (
+            [
+                Element::Contact {
+                    i: 0,
+                    j: Some(1),
+                    gap: 1e-3,
+                    k: 2e6,
+                },
+                Element::Friction {
+                    d: 1,
+                    level: 0.3,
+                    vreg: 1e-2,
+                },
+                Element::Cubic {
+                    i: 2,
+                    j: Some(1),
+                    k3: 1e9,
+                },
+                Element::Cubic {
+                    i: 0,
+                    j: None,
+                    k3: -3e8,
+                },
+            ],
+            [3e-3, 1e-3, -2e-3],
+            [0.1, 4e-3, -0.2],
+        )
+    }
+
     #[test]
     fn tangents_match_central_differences() {
-        let els = [
-            Element::Contact {
-                i: 0,
-                j: Some(1),
-                gap: 1e-3,
-                k: 2e6,
-            },
-            Element::Friction {
-                d: 1,
-                level: 0.3,
-                vreg: 1e-2,
-            },
-            Element::Cubic {
-                i: 2,
-                j: Some(1),
-                k3: 1e9,
-            },
-            Element::Cubic {
-                i: 0,
-                j: None,
-                k3: -3e8,
-            },
-        ];
+        let (els, u, v) = sample();
         let n = 3;
-        let u = [3e-3, 1e-3, -2e-3];
-        let v = [0.1, 4e-3, -0.2];
         let mut t = vec![0.0; n * n];
         for e in &els {
             e.add_tangent(&u, &v, 1.0, 0.0, &mut t, n);
@@ -307,32 +314,8 @@ mod tests {
 
     #[test]
     fn slopes_give_the_same_tangent() {
-        let els = [
-            Element::Contact {
-                i: 0,
-                j: Some(1),
-                gap: 1e-3,
-                k: 2e6,
-            },
-            Element::Friction {
-                d: 1,
-                level: 0.3,
-                vreg: 1e-2,
-            },
-            Element::Cubic {
-                i: 2,
-                j: Some(1),
-                k3: 1e9,
-            },
-            Element::Cubic {
-                i: 0,
-                j: None,
-                k3: -3e8,
-            },
-        ];
+        let (els, u, v) = sample();
         let n = 3;
-        let u = [3e-3, 1e-3, -2e-3];
-        let v = [0.1, 4e-3, -0.2];
         let (mut t1, mut t2) = (vec![0.0; 9], vec![0.0; 9]);
         let (mut f1, mut f2) = (vec![0.0; 3], vec![0.0; 3]);
         for e in &els {
