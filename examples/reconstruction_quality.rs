@@ -40,8 +40,8 @@ fn main() {
             substeps: 40,
             ..Default::default()
         };
-        let e_exact = p.comparison.errors(&exact, sim);
-        let e_lin = p.comparison.errors(&lin, sim);
+        let (e_exact, _) = p.comparison.errors(&exact, sim);
+        let (e_lin, _) = p.comparison.errors(&lin, sim);
         println!("{name}: u5-u6 err {:.3}, v5-v6 err {:.3} | exact model seg err {:?} | linear {:?} | {:.2}s", (num / den).sqrt(), (nv / dv).sqrt(), e_exact.relative_error, e_lin.relative_error, p.recon.elapsed_s);
     }
 }

@@ -80,8 +80,9 @@ impl Comparison {
         Ok(DMatrix::from_fn(rows.len(), ns, |c, k| rows[c][k]))
     }
 
-    /// Both errors of `model`.
-    pub fn errors(&self, model: &Model, sim: SimSettings) -> ErrorSet {
+    /// Both errors of `model`, and its segment predictions (p × N; None
+    /// when a segment simulation failed).
+    pub fn errors(&self, model: &Model, sim: SimSettings) -> (ErrorSet, Option<DMatrix<f64>>) {
         let mut status = vec![];
         let seg = match self.predict(model, &self.segments, sim) {
             Ok(y) => Some(y),
@@ -108,7 +109,7 @@ impl Comparison {
                 simulation_error: rel(&whole, c),
             })
             .collect();
-        ErrorSet {
+        let set = ErrorSet {
             relative_error: seg.as_ref().map(|y| self.total_error(y)),
             simulation_error: whole.as_ref().map(|y| self.total_error(y)),
             per_channel,
@@ -117,7 +118,8 @@ impl Comparison {
             } else {
                 status.join("; ")
             },
-        }
+        };
+        (set, seg)
     }
 
     fn sums(&self, y: &DMatrix<f64>, c: usize) -> (f64, f64) {

@@ -138,6 +138,20 @@ pub fn auto_substeps(model: &Model, fs: f64, base: usize, omega_h: f64, max: usi
     need.clamp(base.max(1), max.max(base))
 }
 
+/// Integrator settings with [`auto_substeps`] for `model`.
+fn resolved(model: &Model, fs: f64, settings: &DiagnoseSettings) -> SimSettings {
+    SimSettings {
+        substeps: auto_substeps(
+            model,
+            fs,
+            settings.substeps,
+            settings.omega_h,
+            settings.max_substeps,
+        ),
+        ..Default::default()
+    }
+}
+
 /// The reconstruction from the identification step.
 #[derive(Debug, Clone)]
 pub struct Reconstruction {
@@ -505,23 +519,13 @@ pub fn diagnose(
     let prep = prepare(declared, rec, sensors, settings)?;
     timings.insert("identify".into(), prep.recon.elapsed_s);
     let cmp = &prep.comparison;
-    let base_sub = auto_substeps(
-        declared,
-        rec.fs,
-        settings.substeps,
-        settings.omega_h,
-        settings.max_substeps,
-    );
-    let sim0 = SimSettings {
-        substeps: base_sub,
-        ..Default::default()
-    };
+    let sim0 = resolved(declared, rec.fs, settings);
+    let base_sub = sim0.substeps;
     progress("errors before");
-    let before = cmp.errors(declared, sim0);
+    let (before, pred_before) = cmp.errors(declared, sim0);
     let mut sims = 2 * cmp.segments.len() + 2;
     let measured = cmp.measured();
     let (cy, dy) = prep.sampled.outputs(&prep.channels)?;
-    let pred_before = cmp.predict(declared, &cmp.segments, sim0).ok();
     let mut current = declared.clone();
     let mut current_err = before.relative_error;
     let mut current_sub = base_sub;
@@ -592,17 +596,8 @@ pub fn diagnose(
         let (fitted, note, fit_sims) =
             fit_effects(&trial, &all, cmp, &prep.recon.states, rec.fs, settings)?;
         sims += fit_sims;
-        let sub = auto_substeps(
-            &fitted,
-            rec.fs,
-            settings.substeps,
-            settings.omega_h,
-            settings.max_substeps,
-        );
-        let sim = SimSettings {
-            substeps: sub,
-            ..Default::default()
-        };
+        let sim = resolved(&fitted, rec.fs, settings);
+        let sub = sim.substeps;
         let pred = cmp.predict(&fitted, &cmp.segments, sim);
         sims += cmp.segments.len();
         let new_err = pred.as_ref().ok().map(|y| cmp.total_error(y));
@@ -653,9 +648,8 @@ pub fn diagnose(
         substeps: current_sub,
         ..Default::default()
     };
-    let after = cmp.errors(&current, sim1);
+    let (after, pred_after) = cmp.errors(&current, sim1);
     sims += cmp.segments.len() + 1;
-    let pred_after = cmp.predict(&current, &cmp.segments, sim1).ok();
     let effects = report_effects(&current, &added, cmp, rec.fs, settings, &mut sims);
     let validation = match validation {
         Some(v) => {
@@ -748,17 +742,7 @@ fn scan_contact(
             let mut m = trial.clone();
             m.contacts[ci].gap = g;
             m.contacts[ci].stiffness = kc;
-            let sub = auto_substeps(
-                &m,
-                fs,
-                settings.substeps,
-                settings.omega_h,
-                settings.max_substeps,
-            );
-            let sim = SimSettings {
-                substeps: sub,
-                ..Default::default()
-            };
+            let sim = resolved(&m, fs, settings);
             evals += 1;
             if let Ok(y) = cmp.predict(&m, segments, sim) {
                 scored.push((cmp.total_error(&y), g, kc));
@@ -811,17 +795,8 @@ fn fit_effects(
             }
         }
     }
-    let sub = auto_substeps(
-        &stiffest,
-        fs,
-        settings.substeps,
-        settings.omega_h,
-        settings.max_substeps,
-    );
-    problem.sim = SimSettings {
-        substeps: sub,
-        ..Default::default()
-    };
+    problem.sim = resolved(&stiffest, fs, settings);
+    let sub = problem.sim.substeps;
     let (best, results) = crate::update::fit_multistart(&problem, &settings.fit, &starts)?;
     sims += results.iter().map(|r| r.simulations).sum::<usize>();
     match best {
@@ -870,20 +845,10 @@ fn report_effects(
                 }
             }
         }
-        let sub = auto_substeps(
-            model,
-            fs,
-            settings.substeps,
-            settings.omega_h,
-            settings.max_substeps,
-        );
         let mut problem = cmp.problem(
             model,
             spread(&cmp.segments, settings.fit_segments),
-            SimSettings {
-                substeps: sub,
-                ..Default::default()
-            },
+            resolved(model, fs, settings),
         );
         problem.parameters = params;
         let fs_ = FitSettings {
@@ -944,8 +909,8 @@ fn validate(
 ) -> Result<Validation> {
     let prep = prepare(declared, v, sensors, settings)?;
     let cmp = &prep.comparison;
-    let before = cmp.errors(declared, sims.0);
-    let after = cmp.errors(fitted, sims.1);
+    let (before, _) = cmp.errors(declared, sims.0);
+    let (after, _) = cmp.errors(fitted, sims.1);
     *count += 2 * (cmp.segments.len() + 1);
     // the linear model driven by the first record's identified force
     let n = declared.ndof();

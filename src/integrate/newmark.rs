@@ -452,8 +452,8 @@ impl Integrator {
                     } else {
                         // not SPD (e.g. a softening cubic): rebuild, solve by LU
                         ws.jac.copy_from_slice(self.j0.as_slice());
-                        for e in &self.elements {
-                            e.add_tangent(&ws.un, &ws.vn, c1, c1 * a1, &mut ws.jac, n);
+                        for (e, &sl) in self.elements.iter().zip(&ws.slopes) {
+                            e.add_slope(sl, c1, c1 * a1, &mut ws.jac, n);
                         }
                         lu_solve(&ws.jac, n, &mut ws.du)
                     }
