@@ -19,6 +19,9 @@ use crate::error::{Result, TacitError};
 use crate::model::elements::{self, Element};
 use crate::model::Model;
 use nalgebra::{DMatrix, DMatrixView};
+
+mod dense;
+use dense::{chol_solve, cholesky_in_place, dim, lu_solve, mat_vec_axpy, max_abs};
 use serde::Serialize;
 
 /// Integrator settings.
@@ -146,6 +149,8 @@ pub struct Integrator {
     j0: DMatrix<f64>,
     /// Cholesky factor of J0 (lower, column-major), None if not SPD.
     j0_chol: Option<Vec<f64>>,
+    /// M's diagonal when M is diagonal (lumped masses): `M z` in n products.
+    m_diag: Option<Vec<f64>>,
 }
 
 impl Integrator {
@@ -179,13 +184,19 @@ impl Integrator {
         let a1 = gamma / (beta * h);
         let j0 = &m * a0 + (&c * a1 + &k) * (1.0 + alpha);
         let mut buf = j0.as_slice().to_vec();
-        let j0_chol = if cholesky_in_place(&mut buf, n) {
+        let j0_chol = if cholesky_in_place::<0>(&mut buf, n) {
             Some(buf)
         } else {
             None
         };
+        let is_diag = m
+            .iter()
+            .enumerate()
+            .all(|(i, &x)| i % n == i / n || x == 0.0);
+        let m_diag = is_diag.then(|| m.diagonal().as_slice().to_vec());
         Ok(Integrator {
             n,
+            m_diag,
             m,
             c,
             k,
@@ -219,269 +230,349 @@ impl Integrator {
     /// from `u0`, `v0`. The first column of the output is the initial state;
     /// the output has as many samples as `force` has columns.
     pub fn run(&self, force: DMatrixView<'_, f64>, u0: &[f64], v0: &[f64]) -> Simulation {
+        // sizes up to 8 get kernels unrolled at compile time (same bits)
+        match self.n {
+            1 => self.run_n::<1>(force, u0, v0),
+            2 => self.run_n::<2>(force, u0, v0),
+            3 => self.run_n::<3>(force, u0, v0),
+            4 => self.run_n::<4>(force, u0, v0),
+            5 => self.run_n::<5>(force, u0, v0),
+            6 => self.run_n::<6>(force, u0, v0),
+            7 => self.run_n::<7>(force, u0, v0),
+            8 => self.run_n::<8>(force, u0, v0),
+            _ => self.run_n::<0>(force, u0, v0),
+        }
+    }
+
+    /// [`Integrator::run`] with the kernels' size `N` (0: run-time size).
+    fn run_n<const N: usize>(
+        &self,
+        force: DMatrixView<'_, f64>,
+        u0: &[f64],
+        v0: &[f64],
+    ) -> Simulation {
         let n = self.n;
         let ns = force.ncols();
-        let s = self.settings.substeps;
-        let (h, alpha, gamma, beta) = (self.h, self.alpha, self.gamma, self.beta);
-        let a0 = 1.0 / (beta * h * h);
-        let a1 = gamma / (beta * h);
-        let a2 = 1.0 / (beta * h);
-        let a3 = 0.5 / beta - 1.0;
-        let hht = alpha != 0.0;
-        let mut out_u = DMatrix::zeros(n, ns);
-        let mut out_v = DMatrix::zeros(n, ns);
-        let mut out_a = DMatrix::zeros(n, ns);
-        let mut out_f = DMatrix::zeros(n, ns);
-        let mut ws = Work::new(n);
-        ws.slopes = vec![0.0; self.elements.len()];
+        let mut out = Outputs::new(n, ns);
+        let mut ws = Work::new(n, self.elements.len());
         ws.u.copy_from_slice(&u0[..n]);
         ws.v.copy_from_slice(&v0[..n]);
-        // initial acceleration from equilibrium
         let mut status = SimStatus::Completed;
-        let mut steps = 0;
-        let mut iters = 0;
-        let mut done = 0usize;
+        let (mut steps, mut iters, mut done) = (0, 0, 0usize);
         if ns > 0 {
-            elements::internal_force(&self.elements, &ws.u, &ws.v, &mut ws.fnl);
-            for i in 0..n {
-                ws.rhs[i] = force[(i, 0)] - ws.fnl[i];
+            if !self.initial_acceleration(force, &mut ws) {
+                return Outputs::new(n, 0).finish(
+                    SimStatus::NonFinite {
+                        time: 0.0,
+                        sample: 0,
+                    },
+                    0,
+                    0,
+                );
             }
-            mat_vec_sub(&self.c, &ws.v, &mut ws.rhs);
-            mat_vec_sub(&self.k, &ws.u, &mut ws.rhs);
-            match self.m.clone().cholesky() {
-                Some(ch) => {
-                    let x = ch.solve(&nalgebra::DVector::from_column_slice(&ws.rhs));
-                    ws.a.copy_from_slice(x.as_slice());
-                }
-                None => {
-                    return Simulation {
-                        status: SimStatus::NonFinite {
-                            time: 0.0,
-                            sample: 0,
-                        },
-                        u: DMatrix::zeros(n, 0),
-                        v: DMatrix::zeros(n, 0),
-                        a: DMatrix::zeros(n, 0),
-                        fint: DMatrix::zeros(n, 0),
-                        steps: 0,
-                        newton_iterations: 0,
-                    };
-                }
-            }
-            self.store(&ws, 0, &mut out_u, &mut out_v, &mut out_a, &mut out_f);
-            if hht {
-                self.g_of(&mut ws);
+            out.store(&ws, 0);
+            if self.alpha != 0.0 {
+                self.g_of::<N>(&mut ws);
             }
             done = 1;
         }
-        let mut f_prev: Vec<f64> = vec![0.0; n];
-        let mut f_next: Vec<f64> = vec![0.0; n];
         'samples: for k in 1..ns {
             for i in 0..n {
-                f_prev[i] = force[(i, k - 1)];
-                f_next[i] = force[(i, k)];
+                ws.f_prev[i] = force[(i, k - 1)];
+                ws.f_next[i] = force[(i, k)];
             }
-            for sub in 0..s {
-                // force at t_n + (1+α) h, linear between samples k-1 and k
-                let frac = ((sub as f64) + 1.0 + alpha) / s as f64;
-                for ((ft, fp), fnx) in ws.ft.iter_mut().zip(&f_prev).zip(&f_next) {
-                    *ft = fp * (1.0 - frac) + fnx * frac;
-                }
-                // affine parts: a = a0 u + z, v = a1 u + w
-                for i in 0..n {
-                    ws.z[i] = -a0 * ws.u[i] - a2 * ws.v[i] - a3 * ws.a[i];
-                    ws.w[i] = ws.v[i] + h * (1.0 - gamma) * ws.a[i] + h * gamma * ws.z[i];
-                }
-                // b = f_t − M z − (1+α) C w + α g_n
-                ws.b.copy_from_slice(&ws.ft);
-                mat_vec_sub(&self.m, &ws.z, &mut ws.b);
-                mat_vec_axpy(&self.c, &ws.w, -(1.0 + alpha), &mut ws.b);
-                if hht {
-                    for i in 0..n {
-                        ws.b[i] += alpha * ws.g[i];
-                    }
-                }
-                // predictor
-                for i in 0..n {
-                    ws.un[i] = ws.u[i] + h * ws.v[i] + 0.5 * h * h * ws.a[i];
-                }
-                match self.newton(&mut ws, a1) {
+            for sub in 0..self.settings.substeps {
+                let time = || (k - 1) as f64 / self.fs() + (sub + 1) as f64 * self.h;
+                match self.advance::<N>(&mut ws, sub) {
                     Ok(it) => iters += it,
-                    Err((it, res)) => {
-                        iters += it;
+                    Err((iterations, residual)) => {
+                        iters += iterations;
                         status = SimStatus::NewtonFailed {
-                            time: (k - 1) as f64 / self.fs() + (sub + 1) as f64 * h,
+                            time: time(),
                             sample: k - 1,
-                            iterations: it,
-                            residual: res,
+                            iterations,
+                            residual,
                         };
                         break 'samples;
                     }
                 }
                 steps += 1;
-                for i in 0..n {
-                    let un = ws.un[i];
-                    ws.a[i] = a0 * un + ws.z[i];
-                    ws.v[i] = a1 * un + ws.w[i];
-                    ws.u[i] = un;
-                }
                 if ws.u.iter().chain(&ws.v).any(|x| !x.is_finite()) {
                     status = SimStatus::NonFinite {
-                        time: (k - 1) as f64 / self.fs() + (sub + 1) as f64 * h,
+                        time: time(),
                         sample: k - 1,
                     };
                     break 'samples;
                 }
-                if hht {
-                    self.g_of(&mut ws);
+                if self.alpha != 0.0 {
+                    self.g_of::<N>(&mut ws);
                 }
             }
             elements::internal_force(&self.elements, &ws.u, &ws.v, &mut ws.fnl);
-            self.store(&ws, k, &mut out_u, &mut out_v, &mut out_a, &mut out_f);
+            out.store(&ws, k);
             done = k + 1;
         }
-        if done < ns {
-            out_u = out_u.columns(0, done).into_owned();
-            out_v = out_v.columns(0, done).into_owned();
-            out_a = out_a.columns(0, done).into_owned();
-            out_f = out_f.columns(0, done).into_owned();
-        }
-        Simulation {
-            status,
-            u: out_u,
-            v: out_v,
-            a: out_a,
-            fint: out_f,
-            steps,
-            newton_iterations: iters,
-        }
+        out.truncate(done);
+        out.finish(status, steps, iters)
     }
 
     fn fs(&self) -> f64 {
         1.0 / (self.h * self.settings.substeps as f64)
     }
 
-    fn store(
+    /// Initial acceleration from equilibrium, `M a = f − C v − K u − f_int`;
+    /// false when M is not positive definite.
+    fn initial_acceleration(&self, force: DMatrixView<'_, f64>, ws: &mut Work) -> bool {
+        let n = self.n;
+        elements::internal_force(&self.elements, &ws.u, &ws.v, &mut ws.fnl);
+        for i in 0..n {
+            ws.rhs[i] = force[(i, 0)] - ws.fnl[i];
+        }
+        mat_vec_axpy::<0>(self.c.as_slice(), n, &ws.v, -1.0, &mut ws.rhs);
+        mat_vec_axpy::<0>(self.k.as_slice(), n, &ws.u, -1.0, &mut ws.rhs);
+        match self.m.clone().cholesky() {
+            Some(ch) => {
+                let x = ch.solve(&nalgebra::DVector::from_column_slice(&ws.rhs));
+                ws.a.copy_from_slice(x.as_slice());
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// One sub-step (number `sub` within the sample) from `ws.u, v, a`, the
+    /// force interpolated between `ws.f_prev` and `ws.f_next`; the state is
+    /// advanced in place. Ok(Newton iterations) or Err((iterations, residual)).
+    fn advance<const N: usize>(
         &self,
-        ws: &Work,
-        k: usize,
-        u: &mut DMatrix<f64>,
-        v: &mut DMatrix<f64>,
-        a: &mut DMatrix<f64>,
-        f: &mut DMatrix<f64>,
-    ) {
-        u.column_mut(k).copy_from_slice(&ws.u);
-        v.column_mut(k).copy_from_slice(&ws.v);
-        a.column_mut(k).copy_from_slice(&ws.a);
-        f.column_mut(k).copy_from_slice(&ws.fnl);
+        ws: &mut Work,
+        sub: usize,
+    ) -> std::result::Result<usize, (usize, f64)> {
+        let n = dim::<N>(self.n);
+        let (h, gamma, beta) = (self.h, self.gamma, self.beta);
+        let (a0, a1) = (1.0 / (beta * h * h), gamma / (beta * h));
+        self.step_setup::<N>(ws, sub);
+        let it = self.newton::<N>(ws, a1)?;
+        let (u, v, a) = (&mut ws.u[..n], &mut ws.v[..n], &mut ws.a[..n]);
+        for i in 0..n {
+            let un = ws.un[i];
+            a[i] = a0 * un + ws.z[i];
+            v[i] = a1 * un + ws.w[i];
+            u[i] = un;
+        }
+        Ok(it)
+    }
+
+    /// The sub-step's affine parts `ws.z, w`, right-hand side `ws.b` and
+    /// predictor `ws.un`.
+    #[inline(always)]
+    fn step_setup<const N: usize>(&self, ws: &mut Work, sub: usize) {
+        let n = dim::<N>(self.n);
+        let (h, alpha, gamma, beta) = (self.h, self.alpha, self.gamma, self.beta);
+        let (a0, a2, a3) = (1.0 / (beta * h * h), 1.0 / (beta * h), 0.5 / beta - 1.0);
+        let (u, v, a) = (&ws.u[..n], &ws.v[..n], &ws.a[..n]);
+        let (z, w, b) = (&mut ws.z[..n], &mut ws.w[..n], &mut ws.b[..n]);
+        // force at t_n + (1+α) h, linear between samples k-1 and k
+        let frac = ((sub as f64) + 1.0 + alpha) / self.settings.substeps as f64;
+        for ((bi, fp), fnx) in b.iter_mut().zip(&ws.f_prev).zip(&ws.f_next) {
+            *bi = fp * (1.0 - frac) + fnx * frac;
+        }
+        // affine parts: a = a0 u + z, v = a1 u + w
+        for i in 0..n {
+            z[i] = -a0 * u[i] - a2 * v[i] - a3 * a[i];
+            w[i] = v[i] + h * (1.0 - gamma) * a[i] + h * gamma * z[i];
+        }
+        // b = f_t − M z − (1+α) C w + α g_n
+        match &self.m_diag {
+            // the same sums as the product below, without its zero terms
+            Some(m) => (0..n).for_each(|i| b[i] += m[i] * -z[i]),
+            None => mat_vec_axpy::<N>(self.m.as_slice(), n, z, -1.0, b),
+        }
+        mat_vec_axpy::<N>(self.c.as_slice(), n, w, -(1.0 + alpha), b);
+        if alpha != 0.0 {
+            for (bi, gi) in b.iter_mut().zip(&ws.g) {
+                *bi += alpha * gi;
+            }
+        }
+        // predictor
+        let un = &mut ws.un[..n];
+        for i in 0..n {
+            un[i] = u[i] + h * v[i] + 0.5 * h * h * a[i];
+        }
     }
 
     /// g = C v + K u + f_int(u, v) at the current state (HHT only).
-    fn g_of(&self, ws: &mut Work) {
+    fn g_of<const N: usize>(&self, ws: &mut Work) {
         elements::internal_force(&self.elements, &ws.u, &ws.v, &mut ws.g);
-        mat_vec_axpy(&self.c, &ws.v, 1.0, &mut ws.g);
-        mat_vec_axpy(&self.k, &ws.u, 1.0, &mut ws.g);
+        mat_vec_axpy::<N>(self.c.as_slice(), self.n, &ws.v, 1.0, &mut ws.g);
+        mat_vec_axpy::<N>(self.k.as_slice(), self.n, &ws.u, 1.0, &mut ws.g);
     }
 
-    /// Residual r(u) = J0 u − b + (1+α) f_int(u, a1 u + w) into ws.r;
-    /// returns (‖r‖∞, scale).
-    fn residual(&self, ws: &mut Work, a1: f64) -> (f64, f64) {
-        let n = self.n;
+    /// Residual r(u) = J0 u − b + (1+α) f_int(u, a1 u + w) into ws.r, the
+    /// element slopes into ws.slopes; returns (‖r‖∞, scale).
+    #[inline(always)]
+    fn residual<const N: usize>(&self, ws: &mut Work, a1: f64) -> (f64, f64) {
+        let n = dim::<N>(self.n);
         let c1 = 1.0 + self.alpha;
+        let (r, b, un) = (&mut ws.r[..n], &ws.b[..n], &ws.un[..n]);
+        r.fill(0.0);
+        mat_vec_axpy::<N>(self.j0.as_slice(), n, un, 1.0, r);
+        let mut scale = max_abs::<N>(max_abs::<N>(0.0, r, n), b, n);
         for i in 0..n {
-            ws.r[i] = 0.0;
-        }
-        mat_vec_axpy(&self.j0, &ws.un, 1.0, &mut ws.r);
-        let mut scale = 0.0f64;
-        for i in 0..n {
-            scale = scale.max(ws.r[i].abs()).max(ws.b[i].abs());
-            ws.r[i] -= ws.b[i];
+            r[i] -= b[i];
         }
         if !self.elements.is_empty() {
+            let (vn, fnl) = (&mut ws.vn[..n], &mut ws.fnl[..n]);
             for i in 0..n {
-                ws.vn[i] = a1 * ws.un[i] + ws.w[i];
+                vn[i] = a1 * un[i] + ws.w[i];
             }
-            ws.fnl.iter_mut().for_each(|x| *x = 0.0);
+            fnl.fill(0.0);
             for (e, s) in self.elements.iter().zip(ws.slopes.iter_mut()) {
-                *s = e.force_and_slope(&ws.un, &ws.vn, &mut ws.fnl);
+                *s = e.force_and_slope(un, vn, fnl);
             }
+            // c1 > 0: max |c1 f| = c1 max |f| (rounding is monotone)
+            scale = scale.max(c1 * max_abs::<N>(0.0, fnl, n));
             for i in 0..n {
-                scale = scale.max(c1 * ws.fnl[i].abs());
-                ws.r[i] += c1 * ws.fnl[i];
+                r[i] += c1 * fnl[i];
             }
         }
-        let norm = ws.r.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
+        let norm = max_abs::<N>(0.0, r, n);
         (norm, scale)
     }
 
     /// Newton iterations on ws.un; Ok(iterations) or Err((iterations, residual)).
-    fn newton(&self, ws: &mut Work, a1: f64) -> std::result::Result<usize, (usize, f64)> {
-        let n = self.n;
-        let c1 = 1.0 + self.alpha;
+    fn newton<const N: usize>(
+        &self,
+        ws: &mut Work,
+        a1: f64,
+    ) -> std::result::Result<usize, (usize, f64)> {
+        let n = dim::<N>(self.n);
         let tol = self.settings.newton_tol;
         if self.elements.is_empty() {
             if let Some(l) = &self.j0_chol {
                 ws.un.copy_from_slice(&ws.b);
-                chol_solve(l, n, &mut ws.un);
+                chol_solve::<N>(l, n, &mut ws.un);
                 return Ok(1);
             }
         }
-        let (mut rn, mut scale) = self.residual(ws, a1);
+        let (mut rn, mut scale) = self.residual::<N>(ws, a1);
         let mut it = 0;
         while !(rn <= tol * scale || rn == 0.0) {
             if it >= self.settings.max_newton || !rn.is_finite() {
                 return Err((it, rn));
             }
             it += 1;
-            // Newton matrix: J0 plus the slopes of the last residual evaluation
-            let mut any_tangent = false;
-            ws.jac.copy_from_slice(self.j0.as_slice());
-            for (e, &sl) in self.elements.iter().zip(&ws.slopes) {
-                any_tangent |= e.add_slope(sl, c1, c1 * a1, &mut ws.jac, n);
-            }
-            ws.du.copy_from_slice(&ws.r);
-            let solved = match (&self.j0_chol, any_tangent) {
-                (Some(l), false) => {
-                    chol_solve(l, n, &mut ws.du);
-                    true
-                }
-                _ => {
-                    if cholesky_in_place(&mut ws.jac, n) {
-                        chol_solve(&ws.jac, n, &mut ws.du);
-                        true
-                    } else {
-                        // not SPD (e.g. a softening cubic): rebuild, solve by LU
-                        ws.jac.copy_from_slice(self.j0.as_slice());
-                        for (e, &sl) in self.elements.iter().zip(&ws.slopes) {
-                            e.add_slope(sl, c1, c1 * a1, &mut ws.jac, n);
-                        }
-                        lu_solve(&ws.jac, n, &mut ws.du)
-                    }
-                }
-            };
-            if !solved {
+            if !self.newton_direction::<N>(ws, a1) {
                 return Err((it, rn));
             }
-            // backtracking line search on ‖r‖∞
-            ws.u_old.copy_from_slice(&ws.un);
-            let mut lambda = 1.0;
-            loop {
-                for i in 0..n {
-                    ws.un[i] = ws.u_old[i] - lambda * ws.du[i];
-                }
-                let (rn_new, sc) = self.residual(ws, a1);
-                if rn_new < rn || lambda < 1.0 / 64.0 || rn_new <= tol * sc {
-                    rn = rn_new;
-                    scale = sc;
-                    break;
-                }
-                lambda *= 0.5;
-            }
+            (rn, scale) = self.line_search::<N>(ws, a1, rn);
         }
         Ok(it.max(1))
     }
+
+    /// Newton step ws.du = J⁻¹ r with J = J0 plus the slopes of the last
+    /// residual evaluation; false when J is singular. J's factor is kept
+    /// in ws.jac and reused while the slopes are unchanged (a closed
+    /// contact without friction), so equal matrices give equal factors.
+    fn newton_direction<const N: usize>(&self, ws: &mut Work, a1: f64) -> bool {
+        let n = dim::<N>(self.n);
+        ws.du.copy_from_slice(&ws.r);
+        if let (Some(l), false) = (&self.j0_chol, ws.slopes.iter().any(|&s| s != 0.0)) {
+            chol_solve::<N>(l, n, &mut ws.du);
+            return true;
+        }
+        if !(ws.jac_factored && ws.slopes == ws.jac_slopes) {
+            self.newton_matrix(ws, a1);
+            ws.jac_factored = cholesky_in_place::<N>(&mut ws.jac, n);
+            if !ws.jac_factored {
+                // not SPD (e.g. a softening cubic): rebuild, solve by LU
+                self.newton_matrix(ws, a1);
+                return lu_solve(&ws.jac, n, &mut ws.du);
+            }
+            ws.jac_slopes.copy_from_slice(&ws.slopes);
+        }
+        chol_solve::<N>(&ws.jac, n, &mut ws.du);
+        true
+    }
+
+    /// ws.jac = J0 + (1+α)(∂f/∂u + a1 ∂f/∂v) from the slopes in ws.slopes.
+    fn newton_matrix(&self, ws: &mut Work, a1: f64) {
+        let c1 = 1.0 + self.alpha;
+        ws.jac.copy_from_slice(self.j0.as_slice());
+        for (e, &sl) in self.elements.iter().zip(&ws.slopes) {
+            e.add_slope(sl, c1, c1 * a1, &mut ws.jac, self.n);
+        }
+    }
+
+    /// Backtracking line search on ‖r‖∞ along −ws.du from ws.un; leaves the
+    /// accepted point in ws.un and returns its (‖r‖∞, scale).
+    fn line_search<const N: usize>(&self, ws: &mut Work, a1: f64, rn: f64) -> (f64, f64) {
+        let n = dim::<N>(self.n);
+        let tol = self.settings.newton_tol;
+        ws.u_old.copy_from_slice(&ws.un);
+        let mut lambda = 1.0;
+        loop {
+            for i in 0..n {
+                ws.un[i] = ws.u_old[i] - lambda * ws.du[i];
+            }
+            let (rn_new, sc) = self.residual::<N>(ws, a1);
+            if rn_new < rn || lambda < 1.0 / 64.0 || rn_new <= tol * sc {
+                return (rn_new, sc);
+            }
+            lambda *= 0.5;
+        }
+    }
 }
 
+/// The output matrices (DOF × sample) being filled.
+struct Outputs {
+    u: DMatrix<f64>,
+    v: DMatrix<f64>,
+    a: DMatrix<f64>,
+    f: DMatrix<f64>,
+}
+
+impl Outputs {
+    fn new(n: usize, ns: usize) -> Outputs {
+        let z = || DMatrix::zeros(n, ns);
+        Outputs {
+            u: z(),
+            v: z(),
+            a: z(),
+            f: z(),
+        }
+    }
+
+    fn store(&mut self, ws: &Work, k: usize) {
+        self.u.column_mut(k).copy_from_slice(&ws.u);
+        self.v.column_mut(k).copy_from_slice(&ws.v);
+        self.a.column_mut(k).copy_from_slice(&ws.a);
+        self.f.column_mut(k).copy_from_slice(&ws.fnl);
+    }
+
+    /// Keep the first `done` samples.
+    fn truncate(&mut self, done: usize) {
+        if done < self.u.ncols() {
+            for m in [&mut self.u, &mut self.v, &mut self.a, &mut self.f] {
+                *m = m.columns(0, done).into_owned();
+            }
+        }
+    }
+
+    fn finish(self, status: SimStatus, steps: usize, newton_iterations: usize) -> Simulation {
+        Simulation {
+            status,
+            u: self.u,
+            v: self.v,
+            a: self.a,
+            fint: self.f,
+            steps,
+            newton_iterations,
+        }
+    }
+}
+
+/// Scratch vectors of one run.
 struct Work {
     u: Vec<f64>,
     v: Vec<f64>,
@@ -495,15 +586,20 @@ struct Work {
     b: Vec<f64>,
     r: Vec<f64>,
     g: Vec<f64>,
-    ft: Vec<f64>,
+    f_prev: Vec<f64>,
+    f_next: Vec<f64>,
     fnl: Vec<f64>,
     rhs: Vec<f64>,
+    /// Factor of the last Newton matrix (valid when `jac_factored`) and
+    /// the slopes it was built from.
     jac: Vec<f64>,
+    jac_factored: bool,
+    jac_slopes: Vec<f64>,
     slopes: Vec<f64>,
 }
 
 impl Work {
-    fn new(n: usize) -> Work {
+    fn new(n: usize, n_elements: usize) -> Work {
         let z = || vec![0.0; n];
         Work {
             u: z(),
@@ -518,104 +614,15 @@ impl Work {
             b: z(),
             r: z(),
             g: z(),
-            ft: z(),
+            f_prev: z(),
+            f_next: z(),
             fnl: z(),
             rhs: z(),
             jac: vec![0.0; n * n],
-            slopes: vec![],
+            jac_factored: false,
+            jac_slopes: vec![0.0; n_elements],
+            slopes: vec![0.0; n_elements],
         }
-    }
-}
-
-/// y −= A x (A column-major n×n).
-#[inline]
-fn mat_vec_sub(a: &DMatrix<f64>, x: &[f64], y: &mut [f64]) {
-    mat_vec_axpy(a, x, -1.0, y);
-}
-
-/// y += s A x.
-#[inline]
-fn mat_vec_axpy(a: &DMatrix<f64>, x: &[f64], s: f64, y: &mut [f64]) {
-    let n = a.nrows();
-    let data = a.as_slice();
-    for (j, &xj) in x.iter().enumerate() {
-        if xj == 0.0 {
-            continue;
-        }
-        let sx = s * xj;
-        let col = &data[j * n..(j + 1) * n];
-        for (yi, &aij) in y.iter_mut().zip(col) {
-            *yi += aij * sx;
-        }
-    }
-}
-
-/// In-place dense Cholesky of a small SPD matrix (column-major, lower
-/// triangle used and overwritten with L, whose diagonal is stored as its
-/// reciprocal so the solves multiply instead of divide). Returns false if
-/// not SPD. This is the Newton step's n×n solve (n ≤ a few dozen); large
-/// problems go through faer elsewhere.
-fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
-    for j in 0..n {
-        let (done, rest) = a.split_at_mut(j * n);
-        let col_j = &mut rest[..n];
-        // col_j[i] -= Σ_k L[i,k] L[j,k]  for i ≥ j
-        for k in 0..j {
-            let col_k = &done[k * n..(k + 1) * n];
-            let ljk = col_k[j];
-            if ljk != 0.0 {
-                for i in j..n {
-                    col_j[i] -= col_k[i] * ljk;
-                }
-            }
-        }
-        let d = col_j[j];
-        if !(d > 0.0) || !d.is_finite() {
-            return false;
-        }
-        let inv = 1.0 / d.sqrt();
-        col_j[j] = inv;
-        for x in col_j.iter_mut().skip(j + 1) {
-            *x *= inv;
-        }
-    }
-    true
-}
-
-/// Solve L Lᵀ x = b in place (L from [`cholesky_in_place`]).
-fn chol_solve(l: &[f64], n: usize, b: &mut [f64]) {
-    // forward: L y = b, column-oriented
-    for j in 0..n {
-        let col = &l[j * n..(j + 1) * n];
-        let y = b[j] * col[j];
-        b[j] = y;
-        if y != 0.0 {
-            for i in (j + 1)..n {
-                b[i] -= col[i] * y;
-            }
-        }
-    }
-    // backward: Lᵀ x = y
-    for i in (0..n).rev() {
-        let col = &l[i * n..(i + 1) * n];
-        let mut s = b[i];
-        for k in (i + 1)..n {
-            s -= col[k] * b[k];
-        }
-        b[i] = s * col[i];
-    }
-}
-
-/// General solve (indefinite tangent, e.g. a softening cubic), with
-/// nalgebra's LU. Returns false when singular.
-fn lu_solve(a: &[f64], n: usize, b: &mut [f64]) -> bool {
-    let m = DMatrix::from_column_slice(n, n, a);
-    match m.lu().solve(&nalgebra::DVector::from_column_slice(b)) {
-        Some(x) => {
-            b.copy_from_slice(x.as_slice());
-            true
-        }
-        None => false,
     }
 }
 

@@ -113,7 +113,7 @@ pub fn compile(model: &super::Model) -> Vec<Element> {
 
 /// tanh through one `exp_m1` (about 3× cheaper than libm's tanh here;
 /// relative error ~1e-16 away from 0, absolute ~1e-17 near 0).
-#[inline]
+#[inline(always)]
 fn fast_tanh(x: f64) -> f64 {
     if x.abs() > 20.0 {
         return x.signum();
@@ -161,7 +161,7 @@ impl Element {
     /// scalar slope: `∂f/∂δ` for a contact or cubic spring (0 when a contact
     /// is open), `∂f/∂v` for friction. [`Element::add_slope`] scatters it
     /// into a tangent without evaluating the law again.
-    #[inline]
+    #[inline(always)]
     pub fn force_and_slope(&self, u: &[f64], v: &[f64], f: &mut [f64]) -> f64 {
         match *self {
             Element::Contact { i, j, gap, k } => {

@@ -1,0 +1,194 @@
+//! Small dense kernels of the Newton step (n ≤ a few dozen; large problems
+//! go through faer elsewhere): column-major matrix–vector products, an
+//! in-place Cholesky with reciprocal diagonal and its solve, an LU fallback.
+//!
+//! Every kernel takes a const `N`: a non-zero `N` is the size known at
+//! compile time (loops unrolled, bounds checks gone, vectors kept in
+//! registers); `N = 0` uses the run-time `n`. Both perform the same
+//! operations in the same order, so the results are the same bits.
+
+use nalgebra::DMatrix;
+
+/// The kernel size: `N` when non-zero, else the run-time `n`.
+#[inline(always)]
+pub(super) fn dim<const N: usize>(n: usize) -> usize {
+    if N == 0 {
+        n
+    } else {
+        debug_assert_eq!(n, N);
+        N
+    }
+}
+
+/// y += s A x (A column-major n×n).
+#[inline(always)]
+pub(super) fn mat_vec_axpy<const N: usize>(a: &[f64], n: usize, x: &[f64], s: f64, y: &mut [f64]) {
+    let n = dim::<N>(n);
+    let (a, x, y) = (&a[..n * n], &x[..n], &mut y[..n]);
+    for (col, &xj) in a.chunks_exact(n).zip(x) {
+        let sx = s * xj;
+        for (yi, &aij) in y.iter_mut().zip(col) {
+            *yi += aij * sx;
+        }
+    }
+}
+
+/// `max(m, maxᵢ |xᵢ|)`, NaNs ignored (as `f64::max` does). `m ≥ 0` and the
+/// `|xᵢ|` are never −0, so the order of the comparisons cannot change the
+/// result: four independent lanes instead of one serial chain.
+#[inline(always)]
+pub(super) fn max_abs<const N: usize>(m: f64, x: &[f64], n: usize) -> f64 {
+    let n = dim::<N>(n);
+    let mut acc = [m; 4];
+    let chunks = x[..n].chunks_exact(4);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for (a, &v) in acc.iter_mut().zip(c) {
+            *a = max_num(*a, v.abs());
+        }
+    }
+    for (a, &v) in acc.iter_mut().zip(rest) {
+        *a = max_num(*a, v.abs());
+    }
+    max_num(max_num(acc[0], acc[1]), max_num(acc[2], acc[3]))
+}
+
+/// `a.max(b)` for a non-NaN `a`: one comparison (a NaN `b` keeps `a`).
+#[inline(always)]
+fn max_num(a: f64, b: f64) -> f64 {
+    if b > a {
+        b
+    } else {
+        a
+    }
+}
+
+/// In-place Cholesky of an SPD matrix (column-major, lower triangle used
+/// and overwritten with L, whose diagonal is stored as its reciprocal so
+/// the solves multiply instead of divide). Returns false if not SPD.
+#[inline(always)]
+pub(super) fn cholesky_in_place<const N: usize>(a: &mut [f64], n: usize) -> bool {
+    let n = dim::<N>(n);
+    let a = &mut a[..n * n];
+    for j in 0..n {
+        let (done, rest) = a.split_at_mut(j * n);
+        let col_j = &mut rest[..n];
+        // col_j[i] -= Σ_k L[i,k] L[j,k]  for i ≥ j
+        for col_k in done.chunks_exact(n) {
+            let ljk = col_k[j];
+            for i in j..n {
+                col_j[i] -= col_k[i] * ljk;
+            }
+        }
+        let d = col_j[j];
+        if !(d > 0.0) || !d.is_finite() {
+            return false;
+        }
+        let inv = 1.0 / d.sqrt();
+        col_j[j] = inv;
+        for x in col_j.iter_mut().skip(j + 1) {
+            *x *= inv;
+        }
+    }
+    true
+}
+
+/// Solve L Lᵀ x = b in place (L from [`cholesky_in_place`]).
+#[inline(always)]
+pub(super) fn chol_solve<const N: usize>(l: &[f64], n: usize, b: &mut [f64]) {
+    let n = dim::<N>(n);
+    let (l, b) = (&l[..n * n], &mut b[..n]);
+    // forward: L y = b, column-oriented
+    for j in 0..n {
+        let col = &l[j * n..(j + 1) * n];
+        let y = b[j] * col[j];
+        b[j] = y;
+        for i in (j + 1)..n {
+            b[i] -= col[i] * y;
+        }
+    }
+    // backward: Lᵀ x = y
+    for i in (0..n).rev() {
+        let col = &l[i * n..(i + 1) * n];
+        let mut s = b[i];
+        for k in (i + 1)..n {
+            s -= col[k] * b[k];
+        }
+        b[i] = s * col[i];
+    }
+}
+
+/// General solve (indefinite tangent, e.g. a softening cubic), with
+/// nalgebra's LU. Returns false when singular.
+pub(super) fn lu_solve(a: &[f64], n: usize, b: &mut [f64]) -> bool {
+    let m = DMatrix::from_column_slice(n, n, a);
+    match m.lu().solve(&nalgebra::DVector::from_column_slice(b)) {
+        Some(x) => {
+            b.copy_from_slice(x.as_slice());
+            true
+        }
+        None => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A seeded SPD matrix `B Bᵀ + n I` and a right-hand side.
+    fn spd(n: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
+        let mut s = seed;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let b: Vec<f64> = (0..n * n).map(|_| rnd()).collect();
+        let mut a = vec![0.0; n * n];
+        for c in 0..n {
+            for r in 0..n {
+                a[c * n + r] = (0..n).map(|k| b[k * n + r] * b[k * n + c]).sum::<f64>();
+            }
+            a[c * n + c] += n as f64;
+        }
+        (a, (0..n).map(|_| rnd()).collect())
+    }
+
+    fn solve<const N: usize>(a: &[f64], n: usize, rhs: &[f64]) -> Vec<f64> {
+        let mut l = a.to_vec();
+        assert!(cholesky_in_place::<N>(&mut l, n));
+        let mut x = rhs.to_vec();
+        chol_solve::<N>(&l, n, &mut x);
+        x
+    }
+
+    #[test]
+    fn cholesky_solves_and_sizes_agree_bit_for_bit() {
+        for seed in 1..6 {
+            let (a, rhs) = spd(8, seed);
+            let x = solve::<0>(&a, 8, &rhs);
+            assert_eq!(x, solve::<8>(&a, 8, &rhs));
+            // A x = rhs
+            let mut r = rhs.clone();
+            mat_vec_axpy::<0>(&a, 8, &x, -1.0, &mut r);
+            let mut r8 = rhs.clone();
+            mat_vec_axpy::<8>(&a, 8, &x, -1.0, &mut r8);
+            assert_eq!(r, r8);
+            assert!(r.iter().all(|e| e.abs() < 1e-13), "{r:?}");
+            let mut lu = rhs.clone();
+            assert!(lu_solve(&a, 8, &mut lu));
+            for (p, q) in x.iter().zip(&lu) {
+                approx::assert_relative_eq!(p, q, max_relative = 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn cholesky_rejects_indefinite() {
+        let (mut a, _) = spd(3, 9);
+        a[4] = -50.0;
+        assert!(!cholesky_in_place::<3>(&mut a.clone(), 3));
+        assert!(!cholesky_in_place::<0>(&mut a, 3));
+    }
+}
