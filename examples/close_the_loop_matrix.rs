@@ -3,7 +3,7 @@
 //! sensors at all eight masses and at 1, 5, 6; each diagnosed with the
 //! declared linear model and validated on a second record.
 //!
-//! `cargo run --release --example close_the_loop_matrix [-- --quick]`
+//! `cargo run --release --example close_the_loop_matrix [-- --quick] [--only TEXT]`
 
 use tacit::diagnose::{diagnose, DiagnoseSettings};
 use tacit::integrate::SimSettings;
@@ -93,9 +93,18 @@ fn cases() -> Vec<(&'static str, Model, String)> {
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let samples = if quick { 2048 } else { 4096 };
+    // `--only TEXT`: the records whose name contains TEXT
+    let args: Vec<String> = std::env::args().collect();
+    let only = args
+        .iter()
+        .position(|a| a == "--only")
+        .and_then(|i| args.get(i + 1).cloned());
     println!("| record | sensors | truth | found | parameters | relative_error before → after | validation before → after | time |");
     println!("|---|---|---|---|---|---|---|---|");
     for (name, truth, truth_text) in cases() {
+        if only.as_ref().is_some_and(|o| !name.contains(o.as_str())) {
+            continue;
+        }
         for sensors in [vec![1, 2, 3, 4, 5, 6, 7, 8], vec![1, 5, 6]] {
             let spec = |seed| RecordSpec {
                 samples,

@@ -3,6 +3,7 @@
 //! (`relative_error`, the headline) and open-loop simulation error over the
 //! whole record (`simulation_error`).
 
+use super::starts::StartFit;
 use crate::integrate::SimSettings;
 use crate::model::Model;
 use crate::update::problem::{Metric, Observation, Problem};
@@ -33,7 +34,14 @@ pub struct ErrorSet {
     pub per_channel: Vec<ChannelError>,
     /// "ok", or what failed.
     pub status: String,
+    /// The start-state refinement of the multiple-shooting error (None
+    /// when off or when the segments could not be simulated).
+    pub starts: Option<super::starts::StartFit>,
 }
+
+/// Multiple-shooting predictions (p × N), the segments with the start
+/// states used, and the refinement that produced them.
+pub type Shot = (DMatrix<f64>, Vec<Segment>, Option<StartFit>);
 
 /// The data a model is compared with.
 #[derive(Debug, Clone)]
@@ -48,6 +56,9 @@ pub struct Comparison {
     pub segments: Vec<Segment>,
     /// The open-loop segment (whole record from the estimated start).
     pub whole: Segment,
+    /// Gauss–Newton iterations of the segment start-state refinement
+    /// ([`super::starts`]; 0 = the reconstructed start states as they are).
+    pub start_iterations: usize,
 }
 
 impl Comparison {
@@ -80,12 +91,39 @@ impl Comparison {
         Ok(DMatrix::from_fn(rows.len(), ns, |c, k| rows[c][k]))
     }
 
+    /// Multiple-shooting predictions of `model` (p × N) with the start
+    /// states refined for it ([`super::starts::refine`], when
+    /// `start_iterations > 0`), the segments used and the refinement; Err
+    /// names a failed simulation.
+    pub fn shoot(&self, model: &Model, sim: SimSettings) -> std::result::Result<Shot, String> {
+        if self.start_iterations == 0 {
+            let y = self.predict(model, &self.segments, sim)?;
+            return Ok((y, self.segments.clone(), None));
+        }
+        let (segs, y, fit) =
+            super::starts::refine(self, model, sim, &self.segments, self.start_iterations);
+        if let Some(k) = (0..y.ncols()).find(|&k| y.column(k).iter().any(|v| v.is_nan())) {
+            let s = segs
+                .iter()
+                .position(|s| k >= s.start && k < s.start + s.len)
+                .map_or("?".into(), |i| i.to_string());
+            return Err(format!(
+                "segment {s} (sample {k}) could not be simulated from its start state"
+            ));
+        }
+        Ok((y, segs, Some(fit)))
+    }
+
     /// Both errors of `model`, and its segment predictions (p × N; None
     /// when a segment simulation failed).
     pub fn errors(&self, model: &Model, sim: SimSettings) -> (ErrorSet, Option<DMatrix<f64>>) {
         let mut status = vec![];
-        let seg = match self.predict(model, &self.segments, sim) {
-            Ok(y) => Some(y),
+        let mut starts = None;
+        let seg = match self.shoot(model, sim) {
+            Ok((y, _, fit)) => {
+                starts = fit;
+                Some(y)
+            }
             Err(e) => {
                 status.push(format!("multiple shooting: {e}"));
                 None
@@ -118,6 +156,7 @@ impl Comparison {
             } else {
                 status.join("; ")
             },
+            starts,
         };
         (set, seg)
     }

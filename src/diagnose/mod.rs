@@ -20,7 +20,9 @@
 pub mod effects;
 pub mod errors;
 pub mod lifted;
+pub mod locate;
 pub mod report;
+pub mod starts;
 
 use crate::error::{Result, TacitError};
 use crate::horizon::{self, problem::HorizonData, settings::HorizonSettings};
@@ -71,6 +73,14 @@ pub struct DiagnoseSettings {
     pub noise_floor: f64,
     /// Where the states come from (default: the lifted smoother).
     pub states: StatesSource,
+    /// Dominance ratio of the force-location search ([`locate`]; default
+    /// 0.8; 0 disables it: an unknown force at every DOF).
+    pub locate_ratio: f64,
+    /// Most force directions the search selects (default 3).
+    pub locate_max: usize,
+    /// Gauss–Newton iterations refining each segment's start state for the
+    /// model being scored ([`starts`]; default 3; 0 = reconstructed states).
+    pub start_iterations: usize,
     /// Settings of the lifted smoother.
     #[serde(skip)]
     pub lifted: lifted::LiftedSettings,
@@ -115,6 +125,9 @@ impl Default for DiagnoseSettings {
             min_improvement: 0.05,
             noise_floor: 0.025,
             states: StatesSource::Lifted,
+            locate_ratio: 0.8,
+            locate_max: 3,
+            start_iterations: 3,
             lifted: lifted::LiftedSettings::default(),
         }
     }
@@ -184,6 +197,8 @@ pub struct Prepared {
     pub sampled: SampledModel,
     /// Samples per segment.
     pub segment: usize,
+    /// The force-location search (lifted states only).
+    pub located: Option<locate::Located>,
 }
 
 /// Prepare a record: select the channels (all outputs at `sensors`, or all
@@ -237,18 +252,50 @@ pub fn prepare(
     let force = crate::signal::force_matrix(rec, n);
     let measured = DMatrix::from_fn(outs.len(), rec.len(), |c, k| outs[c].data[k]);
     let sampled = SampledModel::from_model(&model.linear_part(), rec.fs, settings.substeps)?;
+    let mut located = None;
     let mut recon = if settings.states == StatesSource::Lifted {
-        let r = lifted::reconstruct(&sampled, &force, &measured, &channels, &settings.lifted)?;
+        let t = Instant::now();
+        let loc = if settings.locate_ratio > 0.0 && settings.locate_max > 0 {
+            Some(locate::locate(
+                model,
+                &sampled,
+                &force,
+                &measured,
+                &channels,
+                &settings.lifted,
+                settings.locate_ratio,
+                settings.locate_max,
+            )?)
+        } else {
+            None
+        };
+        let e = match &loc {
+            Some(l) if !l.directions.is_empty() => l.matrix(n),
+            _ => DMatrix::identity(n, n),
+        };
+        let r = lifted::reconstruct_along(
+            &sampled,
+            &e,
+            &force,
+            &measured,
+            &channels,
+            &settings.lifted,
+        )?;
+        let status = format!(
+            "lifted smoother, {} sub-intervals per sample; {}: {}",
+            settings.lifted.resolution,
+            loc.as_ref()
+                .map_or("location search off".into(), |l| l.summary()),
+            r.status
+        );
+        located = loc;
         Reconstruction {
             states: r.states,
             force: -r.force,
             force_std: None,
             lambda: settings.lifted.lambda,
-            status: format!(
-                "lifted smoother, {} sub-intervals per sample: {}",
-                settings.lifted.resolution, r.status
-            ),
-            elapsed_s: r.elapsed_s,
+            status,
+            elapsed_s: t.elapsed().as_secs_f64(),
         }
     } else {
         reconstruct(&sampled, &force, &measured, &channels, &settings.horizon)?
@@ -297,10 +344,12 @@ pub fn prepare(
                 u0,
                 v0,
             },
+            start_iterations: settings.start_iterations,
         },
         recon,
         sampled,
         segment,
+        located,
     })
 }
 
@@ -496,6 +545,15 @@ pub struct Diagnosis {
     pub predictions: (Option<DMatrix<f64>>, Option<DMatrix<f64>>),
 }
 
+/// Segment simulations spent by [`Comparison::errors`]: the start-state
+/// refinement's (or one per segment) and the open-loop run.
+fn error_simulations(set: &ErrorSet, cmp: &Comparison) -> usize {
+    set.starts
+        .as_ref()
+        .map_or(cmp.segments.len(), |f| f.simulations)
+        + 1
+}
+
 /// Pick up to `k` segments spread evenly over `all`.
 fn spread(all: &[Segment], k: usize) -> Vec<Segment> {
     if all.len() <= k || k == 0 {
@@ -523,7 +581,7 @@ pub fn diagnose(
     let base_sub = sim0.substeps;
     progress("errors before");
     let (before, pred_before) = cmp.errors(declared, sim0);
-    let mut sims = 2 * cmp.segments.len() + 2;
+    let mut sims = error_simulations(&before, cmp);
     let measured = cmp.measured();
     let (cy, dy) = prep.sampled.outputs(&prep.channels)?;
     let mut current = declared.clone();
@@ -598,9 +656,12 @@ pub fn diagnose(
         sims += fit_sims;
         let sim = resolved(&fitted, rec.fs, settings);
         let sub = sim.substeps;
-        let pred = cmp.predict(&fitted, &cmp.segments, sim);
-        sims += cmp.segments.len();
-        let new_err = pred.as_ref().ok().map(|y| cmp.total_error(y));
+        let pred = cmp.shoot(&fitted, sim);
+        sims += match &pred {
+            Ok((_, _, Some(f))) => f.simulations,
+            _ => cmp.segments.len(),
+        };
+        let new_err = pred.as_ref().ok().map(|y| cmp.total_error(&y.0));
         let pays = match (current_err, new_err) {
             (Some(a), Some(b)) => b * b < a * a * (1.0 - settings.min_improvement),
             (None, Some(_)) => true,
@@ -640,7 +701,7 @@ pub fn diagnose(
         current = fitted;
         current_err = new_err;
         current_sub = sub;
-        baseline = pred.ok();
+        baseline = pred.ok().map(|p| p.0);
     }
     timings.insert("trace_and_fit".into(), t_loop.elapsed().as_secs_f64());
     progress("errors after");
@@ -649,7 +710,7 @@ pub fn diagnose(
         ..Default::default()
     };
     let (after, pred_after) = cmp.errors(&current, sim1);
-    sims += cmp.segments.len() + 1;
+    sims += error_simulations(&after, cmp);
     let effects = report_effects(&current, &added, cmp, rec.fs, settings, &mut sims);
     let validation = match validation {
         Some(v) => {
@@ -802,18 +863,38 @@ fn fit_effects(
     match best {
         Some(i) => {
             let r = &results[i];
-            Ok((
-                r.model.clone(),
-                format!(
-                    "{:?} after {} iterations (start {} of {}, {} sub-steps)",
-                    r.termination,
-                    r.iterations,
-                    i + 1,
-                    starts.len(),
-                    sub
-                ),
-                sims,
-            ))
+            let mut note = format!(
+                "{:?} after {} iterations (start {} of {}, {} sub-steps)",
+                r.termination,
+                r.iterations,
+                i + 1,
+                starts.len(),
+                sub
+            );
+            let mut model = r.model.clone();
+            // the start states the fit used were reconstructed with the
+            // linear model: refine them for the fitted model and fit again
+            // from the fitted values (one alternation)
+            if cmp.start_iterations > 0 {
+                let (segs, _, sf) =
+                    starts::refine(cmp, &r.model, problem.sim, &segments, cmp.start_iterations);
+                sims += sf.simulations;
+                problem.segments = segs;
+                if let Ok((Some(_), again)) = crate::update::fit_multistart(
+                    &problem,
+                    &settings.fit,
+                    std::slice::from_ref(&r.x),
+                ) {
+                    let a = &again[0];
+                    sims += a.simulations;
+                    note = format!(
+                        "{note}; refit with start states refined for it: {:?} after {} iterations",
+                        a.termination, a.iterations
+                    );
+                    model = a.model.clone();
+                }
+            }
+            Ok((model, note, sims))
         }
         None => Ok((
             trial.clone(),
@@ -911,7 +992,7 @@ fn validate(
     let cmp = &prep.comparison;
     let (before, _) = cmp.errors(declared, sims.0);
     let (after, _) = cmp.errors(fitted, sims.1);
-    *count += 2 * (cmp.segments.len() + 1);
+    *count += error_simulations(&before, cmp) + error_simulations(&after, cmp);
     // the linear model driven by the first record's identified force
     let n = declared.ndof();
     let ns = v.len();

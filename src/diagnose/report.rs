@@ -85,7 +85,7 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
     let _ = writeln!(s, "## Errors\n");
     let _ = writeln!(
         s,
-        "`relative_error`: multiple-shooting prediction over {}-sample segments, each simulated from the state reconstructed at its start; `simulation_error`: open-loop simulation of the whole record.\n",
+        "`relative_error`: multiple-shooting prediction over {}-sample segments, each simulated from the state reconstructed at its start and refined for the model scored (Gauss–Newton on the segment's output error); `simulation_error`: open-loop simulation of the whole record.\n",
         d.prepared.segment
     );
     let _ = writeln!(s, "| | relative_error | simulation_error |\n|---|---|---|");
@@ -194,7 +194,7 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
     let _ = writeln!(s, "\nIdentification: {}.", d.identification);
     let _ = writeln!(
         s,
-        "Sub-steps per sample: {} (declared model), {} (final model). Simulations: {} nonlinear, {} linear (trace). Time: {:.2} s.",
+        "Sub-steps per sample: {} (declared model), {} (final model). Segment simulations: {} (fits, start-state refinement, errors), {} linear (trace). Time: {:.2} s.",
         d.substeps.0,
         d.substeps.1,
         d.simulations,

@@ -1,0 +1,322 @@
+//! Segment start states fitted to the record.
+//!
+//! The multiple-shooting error simulates each segment from a start state.
+//! The reconstruction gives one, but from a few accelerometers its error is
+//! large enough to dominate the segment error of an otherwise exact model
+//! (an impacting structure amplifies it). So each start state is refined,
+//! for the model being scored, by minimising the segment's weighted output
+//! error
+//!
+//! $$ J_s(x_0) = \sum_{c,k} w_c^2 \, (y_{c,k} - \hat y_{c,k}(x_0))^2 $$
+//!
+//! with Gauss–Newton steps `δ = J⁺ r` from the reconstructed state. The
+//! Jacobian is that of the model's linear part, `∂ŷ_k/∂x_0 = C_y A^k`
+//! (exact for a linear model, where one step solves the problem; an
+//! approximation for a nonlinear one, so every step is checked: a step that
+//! does not lower `J_s` is halved, up to four times, else the segment
+//! keeps its state). `J⁺` is the pseudo-inverse in states scaled to a
+//! common unit (displacements × ω), singular values below 1e-8 of the
+//! largest dropped: directions the outputs never see (a free-free model's
+//! rigid-body displacement under acceleration data) keep the reconstructed
+//! value. Every model — the declared one before, the fitted one after — is
+//! scored the same way.
+
+use super::errors::Comparison;
+use crate::integrate::SimSettings;
+use crate::linear::SampledModel;
+use crate::model::Model;
+use crate::update::shooting::Segment;
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// What the refinement did.
+#[derive(Debug, Clone, Serialize)]
+pub struct StartFit {
+    /// Gauss–Newton iterations run.
+    pub iterations: usize,
+    /// Segment simulations run.
+    pub simulations: usize,
+    /// Weighted squared error summed over segments, before and after.
+    pub cost: (f64, f64),
+    /// Segments whose state could not be improved in the last iteration.
+    pub stalled: usize,
+    /// What went wrong, if anything.
+    pub note: String,
+}
+
+/// Pseudo-inverses of the scaled start-state Jacobian, one per segment
+/// length.
+struct Jacobians {
+    a: DMatrix<f64>,
+    cy: DMatrix<f64>,
+    w: Vec<f64>,
+    scale: DVector<f64>,
+    pinv: BTreeMap<usize, DMatrix<f64>>,
+}
+
+impl Jacobians {
+    fn new(model: &Model, cmp: &Comparison, substeps: usize) -> Option<Jacobians> {
+        let sm = SampledModel::from_model(&model.linear_part(), cmp.fs, substeps).ok()?;
+        let n = sm.n;
+        let channels: Vec<_> = cmp
+            .observations
+            .iter()
+            .map(|o| (o.quantity, o.dof - 1))
+            .collect();
+        let (cy, _) = sm.outputs(&channels).ok()?;
+        let mk = &sm.m_inv * &sm.k;
+        let w2 = (0..n).map(|i| mk[(i, i)].abs()).fold(0.0, f64::max);
+        let omega = if w2 > 0.0 {
+            w2.sqrt()
+        } else {
+            2.0 * std::f64::consts::PI * cmp.fs / 10.0
+        };
+        let scale = DVector::from_fn(2 * n, |i, _| if i < n { 1.0 / omega } else { 1.0 });
+        Some(Jacobians {
+            a: sm.a.clone(),
+            cy,
+            w: cmp.observations.iter().map(|o| o.weight).collect(),
+            scale,
+            pinv: BTreeMap::new(),
+        })
+    }
+
+    fn pinv(&mut self, len: usize) -> &DMatrix<f64> {
+        let (a, cy, w, scale) = (&self.a, &self.cy, &self.w, &self.scale);
+        self.pinv.entry(len).or_insert_with(|| {
+            let (p, nx) = (cy.nrows(), cy.ncols());
+            let mut j = DMatrix::zeros(len * p, nx);
+            let mut blk = cy.clone();
+            for k in 0..len {
+                for r in 0..p {
+                    for c in 0..nx {
+                        j[(k * p + r, c)] = w[r] * blk[(r, c)] * scale[c];
+                    }
+                }
+                blk = &blk * a;
+            }
+            let svd = j.svd(true, true);
+            let smax = svd.singular_values.max();
+            let tol = 1e-8 * smax;
+            let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+            let mut out = DMatrix::zeros(nx, len * p);
+            for (i, &s) in svd.singular_values.iter().enumerate() {
+                if s > tol {
+                    out += vt.row(i).transpose() * u.column(i).transpose() / s;
+                }
+            }
+            // back to unscaled states
+            for r in 0..nx {
+                out.row_mut(r).scale_mut(scale[r]);
+            }
+            out
+        })
+    }
+}
+
+/// Weighted residual of a segment (rows sample-major: `k p + c`) and its
+/// squared norm; `None` when the prediction is not finite.
+fn residual(cmp: &Comparison, seg: &Segment, y: &DMatrix<f64>) -> Option<(DVector<f64>, f64)> {
+    let p = cmp.observations.len();
+    let mut r = DVector::zeros(seg.len * p);
+    for k in 0..seg.len {
+        for (c, o) in cmp.observations.iter().enumerate() {
+            let v = y[(c, seg.start + k)];
+            if !v.is_finite() {
+                return None;
+            }
+            r[k * p + c] = o.weight * (o.data[seg.start + k] - v);
+        }
+    }
+    let s = r.norm_squared();
+    Some((r, s))
+}
+
+/// Predict the segments one call at a time when a joint call fails (a
+/// failing segment stays NaN).
+fn predict_each(
+    cmp: &Comparison,
+    model: &Model,
+    segs: &[Segment],
+    sim: SimSettings,
+    count: &mut usize,
+) -> DMatrix<f64> {
+    *count += segs.len();
+    if let Ok(y) = cmp.predict(model, segs, sim) {
+        return y;
+    }
+    let mut out = DMatrix::from_element(cmp.observations.len(), cmp.force.ncols(), f64::NAN);
+    for s in segs {
+        if let Ok(y) = cmp.predict(model, std::slice::from_ref(s), sim) {
+            for c in 0..out.nrows() {
+                for k in s.start..s.start + s.len {
+                    out[(c, k)] = y[(c, k)];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Gauss–Newton steps from a forward-difference Jacobian of the nonlinear
+/// simulation: one simulation of every segment per state component.
+#[allow(clippy::too_many_arguments)]
+fn fd_steps(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    segs: &[Segment],
+    y: &DMatrix<f64>,
+    res: &[Option<(DVector<f64>, f64)>],
+    scale: &DVector<f64>,
+    count: &mut usize,
+) -> Vec<Option<DVector<f64>>> {
+    let n = model.ndof();
+    let nx = 2 * n;
+    let p = cmp.observations.len();
+    let vref = (segs
+        .iter()
+        .flat_map(|s| s.v0.iter())
+        .map(|v| v * v)
+        .sum::<f64>()
+        / (segs.len() * n).max(1) as f64)
+        .sqrt()
+        .max(1e-9);
+    let mut jac: Vec<DMatrix<f64>> = segs.iter().map(|s| DMatrix::zeros(s.len * p, nx)).collect();
+    for q in 0..nx {
+        let h = 1e-5 * vref * scale[q];
+        let trial: Vec<Segment> = segs
+            .iter()
+            .map(|s| {
+                let mut t = s.clone();
+                if q < n {
+                    t.u0[q] += h;
+                } else {
+                    t.v0[q - n] += h;
+                }
+                t
+            })
+            .collect();
+        let yt = predict_each(cmp, model, &trial, sim, count);
+        for (i, s) in segs.iter().enumerate() {
+            for k in 0..s.len {
+                for (c, o) in cmp.observations.iter().enumerate() {
+                    let d = (yt[(c, s.start + k)] - y[(c, s.start + k)]) / h;
+                    jac[i][(k * p + c, q)] = o.weight * d * scale[q];
+                }
+            }
+        }
+    }
+    jac.into_iter()
+        .zip(res)
+        .map(|(j, r)| {
+            let (r, _) = r.as_ref()?;
+            if j.iter().any(|v| !v.is_finite()) {
+                return None;
+            }
+            let svd = j.svd(true, true);
+            let smax = svd.singular_values.max();
+            let d = svd.solve(r, 1e-6 * smax).ok()?;
+            Some(d.component_mul(scale))
+        })
+        .collect()
+}
+
+/// Refine the start states of `segments` for `model` (module docs).
+/// Returns the refined segments, their predictions (p × N, NaN outside the
+/// segments and where a simulation failed) and what was done.
+pub fn refine(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    segments: &[Segment],
+    iterations: usize,
+) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
+    let mut sims = 0;
+    let mut segs = segments.to_vec();
+    let mut y = predict_each(cmp, model, &segs, sim, &mut sims);
+    let mut res: Vec<Option<(DVector<f64>, f64)>> =
+        segs.iter().map(|s| residual(cmp, s, &y)).collect();
+    let cost0: f64 = res.iter().flatten().map(|r| r.1).sum();
+    let Some(mut jac) = Jacobians::new(model, cmp, sim.substeps) else {
+        let fit = StartFit {
+            iterations: 0,
+            simulations: sims,
+            cost: (cost0, cost0),
+            stalled: segs.len(),
+            note: "the linear part of the model could not be sampled; start states kept".into(),
+        };
+        return (segs, y, fit);
+    };
+    let n = model.ndof();
+    let mut stalled = 0;
+    let mut done = 0;
+    let exact = !model.is_nonlinear();
+    for _ in 0..iterations {
+        done += 1;
+        // steps
+        let steps: Vec<Option<DVector<f64>>> = if exact {
+            segs.iter()
+                .zip(&res)
+                .map(|(s, r)| r.as_ref().map(|(r, _)| jac.pinv(s.len) * r))
+                .collect()
+        } else {
+            fd_steps(cmp, model, sim, &segs, &y, &res, &jac.scale, &mut sims)
+        };
+        let mut pending: Vec<usize> = (0..segs.len()).filter(|&i| steps[i].is_some()).collect();
+        let mut t = 1.0;
+        let mut improved = vec![false; segs.len()];
+        for _ in 0..5 {
+            if pending.is_empty() {
+                break;
+            }
+            let trial: Vec<Segment> = pending
+                .iter()
+                .map(|&i| {
+                    let d = steps[i].as_ref().expect("pending segments have a step");
+                    let s = &segs[i];
+                    Segment {
+                        start: s.start,
+                        len: s.len,
+                        u0: (0..n).map(|q| s.u0[q] + t * d[q]).collect(),
+                        v0: (0..n).map(|q| s.v0[q] + t * d[n + q]).collect(),
+                    }
+                })
+                .collect();
+            let yt = predict_each(cmp, model, &trial, sim, &mut sims);
+            let mut still = vec![];
+            for (ti, &i) in pending.iter().enumerate() {
+                let old = res[i].as_ref().map_or(f64::INFINITY, |r| r.1);
+                match residual(cmp, &trial[ti], &yt) {
+                    Some(r) if r.1 < old => {
+                        for c in 0..y.nrows() {
+                            for k in trial[ti].start..trial[ti].start + trial[ti].len {
+                                y[(c, k)] = yt[(c, k)];
+                            }
+                        }
+                        segs[i] = trial[ti].clone();
+                        res[i] = Some(r);
+                        improved[i] = true;
+                    }
+                    _ => still.push(i),
+                }
+            }
+            pending = still;
+            t *= 0.5;
+        }
+        stalled = improved.iter().filter(|&&b| !b).count();
+        if stalled == segs.len() {
+            break;
+        }
+    }
+    let cost1: f64 = res.iter().flatten().map(|r| r.1).sum();
+    let fit = StartFit {
+        iterations: done,
+        simulations: sims,
+        cost: (cost0, cost1),
+        stalled,
+        note: String::new(),
+    };
+    (segs, y, fit)
+}
