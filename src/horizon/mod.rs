@@ -25,10 +25,15 @@
 //!
 //! The front door is [`identify`]; see `docs/horizon.md`.
 
+mod assemble;
+mod basis;
 pub mod batch;
 pub mod convert;
+mod covariance;
+mod dense;
 pub mod problem;
 pub mod qp;
+mod riccati;
 pub mod select;
 pub mod settings;
 pub mod smoother;
@@ -41,10 +46,15 @@ pub use settings::{
 
 use crate::error::Result;
 use crate::linear::SampledModel;
+use assemble::Sink;
 use nalgebra::DMatrix;
 use problem::Lq;
 use serde::Serialize;
 use std::time::Instant;
+
+/// Floor of the tolerance on the held covariance (relative error of the
+/// held force variances and output trace).
+pub(crate) const COVARIANCE_TOL: f64 = 1e-10;
 
 /// How the identification ended. Numerical trouble is reported here, never
 /// as a panic; the result then says what could still be computed.
@@ -166,6 +176,14 @@ pub struct Diagnostics {
     pub riccati_transient: usize,
     /// Whether the Riccati recursion converged (or covered the record).
     pub riccati_converged: bool,
+    /// Relative distance (max norm) of the held Riccati matrix (the last
+    /// exact one) to the fixed point solved for by Newton's method: at
+    /// most `riccati_tol`, or at the fixed point's own accuracy when the
+    /// gain was held on the change rule; 0 when nothing is held (the record
+    /// is shorter than the transient, or the constrained QP answered), NaN
+    /// when the fixed point could not be solved for (see
+    /// `horizon::riccati`'s docs).
+    pub riccati_held_distance: f64,
     /// Sample from which the covariance was held at its steady value.
     pub covariance_held_from: Option<usize>,
     /// States (0-based index in `[u; v]`) the data do not determine; their
@@ -254,25 +272,29 @@ pub fn solve(
         candidates: vec![],
     };
     let t1 = Instant::now();
-    let bw = match smoother::backward(&lq, settings.riccati_tol, settings.max_transient) {
+    let sys = basis::Sys::new(&lq);
+    let mut bw = match smoother::backward(&lq, &sys, settings) {
         Ok(b) => b,
         Err(e) => return Ok(failed(&lq, data, fixed, e.k)),
     };
     tm.backward = t1.elapsed().as_secs_f64();
     let t2 = Instant::now();
-    let (s0, sig0, dropped) = match smoother::initial_state(&lq, &bw) {
+    let (z0, sig0, dropped) = match smoother::initial_state(&lq, &sys, &bw) {
         Ok(v) => v,
         Err(e) => return Ok(failed(&lq, data, fixed, e.k)),
     };
-    let s = smoother::forward(&lq, &bw, &s0);
+    let lff = std::mem::replace(&mut bw.lff, DMatrix::zeros(0, 0));
+    let mut sink = Sink::new(&lq, data, Some(&sys.wx), lff);
+    smoother::forward(&lq, &sys, &bw, &z0, &mut sink);
     tm.forward = t2.elapsed().as_secs_f64();
     let t3 = Instant::now();
-    let cov_tol = settings.riccati_tol.max(1e-10);
-    let cov = covariance.then(|| smoother::covariance(&lq, &bw, sig0, cov_tol));
+    let cov_tol = settings.riccati_tol.max(COVARIANCE_TOL);
+    let cov = covariance.then(|| self::covariance::covariance(&lq, &sys, &bw, sig0, cov_tol));
     tm.covariance = t3.elapsed().as_secs_f64();
-    let mut res = assemble(&lq, data, settings, &s, cov.as_ref(), fixed);
+    let mut res = sink.finish(settings, cov, fixed);
     res.diagnostics.riccati_transient = bw.transient.len();
     res.diagnostics.riccati_converged = bw.converged;
+    res.diagnostics.riccati_held_distance = bw.held_distance;
     if !bw.converged {
         res.status = HorizonStatus::RiccatiNotConverged {
             steps: bw.transient.len(),
@@ -289,121 +311,30 @@ pub fn solve(
             "{dropped} direction(s) of the initial state are determined neither by the data nor by the prior; minimum-norm values used"
         ));
     }
+    if sys.dropped_coupling > 1e-10 {
+        res.notes.push(format!(
+            "the unseen rigid-body directions are invariant under the sampled model only to {:.1e} (relative); that coupling was dropped",
+            sys.dropped_coupling
+        ));
+    }
     if lq.hidden.ncols() > 0 {
         res.notes.push(format!(
             "{} rigid-body direction(s) of the state are not seen by the channels: they are set by the initial-state prior",
             lq.hidden.ncols()
         ));
     }
-    if let Some(c) = &cov {
-        if !c.undetermined.is_empty() {
-            res.notes.push(format!(
-                "{} state(s) are not determined by the data (their std grows without bound and is reported as NaN once the covariance is held): {:?}",
-                c.undetermined.len(),
-                c.undetermined
-            ));
-        }
+    let undetermined = &res.diagnostics.undetermined_states;
+    if !undetermined.is_empty() {
+        let note = format!(
+            "{} state(s) are not determined by the data (their std grows without bound and is reported as NaN once the covariance is held): {:?}",
+            undetermined.len(),
+            undetermined
+        );
+        res.notes.push(note);
     }
     tm.total = t0.elapsed().as_secs_f64();
     res.timings = tm;
     Ok(res)
-}
-
-/// Physical states, forces, outputs and summaries from scaled states.
-pub(crate) fn assemble(
-    lq: &Lq,
-    data: &HorizonData<'_>,
-    settings: &HorizonSettings,
-    s: &DMatrix<f64>,
-    cov: Option<&smoother::Covariance>,
-    weights: SelectedWeights,
-) -> HorizonResult {
-    let (nx, m, p, len) = (lq.nx, lq.m, lq.p, lq.len);
-    let mut residual = &lq.target - &lq.ch * s;
-    let rss = residual.norm_squared();
-    for r in 0..p {
-        residual.row_mut(r).scale_mut(1.0 / lq.wsqrt[r]);
-    }
-    let predicted = data.measured - &residual;
-    let dx = lq.d.rows(0, nx);
-    let mut states = s.rows(0, nx).into_owned();
-    for mut c in states.column_iter_mut() {
-        c.component_mul_assign(&dx);
-    }
-    let dw = lq.d[nx];
-    let ws = s.rows(nx, m).into_owned();
-    let force = &ws * dw;
-    let dof_force = data.unknown * &force;
-    let wsl = ws.as_slice();
-    let smooth: f64 = wsl[m..]
-        .iter()
-        .zip(&wsl[..wsl.len() - m])
-        .map(|(a, b)| (a - b) * (a - b))
-        .sum();
-    let cost = rss + lq.lambda * ws.norm_squared() + lq.mu * smooth + prior_cost(lq, s);
-    let relative_residual: Vec<f64> = (0..p)
-        .map(|r| {
-            crate::metrics::ratio(
-                residual.row(r).norm_squared(),
-                data.measured.row(r).norm_squared(),
-            )
-        })
-        .collect();
-    let total = crate::metrics::ratio(residual.norm_squared(), data.measured.norm_squared());
-    let tr_h = cov.map_or(f64::NAN, |c| c.tr_h);
-    let dof = (len * p) as f64 - tr_h;
-    let variance_factor = if dof > 0.0 { rss / dof } else { f64::NAN };
-    let scale = match settings.covariance_scale {
-        CovarianceScale::Model => 1.0,
-        CovarianceScale::Estimated => variance_factor,
-    };
-    // NaN (undetermined) stays NaN: sqrt of a NaN product
-    let sd = |v: f64| (v * scale).abs().sqrt();
-    let force_std = cov.map(|c| c.var_w.map(|v| sd(v) * dw));
-    let state_std = cov.map(|c| {
-        let mut out = c.var_x.map(sd);
-        for mut col in out.column_iter_mut() {
-            col.component_mul_assign(&dx);
-        }
-        out
-    });
-    HorizonResult {
-        force,
-        force_std,
-        dof_force,
-        states,
-        state_std,
-        predicted,
-        residual,
-        weights,
-        status: HorizonStatus::Solved,
-        notes: vec![],
-        diagnostics: Diagnostics {
-            solver: Solver::Riccati,
-            cost,
-            rss,
-            relative_residual,
-            relative_residual_total: total,
-            tr_h,
-            variance_factor,
-            riccati_transient: 0,
-            riccati_converged: true,
-            covariance_held_from: cov.and_then(|c| c.held_from),
-            undetermined_states: cov.map(|c| c.undetermined.clone()).unwrap_or_default(),
-            qp_iterations: 0,
-        },
-        timings: Timings::default(),
-    }
-}
-
-fn prior_cost(lq: &Lq, s: &DMatrix<f64>) -> f64 {
-    match &lq.init {
-        problem::Init::Fixed(_) => 0.0,
-        problem::Init::Prior { p, mean } => {
-            let dx = s.column(0).rows(0, lq.nx) - mean;
-            dx.dot(&(p * &dx))
-        }
-    }
 }
 
 fn failed(lq: &Lq, data: &HorizonData<'_>, weights: SelectedWeights, k: usize) -> HorizonResult {
@@ -432,6 +363,7 @@ fn failed(lq: &Lq, data: &HorizonData<'_>, weights: SelectedWeights, k: usize) -
             variance_factor: f64::NAN,
             riccati_transient: 0,
             riccati_converged: false,
+            riccati_held_distance: f64::NAN,
             covariance_held_from: None,
             undetermined_states: vec![],
             qp_iterations: 0,

@@ -112,8 +112,9 @@ pub(crate) struct Lq {
     /// Orthonormal basis (scaled coordinates, ns × q) of the states the
     /// data cannot see: rigid-body positions (and velocities) of a model
     /// with `K r = C r = 0` when no displacement (velocity) channel sees
-    /// them. The exact cost-to-go vanishes on them; the sweep projects them
-    /// out so that rounding does not grow there.
+    /// them. The exact cost-to-go vanishes on them; the sweep splits them
+    /// off exactly ([`super::basis`]) so that rounding does not couple them
+    /// back.
     pub hidden: DMatrix<f64>,
 }
 
@@ -172,9 +173,14 @@ impl Lq {
                 bc1[(r, j)] = model.b1[(r, i)] * dinv[r];
             }
         }
-        let mut target = data.measured - &dy * data.known_force;
-        for r in 0..p {
-            target.row_mut(r).scale_mut(wsqrt[r]);
+        let mut target = data.measured.clone();
+        let (dyv, gv) = (
+            super::dense::view(&dy),
+            super::dense::view(data.known_force),
+        );
+        super::dense::mul(super::dense::view_mut(&mut target), true, dyv, gv, -1.0);
+        for col in target.as_mut_slice().chunks_exact_mut(p) {
+            col.iter_mut().zip(wsqrt.iter()).for_each(|(v, w)| *v *= w);
         }
         let init = initial(&settings.initial, nx, &d)?;
         let hidden = hidden_directions(model, data.channels, &d, ns);
@@ -198,25 +204,6 @@ impl Lq {
             wsqrt,
             hidden,
         })
-    }
-
-    /// `P ← (I − U Uᵀ) P (I − U Uᵀ)` with `U` = [`Lq::hidden`].
-    pub fn project_matrix(&self, p: &mut DMatrix<f64>) {
-        if self.hidden.ncols() == 0 {
-            return;
-        }
-        let u = &self.hidden;
-        let pu = &*p * u;
-        let upu = u.transpose() * &pu;
-        *p -= &pu * u.transpose() + u * pu.transpose() - u * upu * u.transpose();
-    }
-
-    /// `p ← (I − U Uᵀ) p`.
-    pub fn project_vector(&self, v: &mut [f64]) {
-        for c in self.hidden.column_iter() {
-            let a: f64 = c.iter().zip(v.iter()).map(|(x, y)| x * y).sum();
-            v.iter_mut().zip(c.iter()).for_each(|(y, x)| *y -= a * x);
-        }
     }
 
     /// `c_k` (scaled, ns) added into `out`.

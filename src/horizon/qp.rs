@@ -18,7 +18,7 @@
 //! unconstrained problem.
 
 use super::problem::{Init, Lq};
-use super::{assemble, smoother, HorizonData, HorizonResult, HorizonSettings, HorizonStatus};
+use super::{smoother, HorizonData, HorizonResult, HorizonSettings, HorizonStatus};
 use super::{SelectedWeights, Solver, Timings, WeightSelection};
 use crate::error::{Result, TacitError};
 use crate::linear::SampledModel;
@@ -219,21 +219,19 @@ pub fn solve_constrained(
     };
     // the unconstrained covariance, for the reported std
     let cov = if settings.covariance {
-        smoother::backward(&lq, settings.riccati_tol, settings.max_transient)
-            .ok()
-            .and_then(|bw| {
-                let (_, sig0, _) = smoother::initial_state(&lq, &bw).ok()?;
-                Some(smoother::covariance(
-                    &lq,
-                    &bw,
-                    sig0,
-                    settings.riccati_tol.max(1e-10),
-                ))
-            })
+        let sys = super::basis::Sys::new(&lq);
+        smoother::backward(&lq, &sys, settings).ok().and_then(|bw| {
+            let (_, sig0, _) = smoother::initial_state(&lq, &sys, &bw).ok()?;
+            let tol = settings.riccati_tol.max(super::COVARIANCE_TOL);
+            Some(super::covariance::covariance(&lq, &sys, &bw, sig0, tol))
+        })
     } else {
         None
     };
-    let mut res = assemble(&lq, data, settings, &s, cov.as_ref(), weights);
+    let has_cov = cov.is_some();
+    let mut sink = super::assemble::Sink::new(&lq, data, None, DMatrix::zeros(lq.m, lq.len));
+    sink.push_all(&s);
+    let mut res = sink.finish(settings, cov, weights);
     res.diagnostics.solver = Solver::Qp;
     res.diagnostics.qp_iterations = sol.iterations;
     if sol.status != SolverStatus::Solved {
@@ -245,7 +243,7 @@ pub fn solve_constrained(
             sol.status, sol.iterations, sol.r_prim, sol.r_dual
         ));
     }
-    if cov.is_some() {
+    if has_cov {
         res.notes.push(
             "force_std is that of the unconstrained problem (constraints can only reduce it)"
                 .into(),

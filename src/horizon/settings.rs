@@ -156,11 +156,22 @@ pub struct HorizonSettings {
     /// Scaling of the reported covariance (default
     /// [`CovarianceScale::Estimated`]).
     pub covariance_scale: CovarianceScale,
-    /// Relative change of the Riccati matrix below which the recursion is
-    /// taken as converged and the steady-state gains are used (default
-    /// 1e-13; (0, 1e-4]). The covariance recursion is held once its force
-    /// and output variances change by less than max(this, 1e-10).
+    /// Tolerance on the Riccati recursion's distance to its fixed point
+    /// (relative, max norm) below which its gain is held over the rest of
+    /// the record (default 1e-13; (0, 1e-4]). The fixed point is solved
+    /// for by Newton's method, so the distance is measured, not guessed
+    /// from a change between steps; below ~1e-13 it is rounding (the
+    /// recursion is then held once its change stayed below this for 64
+    /// steps, as it is when the fixed point is too ill-conditioned to
+    /// solve for). The covariance recursion is held once its force
+    /// variances and output trace are within max(this, 1e-10) of their
+    /// steady values.
     pub riccati_tol: f64,
+    /// Hold the Riccati gain once the recursion has reached its fixed point
+    /// (default true). False computes the exact gain of every transition —
+    /// the reference the held answer is checked against, at the cost of
+    /// one Riccati step per sample (`max_transient` is then ignored).
+    pub hold_steady_gain: bool,
     /// Longest transient (samples) the Riccati recursion may take before it
     /// is declared non-convergent (default 20 000; ≥ 10). The last gain is
     /// then used and the status says so.
@@ -185,6 +196,7 @@ impl Default for HorizonSettings {
             covariance: true,
             covariance_scale: CovarianceScale::Estimated,
             riccati_tol: 1e-13,
+            hold_steady_gain: true,
             max_transient: 20_000,
         }
     }
