@@ -286,6 +286,52 @@ pub(crate) fn fixed_point(
 mod tests {
     use super::*;
 
+    /// A 2-state, 1-force system: `x_{k+1} = A x_k + b0 w_k + b1 w_{k+1}`,
+    /// one output `y = c x + d w`.
+    fn small(mu: f64) -> Reduced {
+        let f = DMatrix::from_row_slice(3, 3, &[0.95, 0.1, 0.02, -0.3, 0.9, 0.05, 0.0, 0.0, 0.0]);
+        let g = DMatrix::from_row_slice(3, 1, &[0.01, 0.04, 1.0]);
+        Reduced {
+            nx: 2,
+            m: 1,
+            ns: 3,
+            mu,
+            lambda: 0.1,
+            f,
+            g,
+            ch: DMatrix::from_row_slice(1, 3, &[1.0, 0.2, 0.5]),
+            bc0: DMatrix::zeros(3, 0),
+            bc1: DMatrix::zeros(3, 0),
+        }
+    }
+
+    #[test]
+    fn newton_finds_the_limit_of_the_recursion() {
+        for mu in [0.0, 0.3] {
+            let sys = small(mu);
+            let mut ric = Riccati::new(&sys);
+            let mut p = sys.stage_weight();
+            let mut at = None;
+            for k in 0..3000 {
+                assert!(ric.step(&sys, &p));
+                std::mem::swap(&mut p, &mut ric.p);
+                if k == 60 {
+                    at = Some(p.clone());
+                }
+            }
+            let start = at.unwrap();
+            let (pinf, acc) = fixed_point(&sys, &mut ric, &start).unwrap();
+            let d = rel_change(&pinf, &p);
+            assert!(
+                d < 1e-13 && acc <= 1e-12,
+                "μ = {mu}: distance {d:e}, accuracy {acc:e}"
+            );
+            // and it is a fixed point of the step
+            assert!(ric.step(&sys, &pinf));
+            assert!(rel_change(&ric.p, &pinf) < 1e-14);
+        }
+    }
+
     #[test]
     fn stein_solves_its_equation() {
         let a = DMatrix::from_fn(5, 5, |i, j| 0.15 * (((i * 3 + j * 7) % 5) as f64 - 2.0));

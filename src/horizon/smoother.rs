@@ -161,15 +161,60 @@ impl Vectors {
     }
 }
 
-/// The exact transient from the end of the record: returns the Riccati
-/// matrix where it stopped, the fixed point (if found) and the distance.
+/// The state of the exact recursion from the end of the record and of its
+/// fixed-point test (see [`super::riccati`]).
 struct Transient {
+    /// `P` of the last exact step.
     p: DMatrix<f64>,
-    /// The fixed point and its accuracy.
+    /// The fixed point and its accuracy, once solved for.
     pinf: Option<(DMatrix<f64>, f64)>,
+    /// `‖P − P_∞‖_max / ‖P_∞‖_max` (∞ before `P_∞` is known).
     distance: f64,
+    /// Relative change of `P` over the last step.
     last_change: f64,
-    settled: bool,
+    /// Newton attempts made (at most one per [`NEWTON_AT`] threshold).
+    attempts: usize,
+    /// Consecutive steps with a change below the tolerance.
+    calm: usize,
+}
+
+impl Transient {
+    fn new(r: &Reduced) -> Transient {
+        Transient {
+            p: r.stage_weight(),
+            pinf: None,
+            distance: f64::INFINITY,
+            last_change: f64::INFINITY,
+            attempts: 0,
+            calm: 0,
+        }
+    }
+
+    /// After an exact step: may the gain be held from here? The measured
+    /// distance when the fixed point is known (down to its own accuracy),
+    /// else a change that stayed below `tol` for [`WINDOW`] steps.
+    fn settles(&mut self, r: &Reduced, ric: &mut Riccati, tol: f64) -> bool {
+        self.calm = if self.last_change <= tol {
+            self.calm + 1
+        } else {
+            0
+        };
+        let due = NEWTON_AT
+            .get(self.attempts)
+            .is_some_and(|t| self.last_change <= *t);
+        if self.pinf.is_none() && due {
+            self.attempts += 1;
+            self.pinf = fixed_point(r, ric, &self.p);
+        }
+        match &self.pinf {
+            Some((pinf, acc)) => {
+                self.distance = rel_change(&self.p, pinf);
+                // (a floor under-estimated by `acc` must not run on forever)
+                self.distance <= tol.max(2.0 * acc) || self.calm >= 4 * WINDOW
+            }
+            None => self.attempts == NEWTON_AT.len() && self.calm >= WINDOW,
+        }
+    }
 }
 
 /// The backward pass.
@@ -179,26 +224,15 @@ pub(crate) fn backward(
     settings: &HorizonSettings,
 ) -> Result<Backward, NotPositiveDefinite> {
     let (tol, hold) = (settings.riccati_tol, settings.hold_steady_gain);
-    let max_transient = if hold {
-        settings.max_transient
-    } else {
-        usize::MAX
-    };
     let (r, m, len) = (&sys.r, lq.m, lq.len);
     let mut ric = Riccati::new(r);
     let mut pv = DVector::zeros(r.ns);
     pv.gemv_tr(1.0, &r.ch, &lq.target.column(len - 1), 0.0);
     let mut lff = DMatrix::zeros(m, len);
     let mut transient: Vec<Gain> = Vec::new();
-    let mut tr = Transient {
-        p: r.stage_weight(),
-        pinf: None,
-        distance: f64::INFINITY,
-        last_change: f64::INFINITY,
-        settled: false,
-    };
+    let mut tr = Transient::new(r);
     let mut vec = Vectors::new(r);
-    let (mut j, mut attempts, mut calm) = (len - 1, 0usize, 0usize);
+    let (mut j, mut settled) = (len - 1, false);
     while j > 0 {
         let k = j - 1;
         if !ric.step(r, &tr.p) {
@@ -213,31 +247,13 @@ pub(crate) fn backward(
             c: ric.c.clone(),
         });
         j -= 1;
-        calm = if tr.last_change <= tol { calm + 1 } else { 0 };
-        if !hold {
-            continue;
-        }
-        if tr.pinf.is_none() && attempts < NEWTON_AT.len() && tr.last_change <= NEWTON_AT[attempts]
-        {
-            attempts += 1;
-            tr.pinf = fixed_point(r, &mut ric, &tr.p);
-        }
-        // the measured distance when the fixed point is known (down to its
-        // own accuracy); else a change that stayed below the tolerance
-        let settled = match &tr.pinf {
-            Some((pinf, acc)) => {
-                tr.distance = rel_change(&tr.p, pinf);
-                // (a floor under-estimated by `acc` must not run on forever)
-                tr.distance <= tol.max(2.0 * acc) || calm >= 4 * WINDOW
+        if hold {
+            settled = tr.settles(r, &mut ric, tol);
+            if settled || transient.len() >= settings.max_transient {
+                break;
             }
-            None => attempts == NEWTON_AT.len() && calm >= WINDOW,
-        };
-        if settled || transient.len() >= max_transient {
-            tr.settled = settled;
-            break;
         }
     }
-    let converged = j == 0 || tr.settled;
     // hold the last exact iterate: it is within `tol` of the fixed point,
     // and within rounding of the iterates it stands for, where the fixed
     // point solved for carries its own rounding, amplified by the Stein
@@ -260,14 +276,8 @@ pub(crate) fn backward(
             .ok_or(NotPositiveDefinite { k: 0 })?,
     };
     let mut phi = sys.f.clone();
-    let q = sys.q;
-    mul(
-        view_mut(&mut phi).submatrix_mut(0, q, lq.ns, r.ns),
-        true,
-        view(&sys.g),
-        view(&steady.l),
-        -1.0,
-    );
+    let dst = view_mut(&mut phi).submatrix_mut(0, sys.q, lq.ns, r.ns);
+    mul(dst, true, view(&sys.g), view(&steady.l), -1.0);
     let held_distance = match (&held, &tr.pinf) {
         (None, _) => 0.0,
         (Some(_), Some(_)) => tr.distance,
@@ -290,7 +300,7 @@ pub(crate) fn backward(
         lff,
         p0,
         pv0: pv,
-        converged,
+        converged: j == 0 || settled,
         last_change: tr.last_change,
         held_distance,
     })
