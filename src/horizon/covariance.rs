@@ -9,30 +9,34 @@
 //!    \quad G R^{-1} Gᵀ = XᵀX $$
 //!
 //! — the Rauch–Tung–Striebel smoothed covariance, obtained without a
-//! filter. It runs in the coordinates of [`super::basis`], where the
-//! covariance of the observable part `[z_V; w]` evolves on its own, exactly
-//! (the closed loop has exact zeros in its `[V w, U]` block): the growing
-//! variance of the hidden directions cannot leak into the forces.
+//! filter. In the coordinates of [`super::basis`] the covariance of the
+//! observable part `[z_V; w]` evolves on its own, exactly (the closed loop
+//! has exact zeros in its `[V w, U]` block), and it is all that is
+//! computed: the forces, the outputs and the states without a component
+//! along a hidden direction depend on it alone. States with such a
+//! component (for a free-free model under acceleration data: every
+//! displacement and velocity) are set by the initial-state prior, not by
+//! the data, and their variance grows without bound: their std is NaN.
 //!
-//! Over the steady region the observable block converges to the fixed
-//! point `Σ_∞ = Φ Σ_∞ Φᵀ + XᵀX` of the steady closed loop, solved by
-//! Smith's doubling ([`super::riccati::stein`]). The recursion runs from
-//! the first sample until its force variances and output-variance trace
-//! are within `tol` (relative) of `Σ_∞`'s; `Σ_∞` is then held over the
-//! steady region, and over the transient at the end of the record the
-//! recursion runs again with the exact gains (when `Σ_∞` cannot be solved
-//! for, the recursion is held once its force variances and output trace
-//! changed by less than `tol` over [`WINDOW`] steps). States with a component
-//! along a hidden direction (for a free-free model under acceleration
-//! data: every displacement and velocity) have a variance that grows
-//! without bound; from the hold on it is reported as NaN.
+//! **Steady region.** The steady closed loop has the fixed point
+//! `Σ_∞ = Φ Σ_∞ Φᵀ + XᵀX`, solved by Smith's doubling
+//! ([`super::riccati::stein`]). Before the end transient every transition
+//! uses the steady gain, so `Σ_k = Σ_∞ + Φ^k Δ_0 Φ^{kᵀ}`, `Δ_0 = Σ_0 − Σ_∞
+//! = V Λ Vᵀ`: one product `Y_{k+1} = Φ Y_k` (`Y_0 = V`) per sample gives every
+//! variance, `diag Σ_k = diag Σ_∞ + Σ_j λ_j Y_{k,·j}²`, exactly. Once the
+//! force variances and the output trace are within `tol` (relative) of
+//! `Σ_∞`'s, `Σ_∞` is held over the steady region; over the transient at the
+//! end of the record the recursion runs with the exact gains. When `Σ_∞`
+//! cannot be solved for, the recursion runs from the first sample and is
+//! held once its force variances and output trace changed by less than
+//! `tol` over [`WINDOW`] steps.
 
 use super::basis::Sys;
 use super::dense::{mul, solve_lower, symmetrize, view, view_mut};
 use super::problem::Lq;
 use super::riccati::{stein, WINDOW};
 use super::smoother::Backward;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
 /// Smoother covariance summaries (scaled units, model scale).
 #[derive(Debug, Clone)]
@@ -45,197 +49,189 @@ pub(crate) struct Covariance {
     pub tr_h: f64,
     /// Sample from which the covariance was held constant, if any.
     pub held_from: Option<usize>,
-    /// States flagged as not determined by the data.
+    /// States not determined by the data (a component along a hidden
+    /// direction).
     pub undetermined: Vec<usize>,
 }
 
-/// Buffers of one covariance step (z coordinates). A step is
-/// `Σ' = [ΦΣ, Xᵀ] [Φ, Xᵀ]ᵀ`: two products, and for a transient step one
-/// more for Φ and a triangular solve for X.
-struct Propagator<'a> {
+/// One covariance step on the observable block:
+/// `Σ' = [ΦΣ, Xᵀ] [Φ, Xᵀ]ᵀ`, two products (and for a transient step one
+/// more for Φ and a triangular solve for X).
+struct Step<'a> {
     sys: &'a Sys,
     bw: &'a Backward,
-    /// `[Φ, Xᵀ]` of the transient step (ns × (ns + m)).
+    /// `[Φ, Xᵀ]` of a transient step, `[Φ_∞, X_∞ᵀ]` (nr × (nr + m)).
     b: DMatrix<f64>,
-    /// `[Φ_∞, X_∞ᵀ]` (ns × (ns + m)).
     b_ss: DMatrix<f64>,
-    /// `[ΦΣ, Xᵀ]` (ns × (ns + m)).
+    /// `[ΦΣ, Xᵀ]`.
     a: DMatrix<f64>,
-    /// `X = C⁻¹Ḡᵀ` (m × ns).
+    /// `X = C⁻¹ Gᵀ` (m × nr) and `Gᵀ`.
     xbar: DMatrix<f64>,
     gt: DMatrix<f64>,
-    cs: DMatrix<f64>,
-    tx: DMatrix<f64>,
 }
 
-impl<'a> Propagator<'a> {
-    fn new(lq: &Lq, sys: &'a Sys, bw: &'a Backward) -> Propagator<'a> {
-        let (ns, m) = (lq.ns, lq.m);
-        let mut p = Propagator {
+impl<'a> Step<'a> {
+    fn new(sys: &'a Sys, bw: &'a Backward) -> Step<'a> {
+        let (nr, m, q) = (sys.r.ns, sys.r.m, sys.q);
+        let mut st = Step {
             sys,
             bw,
-            b: DMatrix::zeros(ns, ns + m),
-            b_ss: DMatrix::zeros(ns, ns + m),
-            a: DMatrix::zeros(ns, ns + m),
-            xbar: DMatrix::zeros(m, ns),
-            gt: sys.g.transpose(),
-            cs: DMatrix::zeros(lq.p, sys.r.ns),
-            tx: DMatrix::zeros(lq.nx, lq.nx),
+            b: DMatrix::zeros(nr, nr + m),
+            b_ss: DMatrix::zeros(nr, nr + m),
+            a: DMatrix::zeros(nr, nr + m),
+            xbar: DMatrix::zeros(m, nr),
+            gt: sys.r.g.transpose(),
         };
-        p.process(&bw.steady.c);
-        p.b_ss.columns_mut(0, ns).copy_from(&bw.phi);
-        p.b_ss.columns_mut(ns, m).copy_from(&p.xbar.transpose());
-        p
+        st.process(&bw.steady.c);
+        st.b_ss
+            .columns_mut(0, nr)
+            .copy_from(&bw.phi.view((q, q), (nr, nr)));
+        st.b_ss.columns_mut(nr, m).tr_copy_from(&st.xbar);
+        st
     }
 
-    /// `X = C⁻¹Ḡᵀ` (`Ḡ R⁻¹ Ḡᵀ = XᵀX`) into `xbar`.
+    /// `X = C⁻¹Gᵀ` (`G R⁻¹ Gᵀ = XᵀX`) into `xbar`.
     fn process(&mut self, c: &DMatrix<f64>) {
         self.xbar.copy_from(&self.gt);
         solve_lower(c, view_mut(&mut self.xbar));
     }
 
-    /// `Ḡ R_∞⁻¹ Ḡᵀ` (ns × ns).
-    fn process_ss(&self) -> DMatrix<f64> {
-        let ns = self.b_ss.nrows();
-        let x = self.b_ss.columns(ns, self.b_ss.ncols() - ns);
-        x * x.transpose()
+    /// `Φ_∞` (nr × nr) and `G R_∞⁻¹ Gᵀ`.
+    fn steady(&self) -> (DMatrix<f64>, DMatrix<f64>) {
+        let nr = self.b_ss.nrows();
+        let x = self.b_ss.columns(nr, self.b_ss.ncols() - nr);
+        (self.b_ss.columns(0, nr).into_owned(), x * x.transpose())
     }
 
-    /// `out = Φ̄_k Σ Φ̄_kᵀ + XᵀX` for transition `k`; with `observable`, only
-    /// the block of `[z_V; w]` (it evolves on its own: `Φ̄[V w, U] = 0`).
-    fn step(&mut self, k: usize, sig: &DMatrix<f64>, out: &mut DMatrix<f64>, observable: bool) {
-        let (bw, sys) = (self.bw, self.sys);
-        let ns = sys.f.nrows();
-        let m = self.xbar.nrows();
+    /// `out = Φ_k Σ Φ_kᵀ + XᵀX` for transition `k`.
+    fn step(&mut self, k: usize, sig: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        let (bw, r) = (self.bw, &self.sys.r);
+        let (nr, m) = (r.ns, r.m);
         if k >= bw.j0 {
             let gain = &bw.transient[k - bw.j0];
             self.process(&gain.c);
-            self.b.columns_mut(0, ns).copy_from(&sys.f);
-            let dst = view_mut(&mut self.b).submatrix_mut(0, sys.q, ns, sys.r.ns);
-            mul(dst, true, view(&sys.g), view(&gain.l), -1.0);
-            self.b.columns_mut(ns, m).tr_copy_from(&self.xbar);
+            self.b.columns_mut(0, nr).copy_from(&r.f);
+            let dst = view_mut(&mut self.b).submatrix_mut(0, 0, nr, nr);
+            mul(dst, true, view(&r.g), view(&gain.l), -1.0);
+            self.b.columns_mut(nr, m).tr_copy_from(&self.xbar);
         }
         let b = if k < bw.j0 { &self.b_ss } else { &self.b };
-        let lo = if observable { sys.q } else { 0 };
-        let n = ns - lo;
-        // A = [ΦΣ, Xᵀ] (rows and columns lo..), out = A [Φ, Xᵀ]ᵀ
-        let phi = view(b).submatrix(lo, lo, n, n);
-        let dst = view_mut(&mut self.a).submatrix_mut(lo, lo, n, n);
-        mul(dst, false, phi, view(sig).submatrix(lo, lo, n, n), 1.0);
-        self.a
-            .view_mut((lo, ns), (n, m))
-            .copy_from(&b.view((lo, ns), (n, m)));
-        let (a, bb) = (
-            view(&self.a).submatrix(lo, lo, n, n + m),
-            view(b).submatrix(lo, lo, n, n + m),
-        );
+        let phi = view(b).submatrix(0, 0, nr, nr);
+        let dst = view_mut(&mut self.a).submatrix_mut(0, 0, nr, nr);
+        mul(dst, false, phi, view(sig), 1.0);
+        self.a.columns_mut(nr, m).copy_from(&b.columns(nr, m));
         mul(
-            view_mut(out).submatrix_mut(lo, lo, n, n),
+            view_mut(out),
             false,
-            a,
-            bb.transpose(),
+            view(&self.a),
+            view(b).transpose(),
             1.0,
         );
         symmetrize(out);
     }
-
-    /// `tr(Ĉ Σ Ĉᵀ)` (Ĉ is zero on the hidden columns).
-    fn output_trace(&mut self, sig: &DMatrix<f64>) -> f64 {
-        let (q, nr) = (self.sys.q, self.sys.r.ns);
-        let ch = &self.sys.r.ch;
-        mul(
-            view_mut(&mut self.cs),
-            false,
-            view(ch),
-            view(sig).submatrix(q, q, nr, nr),
-            1.0,
-        );
-        self.cs.iter().zip(ch.iter()).map(|(a, b)| a * b).sum()
-    }
-
-    /// Variances of the original states, `diag(W_x Σ̄_xx W_xᵀ)`.
-    fn state_var(&mut self, sig: &DMatrix<f64>, out: &mut [f64]) {
-        let wx = &self.sys.wx;
-        let nx = wx.nrows();
-        mul(
-            view_mut(&mut self.tx),
-            false,
-            view(wx),
-            view(sig).submatrix(0, 0, nx, nx),
-            1.0,
-        );
-        for (i, o) in out.iter_mut().enumerate() {
-            *o = (0..nx).map(|j| self.tx[(i, j)] * wx[(i, j)]).sum();
-        }
-    }
-}
-
-/// The steady covariance of the observable block, `Σ_∞ = Φ Σ_∞ Φᵀ + XᵀX`.
-fn steady(sys: &Sys, bw: &Backward, gq_ss: &DMatrix<f64>) -> Option<DMatrix<f64>> {
-    let (q, nr) = (sys.q, sys.r.ns);
-    let phi_t = bw.phi.view((q, q), (nr, nr)).transpose();
-    stein(&phi_t, &gq_ss.view((q, q), (nr, nr)).into_owned())
 }
 
 /// One sample's summaries.
 #[derive(Debug, Clone)]
 struct Summary {
-    var_w: DVector<f64>,
-    var_x: DVector<f64>,
+    var_w: Vec<f64>,
+    var_x: Vec<f64>,
     tr: f64,
 }
 
 impl Summary {
-    fn new(lq: &Lq) -> Summary {
-        Summary {
-            var_w: DVector::zeros(lq.m),
-            var_x: DVector::zeros(lq.nx),
-            tr: 0.0,
-        }
-    }
-
-    /// Summaries of `sig`; the state variances only when `states`.
-    fn take(&mut self, prop: &mut Propagator<'_>, sig: &DMatrix<f64>, states: bool) {
-        let nx = self.var_x.len();
-        for (i, v) in self.var_w.iter_mut().enumerate() {
-            *v = sig[(nx + i, nx + i)];
-        }
-        if states {
-            prop.state_var(sig, self.var_x.as_mut_slice());
-        }
-        self.tr = prop.output_trace(sig);
-    }
-
-    /// Append this sample's values (samples are recorded in order).
-    fn record(&self, rec: &mut Record) {
-        rec.var_w.extend_from_slice(self.var_w.as_slice());
-        let start = rec.var_x.len();
-        rec.var_x.extend_from_slice(self.var_x.as_slice());
-        for &i in &rec.undetermined {
-            rec.var_x[start + i] = f64::NAN;
-        }
-        rec.tr_h += self.tr;
-    }
-
     /// Largest relative distance of the force variances and of the output
     /// trace to `other`'s.
     fn distance(&self, other: &Summary) -> f64 {
         let rel = |a: f64, b: f64| (a - b).abs() / b.abs().max(f64::MIN_POSITIVE);
         self.var_w
             .iter()
-            .zip(other.var_w.iter())
+            .zip(&other.var_w)
             .map(|(a, b)| rel(*a, *b))
             .fold(rel(self.tr, other.tr), f64::max)
     }
 }
 
-/// The values recorded so far.
+/// Reads the summaries off the observable block.
+struct Observe {
+    /// States along `[z_V; w]` (nxr) and forces (m).
+    nxr: usize,
+    /// `[Ĉ; W_V]` ((p + nx) × nr), `W_V` the rows of `W_x` on `z_V`
+    /// (states, zero on the forces); only Ĉ when every state is
+    /// undetermined.
+    rows: DMatrix<f64>,
+    p: usize,
+    /// Undetermined states (NaN).
+    undetermined: Vec<bool>,
+    /// `rows · Σ`.
+    t: DMatrix<f64>,
+}
+
+impl Observe {
+    fn new(lq: &Lq, sys: &Sys, undetermined: &[usize]) -> Observe {
+        let (nx, p, q, nr, nxr) = (lq.nx, lq.p, sys.q, sys.r.ns, sys.r.nx);
+        let states = if undetermined.len() == nx { 0 } else { nx };
+        let mut rows = DMatrix::zeros(p + states, nr);
+        rows.rows_mut(0, p).copy_from(&sys.r.ch);
+        if states > 0 {
+            rows.view_mut((p, 0), (nx, nxr))
+                .copy_from(&sys.wx.columns(q, nxr));
+        }
+        Observe {
+            nxr,
+            t: DMatrix::zeros(rows.nrows(), nr),
+            rows,
+            p,
+            undetermined: (0..nx).map(|i| undetermined.contains(&i)).collect(),
+        }
+    }
+
+    fn nan_states(&self) -> Vec<f64> {
+        vec![f64::NAN; self.undetermined.len()]
+    }
+
+    /// The summaries of `Σ` (nr × nr).
+    fn of(&mut self, sig: &DMatrix<f64>) -> Summary {
+        let m = sig.nrows() - self.nxr;
+        mul(
+            view_mut(&mut self.t),
+            false,
+            view(&self.rows),
+            view(sig),
+            1.0,
+        );
+        let dot = |r: usize| -> f64 { self.t.row(r).dot(&self.rows.row(r)) };
+        let tr = (0..self.p).map(dot).sum();
+        let mut var_x = self.nan_states();
+        if self.rows.nrows() > self.p {
+            for (i, v) in var_x.iter_mut().enumerate() {
+                if !self.undetermined[i] {
+                    *v = dot(self.p + i);
+                }
+            }
+        }
+        Summary {
+            var_w: (0..m).map(|i| sig[(self.nxr + i, self.nxr + i)]).collect(),
+            var_x,
+            tr,
+        }
+    }
+}
+
+/// The values recorded so far, in the order of the samples.
 struct Record {
     var_w: Vec<f64>,
     var_x: Vec<f64>,
     tr_h: f64,
-    undetermined: Vec<usize>,
     held_from: Option<usize>,
+}
+
+impl Record {
+    fn push(&mut self, s: &Summary) {
+        self.var_w.extend_from_slice(&s.var_w);
+        self.var_x.extend_from_slice(&s.var_x);
+        self.tr_h += s.tr;
+    }
 }
 
 /// States with a component along a hidden direction.
@@ -245,8 +241,68 @@ fn undetermined(sys: &Sys) -> Vec<usize> {
         .collect()
 }
 
-/// The covariance pass from `Σ̄_0 = sig0` (z coordinates); `tol` bounds the
-/// relative error of the held force variances and output trace.
+/// The start of the record, where every transition has the steady gain:
+/// `Σ_k = Σ_∞ + Y_k Λ Y_kᵀ`, `Y_{k+1} = Φ Y_k`. Records samples `0 … k` and
+/// returns `(Σ_k, k)`: held (`Σ_∞`, k = j0 − 1) once within `tol`, else
+/// explicit at k = j0 − 1.
+fn start_region(
+    obs: &mut Observe,
+    rec: &mut Record,
+    phi: &DMatrix<f64>,
+    s0: &DMatrix<f64>,
+    s_inf: &DMatrix<f64>,
+    j0: usize,
+    tol: f64,
+) -> (DMatrix<f64>, usize) {
+    let (nr, nxr) = (s0.nrows(), obs.nxr);
+    let inf = obs.of(s_inf);
+    let eig = (s0 - s_inf).symmetric_eigen();
+    let lam = eig.eigenvalues;
+    let mut y = eig.eigenvectors;
+    // [Φ; Ĉ; W_V] Y: the next Y and what the summaries need of this one
+    let mut rows = DMatrix::zeros(nr + obs.rows.nrows(), nr);
+    rows.rows_mut(0, nr).copy_from(phi);
+    rows.rows_mut(nr, obs.rows.nrows()).copy_from(&obs.rows);
+    let mut my = DMatrix::zeros(rows.nrows(), nr);
+    let weighted = |mat: &DMatrix<f64>, r: usize| -> f64 {
+        (0..nr).map(|j| lam[j] * mat[(r, j)] * mat[(r, j)]).sum()
+    };
+    let mut k = 0;
+    loop {
+        mul(view_mut(&mut my), false, view(&rows), view(&y), 1.0);
+        let mut now = Summary {
+            var_w: inf.var_w.clone(),
+            var_x: inf.var_x.clone(),
+            tr: inf.tr + (0..obs.p).map(|r| weighted(&my, nr + r)).sum::<f64>(),
+        };
+        for (i, v) in now.var_w.iter_mut().enumerate() {
+            *v += weighted(&y, nxr + i);
+        }
+        for (i, v) in now.var_x.iter_mut().enumerate() {
+            if !obs.undetermined[i] && obs.rows.nrows() > obs.p {
+                *v += weighted(&my, nr + obs.p + i);
+            }
+        }
+        if k + 1 < j0 && now.distance(&inf) <= tol {
+            // hold the steady covariance across the steady region
+            rec.held_from = Some(k);
+            for _ in k..j0 {
+                rec.push(&inf);
+            }
+            return (s_inf.clone(), j0 - 1);
+        }
+        rec.push(&now);
+        if k + 1 >= j0 {
+            let sig = s_inf + &y * DMatrix::from_diagonal(&lam) * y.transpose();
+            return (sig, k);
+        }
+        y.copy_from(&my.rows(0, nr));
+        k += 1;
+    }
+}
+
+/// The covariance pass from `Σ̄_0 = sig0` (z coordinates, ns × ns); `tol`
+/// bounds the relative error of the held force variances and output trace.
 pub(crate) fn covariance(
     lq: &Lq,
     sys: &Sys,
@@ -255,77 +311,61 @@ pub(crate) fn covariance(
     tol: f64,
 ) -> Covariance {
     let (nx, m, len, q, nr) = (lq.nx, lq.m, lq.len, sys.q, sys.r.ns);
-    let mut cov = Record {
+    let undetermined = undetermined(sys);
+    let mut obs = Observe::new(lq, sys, &undetermined);
+    let mut step = Step::new(sys, bw);
+    let mut rec = Record {
         var_w: Vec::with_capacity(m * len),
         var_x: Vec::with_capacity(nx * len),
         tr_h: 0.0,
         held_from: None,
-        undetermined: vec![],
     };
-    let mut prop = Propagator::new(lq, sys, bw);
-    // the held value (only worth it when there is a steady region)
-    let held = if bw.j0 > 2 {
-        steady(sys, bw, &prop.process_ss()).map(|s_inf| {
-            let mut sig = DMatrix::zeros(lq.ns, lq.ns);
-            sig.view_mut((q, q), (nr, nr)).copy_from(&s_inf);
-            let mut h = Summary::new(lq);
-            h.take(&mut prop, &sig, false);
-            (h, s_inf)
-        })
+    let s0 = sig0.view((q, q), (nr, nr)).into_owned();
+    let (phi, gq) = step.steady();
+    let s_inf = if bw.j0 > 2 {
+        stein(&phi.transpose(), &gq)
     } else {
         None
     };
-    let mut sig = sig0;
-    let mut new = DMatrix::zeros(lq.ns, lq.ns);
-    let (mut prev, mut now) = (Summary::new(lq), Summary::new(lq));
-    prev.take(&mut prop, &sig, true);
-    prev.record(&mut cov);
-    let (mut k, mut calm) = (0usize, 0usize);
+    let (mut sig, mut k) = match &s_inf {
+        Some(s_inf) => start_region(&mut obs, &mut rec, &phi, &s0, s_inf, bw.j0, tol),
+        None => {
+            rec.push(&obs.of(&s0));
+            (s0, 0)
+        }
+    };
+    // the rest exactly; without Σ_∞, held once the change stayed small
+    let mut new = DMatrix::zeros(nr, nr);
+    let (mut prev, mut calm) = (obs.of(&sig), 0usize);
     while k + 1 < len {
-        // after the hold, the undetermined states are NaN: when they all
-        // are, only the observable block is propagated
-        let all_nan = cov.undetermined.len() == nx;
-        prop.step(k, &sig, &mut new, all_nan);
+        step.step(k, &sig, &mut new);
         std::mem::swap(&mut sig, &mut new);
         k += 1;
-        now.take(&mut prop, &sig, !all_nan);
-        let open = k + 1 < bw.j0 && cov.held_from.is_none();
-        let hold = match &held {
-            Some((h, s_inf)) if open && now.distance(h) <= tol => {
-                sig.view_mut((q, q), (nr, nr)).copy_from(s_inf);
-                true
+        let now = obs.of(&sig);
+        if s_inf.is_none() && rec.held_from.is_none() && k + 1 < bw.j0 && bw.j0 > 2 {
+            calm = if now.distance(&prev) <= tol {
+                calm + 1
+            } else {
+                0
+            };
+            if calm >= WINDOW {
+                rec.held_from = Some(k);
+                for _ in k..bw.j0 {
+                    rec.push(&now);
+                }
+                k = bw.j0 - 1;
+                prev = now;
+                continue;
             }
-            None if open && bw.j0 > 2 => {
-                // no fixed point: hold once the change stayed small
-                calm = if now.distance(&prev) <= tol {
-                    calm + 1
-                } else {
-                    0
-                };
-                calm >= WINDOW
-            }
-            _ => false,
-        };
-        if hold {
-            // hold the steady covariance across the steady region
-            now.take(&mut prop, &sig, true);
-            cov.undetermined = undetermined(sys);
-            cov.held_from = Some(k);
-            now.record(&mut cov);
-            while k + 1 < bw.j0 {
-                k += 1;
-                now.record(&mut cov);
-            }
-        } else {
-            now.record(&mut cov);
         }
-        std::mem::swap(&mut prev, &mut now);
+        rec.push(&now);
+        prev = now;
     }
     Covariance {
-        var_w: DMatrix::from_vec(m, len, cov.var_w),
-        var_x: DMatrix::from_vec(nx, len, cov.var_x),
-        tr_h: cov.tr_h,
-        held_from: cov.held_from,
-        undetermined: cov.undetermined,
+        var_w: DMatrix::from_vec(m, len, rec.var_w),
+        var_x: DMatrix::from_vec(nx, len, rec.var_x),
+        tr_h: rec.tr_h,
+        held_from: rec.held_from,
+        undetermined,
     }
 }

@@ -121,10 +121,13 @@ pub(crate) fn symmetrize(p: &mut DMatrix<f64>) {
     let n = p.nrows();
     let a = p.as_mut_slice();
     for j in 0..n {
-        for i in j + 1..n {
-            let v = 0.5 * (a[i + j * n] + a[j + i * n]);
-            a[i + j * n] = v;
-            a[j + i * n] = v;
+        // column j against row j, read as the j-th entry of the later columns
+        let (left, right) = a.split_at_mut((j + 1) * n);
+        let col = &mut left[j * n..];
+        for (cj, other) in col[j + 1..].iter_mut().zip(right.chunks_exact_mut(n)) {
+            let v = 0.5 * (*cj + other[j]);
+            *cj = v;
+            other[j] = v;
         }
     }
 }
@@ -149,6 +152,15 @@ mod tests {
             gemv_acc(a.as_slice(), x.as_slice(), y.as_mut_slice());
             assert!((&y - &want).amax() < 1e-13 * want.amax());
         }
+    }
+
+    #[test]
+    fn symmetrize_averages_the_triangles() {
+        let a = sample(7, 7, 6);
+        let mut s = a.clone();
+        symmetrize(&mut s);
+        let want = (&a + a.transpose()) * 0.5;
+        assert!((&s - &want).amax() < 1e-15);
     }
 
     #[test]

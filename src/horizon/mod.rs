@@ -186,8 +186,9 @@ pub struct Diagnostics {
     pub riccati_held_distance: f64,
     /// Sample from which the covariance was held at its steady value.
     pub covariance_held_from: Option<usize>,
-    /// States (0-based index in `[u; v]`) the data do not determine; their
-    /// std is NaN once the covariance is held.
+    /// States (0-based index in `[u; v]`) the data do not determine (a
+    /// component along a rigid-body direction no channel sees); their std
+    /// is NaN.
     pub undetermined_states: Vec<usize>,
     /// QP iterations (0 for the Riccati sweep).
     pub qp_iterations: u32,
@@ -326,7 +327,7 @@ pub fn solve(
     let undetermined = &res.diagnostics.undetermined_states;
     if !undetermined.is_empty() {
         let note = format!(
-            "{} state(s) are not determined by the data (their std grows without bound and is reported as NaN once the covariance is held): {:?}",
+            "{} state(s) are not determined by the data (set by the initial-state prior, their variance grows without bound): their std is NaN: {:?}",
             undetermined.len(),
             undetermined
         );
