@@ -126,6 +126,23 @@ impl SampledModel {
         )
     }
 
+    /// Reference frequency ω (rad/s) and mass (kg) that balance state and
+    /// force scales: ω the largest `sqrt(|(M⁻¹K)_ii|)` (or `2π f_s / 10`
+    /// when the model has no stiffness), the mass the mean `|M_ii|` (or 1).
+    /// Displacements × ω and forces / (m ω) then have velocity units.
+    pub fn reference_scales(&self) -> (f64, f64) {
+        let n = self.n;
+        let mk = &self.m_inv * &self.k;
+        let wmax = (0..n).map(|i| mk[(i, i)].abs()).fold(0.0, f64::max).sqrt();
+        let omega = if wmax > 0.0 {
+            wmax
+        } else {
+            2.0 * std::f64::consts::PI * self.fs / 10.0
+        };
+        let mref = (0..n).map(|i| self.m[(i, i)].abs()).sum::<f64>() / n as f64;
+        (omega, if mref > 0.0 { mref } else { 1.0 })
+    }
+
     /// Output rows for measured channels `(quantity, dof0)`:
     /// `y_k = C_y x_k + D_y f_k` (p × 2n and p × n).
     pub fn outputs(&self, channels: &[(Quantity, usize)]) -> Result<(DMatrix<f64>, DMatrix<f64>)> {

@@ -22,22 +22,26 @@ fn text(o: &std::process::Output) -> String {
 #[test]
 fn simulate_writes_hdf5_and_csv_with_truth() {
     let dir = tempfile::tempdir().unwrap();
+    // the contact testbed, 512 samples at 1, 5, 6, seed 3
+    let simulate = |path: &std::path::Path| {
+        tacit(&[
+            "simulate",
+            "--model",
+            "data/lanl8dof-contact.toml",
+            "--samples",
+            "512",
+            "--sensors",
+            "1,5,6",
+            "--noise",
+            "0.01",
+            "--seed",
+            "3",
+            "-o",
+            path.to_str().unwrap(),
+        ])
+    };
     let h5 = dir.path().join("rec.h5");
-    let o = tacit(&[
-        "simulate",
-        "--model",
-        "data/lanl8dof-contact.toml",
-        "--samples",
-        "512",
-        "--sensors",
-        "1,5,6",
-        "--noise",
-        "0.01",
-        "--seed",
-        "3",
-        "-o",
-        h5.to_str().unwrap(),
-    ]);
+    let o = simulate(&h5);
     assert!(o.status.success(), "{}", text(&o));
     let rec = tacit::record::read(&h5).unwrap();
     assert_eq!(rec.len(), 512);
@@ -53,21 +57,7 @@ fn simulate_writes_hdf5_and_csv_with_truth() {
     assert!(f5 > 0.0 && f56 < 1e-9 * f5);
     // same seed, same record
     let h5b = dir.path().join("rec2.h5");
-    let o = tacit(&[
-        "simulate",
-        "--model",
-        "data/lanl8dof-contact.toml",
-        "--samples",
-        "512",
-        "--sensors",
-        "1,5,6",
-        "--noise",
-        "0.01",
-        "--seed",
-        "3",
-        "-o",
-        h5b.to_str().unwrap(),
-    ]);
+    let o = simulate(&h5b);
     assert!(o.status.success());
     assert_eq!(tacit::record::read(&h5b).unwrap().outputs, rec.outputs);
     let csv = dir.path().join("rec.csv");

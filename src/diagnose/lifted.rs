@@ -355,15 +355,7 @@ impl Scaled {
         let (cy, dy) = sm.outputs(channels)?;
         let wsqrt = channel_weights(measured, s.noise_fraction)?;
         // reference frequency and mass (as the horizon smoother)
-        let mk = &sm.m_inv * &sm.k;
-        let wmax = (0..n).map(|i| mk[(i, i)].abs()).fold(0.0, f64::max).sqrt();
-        let omega = if wmax > 0.0 {
-            wmax
-        } else {
-            2.0 * std::f64::consts::PI * sm.fs / 10.0
-        };
-        let mref = (0..n).map(|i| sm.m[(i, i)].abs()).sum::<f64>() / n as f64;
-        let mref = if mref > 0.0 { mref } else { 1.0 };
+        let (omega, mref) = sm.reference_scales();
         let dx = DVector::from_fn(nx, |i, _| if i < n { 1.0 / omega } else { 1.0 });
         let df = mref * omega;
         let a = DMatrix::from_fn(nx, nx, |i, j| lm.a[(i, j)] * dx[j] / dx[i]);

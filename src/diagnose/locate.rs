@@ -81,14 +81,19 @@ pub struct Located {
     pub steps: Vec<LocateStep>,
 }
 
+/// The direction matrix (n × q) of `dirs`, one column each.
+pub fn direction_matrix(dirs: &[Direction], n: usize) -> DMatrix<f64> {
+    let mut e = DMatrix::zeros(n, dirs.len());
+    for (c, d) in dirs.iter().enumerate() {
+        e.set_column(c, &d.column(n));
+    }
+    e
+}
+
 impl Located {
     /// The direction matrix (n × q) of the selection.
     pub fn matrix(&self, n: usize) -> DMatrix<f64> {
-        let mut e = DMatrix::zeros(n, self.directions.len());
-        for (c, d) in self.directions.iter().enumerate() {
-            e.set_column(c, &d.column(n));
-        }
-        e
+        direction_matrix(&self.directions, n)
     }
 
     /// One line for reports.
@@ -165,11 +170,7 @@ pub fn locate(
         ..settings.clone()
     };
     let fit = |sel: &[Direction]| -> Result<f64> {
-        let e = Located {
-            directions: sel.to_vec(),
-            steps: vec![],
-        }
-        .matrix(n);
+        let e = direction_matrix(sel, n);
         Ok(
             lifted::reconstruct_along(sm, &e, known_force, measured, channels, &quick)?
                 .weighted_rms,

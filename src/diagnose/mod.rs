@@ -79,7 +79,8 @@ pub struct DiagnoseSettings {
     /// Most force directions the search selects (default 3).
     pub locate_max: usize,
     /// Gauss–Newton iterations refining each segment's start state for the
-    /// model being scored ([`starts`]; default 3; 0 = reconstructed states).
+    /// model being scored ([`starts`]; default 3, a linear model takes one;
+    /// 0 = reconstructed states).
     pub start_iterations: usize,
     /// Settings of the lifted smoother.
     #[serde(skip)]
@@ -431,7 +432,10 @@ pub fn reconstruct(
         unknown: &unknown,
     };
     let res = horizon::identify(sampled, &data, settings)?;
-    let mut status = format!("{:?}", res.status);
+    let mut status = format!(
+        "full-horizon smoother, unknown force at every DOF: {:?}",
+        res.status
+    );
     if !res.notes.is_empty() {
         status = format!("{status}: {}", res.notes.join("; "));
     }
@@ -545,13 +549,16 @@ pub struct Diagnosis {
     pub predictions: (Option<DMatrix<f64>>, Option<DMatrix<f64>>),
 }
 
-/// Segment simulations spent by [`Comparison::errors`]: the start-state
-/// refinement's (or one per segment) and the open-loop run.
+/// Segment simulations spent by [`Comparison::shoot`]: the start-state
+/// refinement's, or one per segment.
+fn shot_simulations(starts: Option<&starts::StartFit>, cmp: &Comparison) -> usize {
+    starts.map_or(cmp.segments.len(), |f| f.simulations)
+}
+
+/// Segment simulations spent by [`Comparison::errors`]: the multiple
+/// shooting and the open-loop run.
 fn error_simulations(set: &ErrorSet, cmp: &Comparison) -> usize {
-    set.starts
-        .as_ref()
-        .map_or(cmp.segments.len(), |f| f.simulations)
-        + 1
+    shot_simulations(set.starts.as_ref(), cmp) + 1
 }
 
 /// Pick up to `k` segments spread evenly over `all`.
@@ -657,10 +664,7 @@ pub fn diagnose(
         let sim = resolved(&fitted, rec.fs, settings);
         let sub = sim.substeps;
         let pred = cmp.shoot(&fitted, sim);
-        sims += match &pred {
-            Ok((_, _, Some(f))) => f.simulations,
-            _ => cmp.segments.len(),
-        };
+        sims += shot_simulations(pred.as_ref().ok().and_then(|p| p.2.as_ref()), cmp);
         let new_err = pred.as_ref().ok().map(|y| cmp.total_error(&y.0));
         let pays = match (current_err, new_err) {
             (Some(a), Some(b)) => b * b < a * a * (1.0 - settings.min_improvement),
@@ -753,7 +757,7 @@ pub fn diagnose(
         simulations: sims,
         trace_simulations: trace_sims,
         identification: format!(
-            "full-order model, unknown force at every DOF, λ = {:.3e}: {}",
+            "full-order model, λ = {:.3e}: {}",
             prep.recon.lambda, prep.recon.status
         ),
         timings,
@@ -772,6 +776,7 @@ pub fn diagnose(
 fn scan_contact(
     trial: &Model,
     ci: usize,
+    cand: &crate::trace::Candidate,
     states: &DMatrix<f64>,
     cmp: &Comparison,
     segments: &[Segment],
@@ -780,10 +785,7 @@ fn scan_contact(
     const KEEP: usize = 2;
     let fs = cmp.fs;
     let c = &trial.contacts[ci];
-    let (i, j) = (c.dofs[0] - 1, c.dofs.get(1).map(|d| d - 1));
-    let mut d: Vec<f64> = (0..states.ncols())
-        .map(|k| states[(i, k)] - j.map_or(0.0, |j| states[(j, k)]))
-        .collect();
+    let mut d: Vec<f64> = (0..states.ncols()).map(|k| cand.delta(states, k)).collect();
     d.sort_by(f64::total_cmp);
     let q = |f: f64| d[((d.len() - 1) as f64 * f) as usize].max(0.0);
     let kspring = trial
@@ -842,7 +844,8 @@ fn fit_effects(
     if let Some(last) = all.last() {
         if last.candidate.kind == crate::trace::EffectKind::Contact {
             let ci = trial.contacts.len() - 1;
-            let (best, evals) = scan_contact(trial, ci, states, cmp, &segments, settings);
+            let (best, evals) =
+                scan_contact(trial, ci, &last.candidate, states, cmp, &segments, settings);
             sims += evals * segments.len();
             let (pg, pk) = (&problem.parameters[np - 2], &problem.parameters[np - 1]);
             for (g, kc) in best {

@@ -9,14 +9,16 @@
 //!
 //! $$ J_s(x_0) = \sum_{c,k} w_c^2 \, (y_{c,k} - \hat y_{c,k}(x_0))^2 $$
 //!
-//! with Gauss–Newton steps `δ = J⁺ r` from the reconstructed state. The
-//! Jacobian is that of the model's linear part, `∂ŷ_k/∂x_0 = C_y A^k`
-//! (exact for a linear model, where one step solves the problem; an
-//! approximation for a nonlinear one, so every step is checked: a step that
-//! does not lower `J_s` is halved, up to four times, else the segment
-//! keeps its state). `J⁺` is the pseudo-inverse in states scaled to a
-//! common unit (displacements × ω), singular values below 1e-8 of the
-//! largest dropped: directions the outputs never see (a free-free model's
+//! with Gauss–Newton steps `δ = J⁺ r` from the reconstructed state. For a
+//! linear model the Jacobian is exact, `∂ŷ_k/∂x_0 = C_y A^k`, and one step
+//! solves the problem (the only one taken). For a nonlinear model it is a
+//! forward-difference Jacobian of the nonlinear simulation (2n simulations
+//! of every segment per iteration, step `10⁻⁵ v_ref` in scaled states), and
+//! the iterations go on; a step that does not lower `J_s` is halved, up to
+//! four times, else the segment keeps its state. `J⁺` is the pseudo-inverse
+//! in states scaled to a common unit (displacements × ω), singular values
+//! below 1e-8 (linear) or 1e-6 (forward differences) of the largest
+//! dropped: directions the outputs never see (a free-free model's
 //! rigid-body displacement under acceleration data) keep the reconstructed
 //! value. Every model — the declared one before, the fitted one after — is
 //! scored the same way.
@@ -45,8 +47,15 @@ pub struct StartFit {
     pub note: String,
 }
 
-/// Pseudo-inverses of the scaled start-state Jacobian, one per segment
-/// length.
+/// State scaling to a common unit: displacements × ω (velocity units).
+fn state_scale(sm: &SampledModel) -> DVector<f64> {
+    let (omega, _) = sm.reference_scales();
+    DVector::from_fn(2 * sm.n, |i, _| if i < sm.n { 1.0 / omega } else { 1.0 })
+}
+
+/// Pseudo-inverses of the start-state Jacobian of the linear part, one per
+/// segment length (in unscaled states; singular values below 1e-8 of the
+/// largest, in scaled states, dropped).
 struct Jacobians {
     a: DMatrix<f64>,
     cy: DMatrix<f64>,
@@ -56,35 +65,25 @@ struct Jacobians {
 }
 
 impl Jacobians {
-    fn new(model: &Model, cmp: &Comparison, substeps: usize) -> Option<Jacobians> {
-        let sm = SampledModel::from_model(&model.linear_part(), cmp.fs, substeps).ok()?;
-        let n = sm.n;
+    fn new(sm: &SampledModel, cmp: &Comparison) -> Option<Jacobians> {
         let channels: Vec<_> = cmp
             .observations
             .iter()
             .map(|o| (o.quantity, o.dof - 1))
             .collect();
         let (cy, _) = sm.outputs(&channels).ok()?;
-        let mk = &sm.m_inv * &sm.k;
-        let w2 = (0..n).map(|i| mk[(i, i)].abs()).fold(0.0, f64::max);
-        let omega = if w2 > 0.0 {
-            w2.sqrt()
-        } else {
-            2.0 * std::f64::consts::PI * cmp.fs / 10.0
-        };
-        let scale = DVector::from_fn(2 * n, |i, _| if i < n { 1.0 / omega } else { 1.0 });
         Some(Jacobians {
             a: sm.a.clone(),
             cy,
             w: cmp.observations.iter().map(|o| o.weight).collect(),
-            scale,
+            scale: state_scale(sm),
             pinv: BTreeMap::new(),
         })
     }
 
-    fn pinv(&mut self, len: usize) -> &DMatrix<f64> {
+    fn pinv(&mut self, len: usize) -> Option<&DMatrix<f64>> {
         let (a, cy, w, scale) = (&self.a, &self.cy, &self.w, &self.scale);
-        self.pinv.entry(len).or_insert_with(|| {
+        if let std::collections::btree_map::Entry::Vacant(slot) = self.pinv.entry(len) {
             let (p, nx) = (cy.nrows(), cy.ncols());
             let mut j = DMatrix::zeros(len * p, nx);
             let mut blk = cy.clone();
@@ -97,21 +96,15 @@ impl Jacobians {
                 blk = &blk * a;
             }
             let svd = j.svd(true, true);
-            let smax = svd.singular_values.max();
-            let tol = 1e-8 * smax;
-            let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
-            let mut out = DMatrix::zeros(nx, len * p);
-            for (i, &s) in svd.singular_values.iter().enumerate() {
-                if s > tol {
-                    out += vt.row(i).transpose() * u.column(i).transpose() / s;
-                }
-            }
+            let tol = 1e-8 * svd.singular_values.max();
+            let mut out = svd.pseudo_inverse(tol).ok()?;
             // back to unscaled states
             for r in 0..nx {
                 out.row_mut(r).scale_mut(scale[r]);
             }
-            out
-        })
+            slot.insert(out);
+        }
+        self.pinv.get(&len)
     }
 }
 
@@ -133,6 +126,12 @@ fn residual(cmp: &Comparison, seg: &Segment, y: &DMatrix<f64>) -> Option<(DVecto
     Some((r, s))
 }
 
+/// Copy the columns of segment `s` from `src` into `dst`.
+fn copy_segment(dst: &mut DMatrix<f64>, src: &DMatrix<f64>, s: &Segment) {
+    dst.columns_mut(s.start, s.len)
+        .copy_from(&src.columns(s.start, s.len));
+}
+
 /// Predict the segments one call at a time when a joint call fails (a
 /// failing segment stays NaN).
 fn predict_each(
@@ -149,11 +148,7 @@ fn predict_each(
     let mut out = DMatrix::from_element(cmp.observations.len(), cmp.force.ncols(), f64::NAN);
     for s in segs {
         if let Ok(y) = cmp.predict(model, std::slice::from_ref(s), sim) {
-            for c in 0..out.nrows() {
-                for k in s.start..s.start + s.len {
-                    out[(c, k)] = y[(c, k)];
-                }
-            }
+            copy_segment(&mut out, &y, s);
         }
     }
     out
@@ -239,7 +234,8 @@ pub fn refine(
     let mut res: Vec<Option<(DVector<f64>, f64)>> =
         segs.iter().map(|s| residual(cmp, s, &y)).collect();
     let cost0: f64 = res.iter().flatten().map(|r| r.1).sum();
-    let Some(mut jac) = Jacobians::new(model, cmp, sim.substeps) else {
+    let sampled = SampledModel::from_model(&model.linear_part(), cmp.fs, sim.substeps).ok();
+    let Some(sm) = sampled else {
         let fit = StartFit {
             iterations: 0,
             simulations: sims,
@@ -250,19 +246,30 @@ pub fn refine(
         return (segs, y, fit);
     };
     let n = model.ndof();
+    // a linear model: the Jacobian is exact and one step solves the problem
+    let mut exact = if model.is_nonlinear() {
+        None
+    } else {
+        Jacobians::new(&sm, cmp)
+    };
+    let scale = state_scale(&sm);
+    let iterations = if exact.is_some() {
+        iterations.min(1)
+    } else {
+        iterations
+    };
     let mut stalled = 0;
     let mut done = 0;
-    let exact = !model.is_nonlinear();
     for _ in 0..iterations {
         done += 1;
         // steps
-        let steps: Vec<Option<DVector<f64>>> = if exact {
-            segs.iter()
+        let steps: Vec<Option<DVector<f64>>> = match exact.as_mut() {
+            Some(jac) => segs
+                .iter()
                 .zip(&res)
-                .map(|(s, r)| r.as_ref().map(|(r, _)| jac.pinv(s.len) * r))
-                .collect()
-        } else {
-            fd_steps(cmp, model, sim, &segs, &y, &res, &jac.scale, &mut sims)
+                .map(|(s, r)| Some(jac.pinv(s.len)? * &r.as_ref()?.0))
+                .collect(),
+            None => fd_steps(cmp, model, sim, &segs, &y, &res, &scale, &mut sims),
         };
         let mut pending: Vec<usize> = (0..segs.len()).filter(|&i| steps[i].is_some()).collect();
         let mut t = 1.0;
@@ -290,11 +297,7 @@ pub fn refine(
                 let old = res[i].as_ref().map_or(f64::INFINITY, |r| r.1);
                 match residual(cmp, &trial[ti], &yt) {
                     Some(r) if r.1 < old => {
-                        for c in 0..y.nrows() {
-                            for k in trial[ti].start..trial[ti].start + trial[ti].len {
-                                y[(c, k)] = yt[(c, k)];
-                            }
-                        }
+                        copy_segment(&mut y, &yt, &trial[ti]);
                         segs[i] = trial[ti].clone();
                         res[i] = Some(r);
                         improved[i] = true;

@@ -305,15 +305,7 @@ pub(crate) fn channel_weights(y: &DMatrix<f64>, noise: &ChannelNoise) -> Result<
 /// The state scaling `D`: displacement × ω, force / (m ω) (velocity units).
 fn scaling(model: &SampledModel, m: usize) -> DVector<f64> {
     let n = model.n;
-    let mk = &model.m_inv * &model.k;
-    let wmax = (0..n).map(|i| mk[(i, i)].abs()).fold(0.0, f64::max).sqrt();
-    let omega = if wmax > 0.0 {
-        wmax
-    } else {
-        2.0 * std::f64::consts::PI * model.fs / 10.0
-    };
-    let mref = (0..n).map(|i| model.m[(i, i)].abs()).sum::<f64>() / n as f64;
-    let mref = if mref > 0.0 { mref } else { 1.0 };
+    let (omega, mref) = model.reference_scales();
     let mut d = DVector::from_element(2 * n + m, 1.0);
     for i in 0..n {
         d[i] = 1.0 / omega;
