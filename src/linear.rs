@@ -289,6 +289,26 @@ pub fn spectral_radius(a: &DMatrix<f64>) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// Orthonormal basis of the unobservable subspace of `(a, h)`: right
+/// singular vectors of `[h; h a; …; h a^{nx−1}]` with singular values below
+/// `1e-9` of the largest.
+pub fn unobservable(a: &DMatrix<f64>, h: &DMatrix<f64>) -> DMatrix<f64> {
+    let (nx, p) = (a.nrows(), h.nrows());
+    let mut obs = DMatrix::zeros(p * nx, nx);
+    let mut blk = h.clone();
+    for i in 0..nx {
+        obs.rows_mut(i * p, p).copy_from(&blk);
+        blk = &blk * a;
+    }
+    let svd = obs.svd(false, true);
+    let vt = svd.v_t.expect("v_t was requested");
+    let smax = svd.singular_values.max();
+    let idx: Vec<usize> = (0..nx)
+        .filter(|&i| !(svd.singular_values[i] > 1e-9 * smax))
+        .collect();
+    DMatrix::from_fn(nx, idx.len(), |r, c| vt[(idx[c], r)])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

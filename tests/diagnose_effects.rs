@@ -167,8 +167,13 @@ fn cubic_spring_between_masses_sensors_156() {
     cubic_case(&[1, 5, 6], 44);
 }
 
+/// A weak spring to ground: the declared model already predicts the
+/// segments to about 5 %, of which 1 % is noise and 1 % the integration
+/// error of 10 sub-steps (the record is simulated with 40), so 1/5 of the
+/// error before is below what the exact model reaches. The check: the right
+/// kind, DOF and stiffness, and an error down to the exact model's, scored
+/// the same way, on both records.
 #[test]
-#[ignore = "not met yet: the 2000 N/m spring leaves the linear model only 4–5 % segment error, and the loop fits a stiffness change of spring 1–2 or 2–3 instead (see the issue note)"]
 fn ground_spring_at_dof_1() {
     let mut gs = lanl();
     gs.springs.push(Spring {
@@ -176,10 +181,36 @@ fn ground_spring_at_dof_1() {
         stiffness: 2000.0,
         name: None,
     });
-    let d = run(&gs, &[1, 5, 6], 43);
-    assert_eq!(d.effects[0].dofs, vec![1]);
-    within(param(&d, "ground_spring", "stiffness"), 2000.0, 0.1);
-    assert_improved(&d);
+    for sensors in [vec![1, 5, 6], vec![1, 2, 3, 4, 5, 6, 7, 8]] {
+        let d = run(&gs, &sensors, 43);
+        assert_eq!(d.effects.len(), 1, "{}", d.verdict);
+        assert_eq!(d.effects[0].kind, "ground_spring");
+        assert_eq!(d.effects[0].dofs, vec![1]);
+        within(param(&d, "ground_spring", "stiffness"), 2000.0, 0.1);
+        let sim = SimSettings {
+            substeps: d.substeps.1,
+            ..Default::default()
+        };
+        let exact = d
+            .prepared
+            .comparison
+            .errors(&gs, sim)
+            .0
+            .relative_error
+            .unwrap();
+        let (b, a) = (
+            d.before.relative_error.unwrap(),
+            d.after.relative_error.unwrap(),
+        );
+        assert!(a <= 1.05 * exact, "after {a} vs exact model {exact}");
+        assert!(a <= b / 3.5, "relative_error {b} → {a}");
+        let v = d.validation.as_ref().unwrap();
+        let (vb, va) = (
+            v.before.relative_error.unwrap(),
+            v.after.relative_error.unwrap(),
+        );
+        assert!(va <= vb / 3.5, "validation {vb} → {va}");
+    }
 }
 
 #[test]

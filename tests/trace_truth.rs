@@ -14,6 +14,18 @@ fn lanl() -> Model {
 }
 
 fn run(truth: &Model, sensors: &[usize], noise: f64, seed: u64) -> tacit::trace::TraceResult {
+    run_shifted(truth, sensors, noise, seed, (0.0, 0.0)).0
+}
+
+/// [`run`] with the states shifted by a rigid-body motion `d + w t` (what
+/// acceleration data cannot fix).
+fn run_shifted(
+    truth: &Model,
+    sensors: &[usize],
+    noise: f64,
+    seed: u64,
+    (d, w): (f64, f64),
+) -> (tacit::trace::TraceResult, f64) {
     let declared = lanl();
     let spec = RecordSpec {
         samples: 2048,
@@ -40,6 +52,13 @@ fn run(truth: &Model, sensors: &[usize], noise: f64, seed: u64) -> tacit::trace:
     let mut states = DMatrix::zeros(2 * n, rec.len());
     states.rows_mut(0, n).copy_from(&sim.u);
     states.rows_mut(n, n).copy_from(&sim.v);
+    for k in 0..rec.len() {
+        let t = k as f64 / rec.fs;
+        for i in 0..n {
+            states[(i, k)] += d + w * t;
+            states[(n + i, k)] += w;
+        }
+    }
     let input = TraceInput {
         model: &declared,
         sampled: &sm,
@@ -52,6 +71,7 @@ fn run(truth: &Model, sensors: &[usize], noise: f64, seed: u64) -> tacit::trace:
         segment: 51,
         baseline: None,
         exclude: &[],
+        located: None,
     };
     let t = std::time::Instant::now();
     let res = trace(&input, &TraceSettings::default());
@@ -69,7 +89,7 @@ fn run(truth: &Model, sensors: &[usize], noise: f64, seed: u64) -> tacit::trace:
         );
     }
     eprintln!("stop: {}", res.stop_reason);
-    res
+    (res, rec.fs)
 }
 
 #[test]
@@ -151,4 +171,43 @@ fn other_effects_are_named() {
     let res = run(&gs, &[1, 5, 6], 0.01, 7);
     assert_eq!(res.selected[0].candidate.kind, EffectKind::GroundSpring);
     assert_eq!(res.selected[0].candidate.dofs, vec![0]);
+}
+
+#[test]
+fn a_spring_to_ground_is_found_under_an_unknown_rigid_body_shift() {
+    // the reconstruction cannot place the rigid-body position: the trace
+    // fits it with the spring along the hidden trajectories
+    for (dof, sensors, shift) in [
+        (1, vec![1, 2, 3, 4, 5, 6, 7, 8], (2e-4, -1e-3)),
+        (4, vec![1, 5, 6], (-3e-4, 5e-4)),
+        (8, vec![1, 5, 6], (0.0, 0.0)),
+    ] {
+        let mut gs = lanl();
+        gs.springs.push(Spring {
+            dofs: vec![dof],
+            stiffness: 2000.0,
+            name: None,
+        });
+        let (res, fs) = run_shifted(&gs, &sensors, 0.01, 17, shift);
+        let e = &res.selected[0];
+        assert_eq!(e.candidate.kind, EffectKind::GroundSpring, "{}", e.label);
+        assert_eq!(e.candidate.dofs, vec![dof - 1]);
+        let k = e.parameters[0].1;
+        assert!((k / 2000.0 - 1.0).abs() < 0.1, "DOF {dof}: k {k}");
+        // the fitted correction undoes the shift at the spring's DOF
+        let mut corr = DMatrix::zeros(16, res.hidden[0].ncols());
+        for (c, h) in e.hidden.iter().zip(&res.hidden) {
+            corr += h * *c;
+        }
+        let last = corr.ncols() - 1;
+        let scale = shift.0.abs() + shift.1.abs() * last as f64 / fs;
+        for k in [0, last / 2, last] {
+            let want = -(shift.0 + shift.1 * k as f64 / fs);
+            let got = corr[(dof - 1, k)];
+            assert!(
+                (got - want).abs() <= 0.1 * scale + 2e-5,
+                "DOF {dof}, sample {k}: correction {got:.3e}, shift {want:.3e}"
+            );
+        }
+    }
 }

@@ -385,7 +385,7 @@ impl Scaled {
         for i in 0..nx {
             c.row_mut(i).scale_mut(1.0 / dx[i]);
         }
-        let null = unobservable(&a, &hx);
+        let null = crate::linear::unobservable(&a, &hx);
         let mut z = DMatrix::zeros(p + nx, nu);
         z.rows_mut(0, p).copy_from(&hu);
         z.rows_mut(p, nx).copy_from(&g);
@@ -417,26 +417,6 @@ impl Scaled {
             df,
         })
     }
-}
-
-/// Orthonormal basis of the unobservable subspace of `(a, h)`: right
-/// singular vectors of `[h; h a; …; h a^{nx−1}]` with singular values below
-/// `1e-9` of the largest.
-fn unobservable(a: &DMatrix<f64>, h: &DMatrix<f64>) -> DMatrix<f64> {
-    let (nx, p) = (a.nrows(), h.nrows());
-    let mut obs = DMatrix::zeros(p * nx, nx);
-    let mut blk = h.clone();
-    for i in 0..nx {
-        obs.rows_mut(i * p, p).copy_from(&blk);
-        blk = &blk * a;
-    }
-    let svd = obs.svd(false, true);
-    let vt = svd.v_t.expect("v_t was requested");
-    let smax = svd.singular_values.max();
-    let idx: Vec<usize> = (0..nx)
-        .filter(|&i| !(svd.singular_values[i] > 1e-9 * smax))
-        .collect();
-    DMatrix::from_fn(nx, idx.len(), |r, c| vt[(idx[c], r)])
 }
 
 /// `P ← (I − N Nᵀ) P (I − N Nᵀ)`.

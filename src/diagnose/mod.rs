@@ -82,6 +82,9 @@ pub struct DiagnoseSettings {
     /// model being scored ([`starts`]; default 3, a linear model takes one;
     /// 0 = reconstructed states).
     pub start_iterations: usize,
+    /// Most alternations of start-state refinement and refit after an
+    /// effect's fit (default 12; they stop once the cost falls by < 1 %).
+    pub start_alternations: usize,
     /// Settings of the lifted smoother.
     #[serde(skip)]
     pub lifted: lifted::LiftedSettings,
@@ -129,6 +132,7 @@ impl Default for DiagnoseSettings {
             locate_ratio: 0.8,
             locate_max: 3,
             start_iterations: 3,
+            start_alternations: 12,
             lifted: lifted::LiftedSettings::default(),
         }
     }
@@ -603,6 +607,7 @@ pub fn diagnose(
     let mut rounds = vec![];
     let mut ranking = vec![];
     let mut trace_sims = 0;
+    let located = prep.located.as_ref().map(|l| l.matrix(declared.ndof()));
     let t_loop = Instant::now();
     for round in 0..settings.max_effects {
         if current_err.is_some_and(|e| e <= settings.noise_floor) {
@@ -633,6 +638,7 @@ pub fn diagnose(
             segment: prep.segment,
             baseline: baseline.as_ref(),
             exclude: &exclude,
+            located: located.as_ref(),
         };
         let ts = TraceSettings {
             max_effects: 1,
@@ -658,8 +664,23 @@ pub fn diagnose(
         let eff = effects::add(&mut trial, &best);
         let mut all: Vec<AddedEffect> = added.iter().map(|a| a.0.clone()).collect();
         all.push(eff.clone());
-        let (fitted, note, fit_sims) =
-            fit_effects(&trial, &all, cmp, &prep.recon.states, rec.fs, settings)?;
+        // the effect's fit of the states along the hidden trajectories
+        let correction = (!best.hidden.is_empty()).then(|| {
+            let mut d = DMatrix::zeros(prep.recon.states.nrows(), prep.recon.states.ncols());
+            for (c, e) in best.hidden.iter().zip(&tr.hidden) {
+                d += e * *c;
+            }
+            d
+        });
+        let (fitted, note, fit_sims) = fit_effects(
+            &trial,
+            &all,
+            cmp,
+            &prep.recon.states,
+            correction.as_ref(),
+            rec.fs,
+            settings,
+        )?;
         sims += fit_sims;
         let sim = resolved(&fitted, rec.fs, settings);
         let sub = sim.substeps;
@@ -821,11 +842,13 @@ fn scan_contact(
 
 /// Fit the parameters of all added effects jointly; returns the fitted
 /// model, a note on how the fit ended and the simulations spent.
+#[allow(clippy::too_many_arguments)]
 fn fit_effects(
     trial: &Model,
     all: &[AddedEffect],
     cmp: &Comparison,
     states: &DMatrix<f64>,
+    correction: Option<&DMatrix<f64>>,
     fs: f64,
     settings: &DiagnoseSettings,
 ) -> Result<(Model, String, usize)> {
@@ -833,7 +856,22 @@ fn fit_effects(
     for e in all {
         params.extend(effects::parameters(trial, e)?);
     }
-    let segments = spread(&cmp.segments, settings.fit_segments);
+    let mut segments = spread(&cmp.segments, settings.fit_segments);
+    let corrected;
+    let states = match correction {
+        Some(d) => {
+            let n = trial.ndof();
+            for s in &mut segments {
+                for i in 0..n {
+                    s.u0[i] += d[(i, s.start)];
+                    s.v0[i] += d[(n + i, s.start)];
+                }
+            }
+            corrected = states + d;
+            &corrected
+        }
+        None => states,
+    };
     let mut problem = cmp.problem(trial, segments.clone(), SimSettings::default());
     problem.parameters = params;
     let np = problem.parameters.len();
@@ -875,27 +913,47 @@ fn fit_effects(
                 sub
             );
             let mut model = r.model.clone();
+            let mut x = r.x.clone();
+            let mut cost = r.cost_history.last().copied().unwrap_or(f64::INFINITY);
             // the start states the fit used were reconstructed with the
             // linear model: refine them for the fitted model and fit again
-            // from the fitted values (one alternation)
-            if cmp.start_iterations > 0 {
-                let (segs, _, sf) =
-                    starts::refine(cmp, &r.model, problem.sim, &segments, cmp.start_iterations);
+            // from the fitted values, while that lowers the cost by 1 %
+            // (start states and parameters are correlated: a spring to
+            // ground moves with the rigid-body position)
+            let mut rounds = 0;
+            while cmp.start_iterations > 0 && rounds < settings.start_alternations {
+                rounds += 1;
+                let (segs, _, sf) = starts::refine(
+                    cmp,
+                    &model,
+                    problem.sim,
+                    &problem.segments,
+                    cmp.start_iterations,
+                );
                 sims += sf.simulations;
                 problem.segments = segs;
-                if let Ok((Some(_), again)) = crate::update::fit_multistart(
+                let Ok((Some(_), again)) = crate::update::fit_multistart(
                     &problem,
                     &settings.fit,
-                    std::slice::from_ref(&r.x),
-                ) {
-                    let a = &again[0];
-                    sims += a.simulations;
-                    note = format!(
-                        "{note}; refit with start states refined for it: {:?} after {} iterations",
-                        a.termination, a.iterations
-                    );
-                    model = a.model.clone();
+                    std::slice::from_ref(&x),
+                ) else {
+                    break;
+                };
+                let a = &again[0];
+                sims += a.simulations;
+                let c = a.cost_history.last().copied().unwrap_or(f64::INFINITY);
+                model = a.model.clone();
+                x = a.x.clone();
+                let gain = 1.0 - c / cost;
+                cost = c;
+                if !(gain > 0.01) {
+                    break;
                 }
+            }
+            if rounds > 0 {
+                note = format!(
+                    "{note}; {rounds} refits with start states refined for the fitted model (cost {cost:.4e})"
+                );
             }
             Ok((model, note, sims))
         }

@@ -59,6 +59,10 @@ pub struct TraceInput<'a> {
     pub baseline: Option<&'a DMatrix<f64>>,
     /// Effects already in the model (not proposed again).
     pub exclude: &'a [Candidate],
+    /// Directions the force was located along (n × q, from
+    /// [`crate::diagnose::locate`]); a candidate acting along them is
+    /// preferred to a better-scoring one acting elsewhere, when it pays.
+    pub located: Option<&'a DMatrix<f64>>,
 }
 
 /// A scored effect with its parameters from the regression.
@@ -78,6 +82,11 @@ pub struct RankedEffect {
     pub force_explained: Option<f64>,
     /// Change of the information criterion (negative pays).
     pub bic_change: f64,
+    /// Correction of the reconstructed states along the hidden
+    /// trajectories ([`TraceResult::hidden`]) fitted with the effect, one
+    /// coefficient per trajectory (empty when the effect does not see them).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub hidden: Vec<f64>,
 }
 
 /// Result of the trace step.
@@ -93,6 +102,41 @@ pub struct TraceResult {
     pub stop_reason: String,
     /// Linear segment simulations run.
     pub simulations: usize,
+    /// Trajectories of the linear model (2n × N each) the measured channels
+    /// never see ([`hidden_trajectories`]).
+    #[serde(skip)]
+    pub hidden: Vec<DMatrix<f64>>,
+}
+
+/// Trajectories of the linear model the measured channels never see, one
+/// 2n × N matrix per direction: `e_{k+1} = A e_k` from an orthonormal basis
+/// (in states scaled to velocity units) of the unobservable subspace of
+/// `(A, C_y)`. Under acceleration data a free-free model has two, the
+/// rigid-body displacement `(r, 0)` and velocity `(t r, r)`. The
+/// reconstruction cannot place the states along them, so the force of a
+/// candidate that is linear in the state is fitted together with them
+/// (`θ φ(x̂ + Σ c_j e_j) = θ φ(x̂) + Σ (θ c_j) φ(e_j)`): a spring to ground
+/// acts on the absolute displacement the data do not fix.
+pub fn hidden_trajectories(sm: &SampledModel, cy: &DMatrix<f64>, ns: usize) -> Vec<DMatrix<f64>> {
+    let n = sm.n;
+    let (omega, _) = sm.reference_scales();
+    let d = DVector::from_fn(2 * n, |i, _| if i < n { 1.0 / omega } else { 1.0 });
+    let a_s = DMatrix::from_fn(2 * n, 2 * n, |r, c| sm.a[(r, c)] * d[c] / d[r]);
+    let h_s = DMatrix::from_fn(cy.nrows(), 2 * n, |r, c| cy[(r, c)] * d[c]);
+    let null = crate::linear::unobservable(&a_s, &h_s);
+    (0..null.ncols())
+        .map(|j| {
+            let mut e = DMatrix::zeros(2 * n, ns);
+            if ns > 0 {
+                e.set_column(0, &null.column(j).component_mul(&d));
+            }
+            for k in 1..ns {
+                let next = &sm.a * e.column(k - 1);
+                e.set_column(k, &next);
+            }
+            e
+        })
+        .collect()
 }
 
 /// Segment responses of the linear model: each segment of `seg` samples
@@ -205,50 +249,102 @@ pub fn channel_weights(measured: &DMatrix<f64>) -> Vec<f64> {
         .collect()
 }
 
-/// The current selection: columns, an orthonormal basis of them, the
-/// residual energy and the parameter count.
+/// The current selection: the column blocks of the selected effects
+/// (strength column first, then its hidden-state columns), an orthonormal
+/// basis of them, the residual energy and the parameter count.
 struct Selection {
     q: Vec<DVector<f64>>,
-    cols: Vec<DVector<f64>>,
+    blocks: Vec<Vec<DVector<f64>>>,
     r0: DVector<f64>,
     rss: f64,
     nobs: f64,
     npar: usize,
 }
 
+/// A block of columns fitted to the residual on top of the selection.
+struct Fit {
+    /// RSS after adding the block.
+    rss: f64,
+    /// Coefficients of the columns (least squares, selection projected out).
+    coef: Vec<f64>,
+    /// `(PᵀP)⁻¹` diagonal of the projected block (for standard errors).
+    inv_diag: Vec<f64>,
+    /// Orthonormal basis of the projected block.
+    qs: Vec<DVector<f64>>,
+}
+
 impl Selection {
-    /// RSS after adding column `s`, and its normalised part orthogonal to
-    /// the selection (None when it adds nothing).
-    fn rss_with(&self, s: &DVector<f64>, r: &DVector<f64>) -> (f64, Option<DVector<f64>>) {
-        let mut t = s.clone();
-        for q in &self.q {
-            let c = q.dot(&t);
-            t.axpy(-c, q, 1.0);
+    /// Fit the block `cols` to `r` (orthogonal to the selection already)
+    /// with the selection projected out; None when the first column adds
+    /// nothing or the block is rank deficient.
+    fn fit_block(&self, cols: &[DVector<f64>], r: &DVector<f64>) -> Option<Fit> {
+        let proj: Vec<DVector<f64>> = cols
+            .iter()
+            .map(|s| {
+                let mut t = s.clone();
+                for q in &self.q {
+                    let c = q.dot(&t);
+                    t.axpy(-c, q, 1.0);
+                }
+                t
+            })
+            .collect();
+        let mut qs: Vec<DVector<f64>> = vec![];
+        for (t, s) in proj.iter().zip(cols) {
+            let mut t = t.clone();
+            for _ in 0..2 {
+                for q in &qs {
+                    let c = q.dot(&t);
+                    t.axpy(-c, q, 1.0);
+                }
+            }
+            let nn = t.norm();
+            if !(nn > 1e-10 * s.norm()) {
+                return None;
+            }
+            qs.push(t / nn);
         }
-        let nn = t.norm();
-        if !(nn > 1e-10 * s.norm()) {
-            return (self.rss, None);
-        }
-        t /= nn;
-        let c = t.dot(r);
-        (self.rss - c * c, Some(t))
+        let m = proj.len();
+        let g = DMatrix::from_fn(m, m, |i, j| proj[i].dot(&proj[j]));
+        let b = DVector::from_fn(m, |i, _| proj[i].dot(r));
+        let ginv = g.try_inverse()?;
+        let coef = &ginv * b;
+        let rss = self.rss - qs.iter().map(|q| q.dot(r).powi(2)).sum::<f64>();
+        Some(Fit {
+            rss,
+            coef: coef.iter().copied().collect(),
+            inv_diag: (0..m).map(|i| ginv[(i, i)]).collect(),
+            qs,
+        })
     }
 
-    /// Joint least-squares strengths of the selected columns and their
-    /// standard errors.
+    /// Joint least-squares strengths of the selected effects (the first
+    /// column of each block) and their standard errors.
     fn coefficients(&self) -> (Vec<f64>, Vec<f64>) {
-        let m = self.cols.len();
-        let g = DMatrix::from_fn(m, m, |i, j| self.cols[i].dot(&self.cols[j]));
-        let b = DVector::from_fn(m, |i, _| self.cols[i].dot(&self.r0));
+        let cols: Vec<&DVector<f64>> = self.blocks.iter().flatten().collect();
+        let firsts: Vec<usize> = self
+            .blocks
+            .iter()
+            .scan(0, |at, b| {
+                let i = *at;
+                *at += b.len();
+                Some(i)
+            })
+            .collect();
+        let m = cols.len();
+        let nb = self.blocks.len();
+        let g = DMatrix::from_fn(m, m, |i, j| cols[i].dot(cols[j]));
+        let b = DVector::from_fn(m, |i, _| cols[i].dot(&self.r0));
         let Some(ginv) = g.try_inverse() else {
-            return (vec![f64::NAN; m], vec![f64::NAN; m]);
+            return (vec![f64::NAN; nb], vec![f64::NAN; nb]);
         };
         let th = &ginv * b;
         let s2 = self.rss.max(0.0) / (self.nobs - self.npar as f64).max(1.0);
-        let se = (0..m)
-            .map(|i| (s2 * ginv[(i, i)]).max(0.0).sqrt())
+        let se = firsts
+            .iter()
+            .map(|&i| (s2 * ginv[(i, i)]).max(0.0).sqrt())
             .collect();
-        (th.iter().copied().collect(), se)
+        (firsts.iter().map(|&i| th[i]).collect(), se)
     }
 }
 
@@ -283,13 +379,19 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
                 rss_history: vec![rss0],
                 stop_reason: format!("sub-step input matrices could not be built: {e}"),
                 simulations: 0,
+                hidden: vec![],
             }
         }
     };
     let hires = crate::linear::hermite_upsample(input.states, sm.fs, sm.substeps);
+    let hidden = hidden_trajectories(sm, input.cy, ns);
+    let hidden_hires: Vec<DMatrix<f64>> = hidden
+        .iter()
+        .map(|e| crate::linear::hermite_upsample(e, sm.fs, sm.substeps))
+        .collect();
     let mut sel = Selection {
         q: vec![],
-        cols: vec![],
+        blocks: vec![],
         r0: r0.clone(),
         rss: rss0,
         nobs: (p * ns) as f64,
@@ -309,6 +411,7 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
             settings,
             nodes: &nodes,
             hires: &hires,
+            hidden: &hidden_hires,
         };
         let mut scored: Vec<Scored> = lib
             .iter()
@@ -317,6 +420,17 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
             .filter_map(|c| score(c, &ctx, &sel, &r, &mut sims))
             .collect();
         scored.sort_by(|a, b| a.effect.bic_change.total_cmp(&b.effect.bic_change));
+        let pays =
+            |e: &RankedEffect| e.bic_change < 0.0 && e.residual_explained >= settings.min_gain;
+        if let Some(dirs) = input.located.filter(|d| d.ncols() > 0) {
+            if let Some(i) = scored
+                .iter()
+                .position(|s| pays(&s.effect) && acts_along(&s.effect.candidate, dirs))
+            {
+                let s = scored.remove(i);
+                scored.insert(0, s);
+            }
+        }
         if round == 0 {
             ranking = scored.iter().map(|s| s.effect.clone()).collect();
         }
@@ -325,7 +439,7 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
             break;
         };
         let e = &best.effect;
-        if !(e.bic_change < 0.0 && e.residual_explained >= settings.min_gain) {
+        if !pays(e) {
             stop = format!(
                 "best remaining candidate ({}) removes {:.1} % of the residual (threshold {:.1} %), BIC change {:.1}",
                 e.label,
@@ -335,12 +449,14 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
             );
             break;
         }
-        let c = best.q.dot(&r);
-        r.axpy(-c, &best.q, 1.0);
-        sel.q.push(best.q);
-        sel.cols.push(best.col);
+        for q in &best.qs {
+            let c = q.dot(&r);
+            r.axpy(-c, q, 1.0);
+        }
+        sel.npar += best.effect.candidate.nparams() + best.cols.len() - 1;
+        sel.q.extend(best.qs);
+        sel.blocks.push(best.cols);
         sel.rss = r.norm_squared();
-        sel.npar += best.effect.candidate.nparams();
         history.push(sel.rss);
         selected.push(best.effect);
         let (th, se) = sel.coefficients();
@@ -360,7 +476,21 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
         rss_history: history,
         stop_reason: stop,
         simulations: sims,
+        hidden,
     }
+}
+
+/// The candidate's force lies in the span of the columns of `dirs`.
+fn acts_along(cand: &Candidate, dirs: &DMatrix<f64>) -> bool {
+    let Some(d) = cand.direction(dirs.nrows()) else {
+        return false;
+    };
+    let g = dirs.transpose() * dirs;
+    let Some(gi) = g.try_inverse() else {
+        return false;
+    };
+    let fit = dirs * (gi * (dirs.transpose() * &d));
+    (d - fit).norm() <= 1e-9
 }
 
 /// The same physical effect (so it is not selected twice).
@@ -414,28 +544,53 @@ struct Context<'a, 'b> {
     nodes: &'a [DMatrix<f64>],
     /// States upsampled to the sub-step nodes.
     hires: &'a DMatrix<f64>,
+    /// Hidden trajectories upsampled to the sub-step nodes.
+    hidden: &'a [DMatrix<f64>],
 }
 
 struct Scored {
     effect: RankedEffect,
-    col: DVector<f64>,
-    q: DVector<f64>,
+    /// Strength column, then the hidden-state columns.
+    cols: Vec<DVector<f64>>,
+    qs: Vec<DVector<f64>>,
 }
 
-/// One evaluation: RSS, strength, raw column, orthonormal part.
-type Eval = (f64, f64, DVector<f64>, DVector<f64>);
+/// One evaluation of a candidate.
+struct Eval {
+    /// Residual energy with it.
+    rss: f64,
+    /// Strength.
+    th: f64,
+    /// `(PᵀP)⁻¹` of the strength (its variance per unit noise variance).
+    var: f64,
+    /// Strength column, then the hidden-state columns.
+    cols: Vec<DVector<f64>>,
+    /// Orthonormal basis of the projected columns.
+    qs: Vec<DVector<f64>>,
+    /// State correction along each hidden trajectory (0 where unused).
+    hidden: Vec<f64>,
+}
 
-/// Weighted stacked response column of a candidate at unit strength
-/// (internal force on the left-hand side → minus on the right).
-fn column(cand: &Candidate, ctx: &Context<'_, '_>) -> DVector<f64> {
+/// Force linear in the state (so the hidden trajectories enter linearly).
+fn linear_in_state(kind: EffectKind) -> bool {
+    matches!(
+        kind,
+        EffectKind::Stiffness | EffectKind::GroundSpring | EffectKind::Damping
+    )
+}
+
+/// Weighted stacked response column of a candidate at unit strength on the
+/// node states `hires` (internal force on the left-hand side → minus on
+/// the right).
+fn column(cand: &Candidate, ctx: &Context<'_, '_>, hires: &DMatrix<f64>) -> DVector<f64> {
     let sm = ctx.input.sampled;
     let y = match cand.direction(sm.n) {
         Some(dir) => {
-            let phi: Vec<f64> = cand.shape(ctx.hires, sm.n).iter().map(|x| -x).collect();
+            let phi: Vec<f64> = cand.shape(hires, sm.n).iter().map(|x| -x).collect();
             node_response(ctx, NodeForce::Along(&dir, &phi))
         }
         None => {
-            let f = -cand.force(ctx.hires, &sm.c);
+            let f = -cand.force(hires, &sm.c);
             node_response(ctx, NodeForce::Full(&f))
         }
     };
@@ -450,14 +605,36 @@ fn evaluate(
     sims: &mut usize,
 ) -> Option<Eval> {
     *sims += 1;
-    let col = column(cand, ctx);
-    let (rss, q) = sel.rss_with(&col, r);
-    let q = q?;
-    let th = q.dot(r) / q.dot(&col);
+    let col = column(cand, ctx, ctx.hires);
+    let mut cols = vec![col];
+    let mut used = vec![];
+    if linear_in_state(cand.kind) {
+        for (j, e) in ctx.hidden.iter().enumerate() {
+            *sims += 1;
+            let c = column(cand, ctx, e);
+            if c.norm() > 1e-8 * cols[0].norm() {
+                cols.push(c);
+                used.push(j);
+            }
+        }
+    }
+    let fit = sel.fit_block(&cols, r)?;
+    let th = fit.coef[0];
     if positive_only(cand.kind) && !(th > 0.0) {
         return None;
     }
-    Some((rss, th, col, q))
+    let mut hidden = vec![0.0; if used.is_empty() { 0 } else { ctx.hidden.len() }];
+    for (k, &j) in used.iter().enumerate() {
+        hidden[j] = fit.coef[k + 1] / th;
+    }
+    Some(Eval {
+        rss: fit.rss,
+        th,
+        var: fit.inv_diag[0],
+        cols,
+        qs: fit.qs,
+        hidden,
+    })
 }
 
 /// Scan the gap of a contact candidate (coarse grid over the upper half of
@@ -493,7 +670,7 @@ fn scan_gap(
     let mut best: Option<(usize, Candidate, Eval)> = None;
     for (i, &g) in gaps.iter().enumerate() {
         if let Some((c, e)) = at(g, sims) {
-            if best.as_ref().is_none_or(|b| e.0 < b.2 .0) {
+            if best.as_ref().is_none_or(|b| e.rss < b.2.rss) {
                 best = Some((i, c, e));
             }
         }
@@ -505,8 +682,8 @@ fn scan_gap(
         let (x1, x2) = (b - PHI * (b - a), a + PHI * (b - a));
         let f1 = at(x1, sims);
         let f2 = at(x2, sims);
-        let v1 = f1.as_ref().map_or(f64::INFINITY, |f| f.1 .0);
-        let v2 = f2.as_ref().map_or(f64::INFINITY, |f| f.1 .0);
+        let v1 = f1.as_ref().map_or(f64::INFINITY, |f| f.1.rss);
+        let v2 = f2.as_ref().map_or(f64::INFINITY, |f| f.1.rss);
         let winner = if v1 < v2 {
             b = x2;
             f1
@@ -515,7 +692,7 @@ fn scan_gap(
             f2
         };
         if let Some((c, e)) = winner {
-            if e.0 < e_best.0 {
+            if e.rss < e_best.rss {
                 c_best = c;
                 e_best = e;
             }
@@ -523,12 +700,12 @@ fn scan_gap(
     }
     let g = c_best.gap.unwrap_or(0.0);
     let h = ((hi - lo) / ng as f64 * 0.25).max(1e-9);
-    let rp = at(g + h, sims).map(|e| e.1 .0);
-    let rm = at((g - h).max(0.0), sims).map(|e| e.1 .0);
+    let rp = at(g + h, sims).map(|e| e.1.rss);
+    let rm = at((g - h).max(0.0), sims).map(|e| e.1.rss);
     let se = match (rp, rm) {
-        (Some(p), Some(m)) if p - 2.0 * e_best.0 + m > 0.0 => {
-            let curv = (p - 2.0 * e_best.0 + m) / (h * h);
-            let s2 = e_best.0 / (sel.nobs - (sel.npar + 2) as f64).max(1.0);
+        (Some(p), Some(m)) if p - 2.0 * e_best.rss + m > 0.0 => {
+            let curv = (p - 2.0 * e_best.rss + m) / (h * h);
+            let s2 = e_best.rss / (sel.nobs - (sel.npar + 2) as f64).max(1.0);
             (2.0 * s2 / curv).sqrt()
         }
         _ => f64::NAN,
@@ -543,28 +720,29 @@ fn score(
     r: &DVector<f64>,
     sims: &mut usize,
 ) -> Option<Scored> {
-    let (cand, (rss, th, col, q), gap_se) = if cand.kind == EffectKind::Contact {
+    let (cand, ev, gap_se) = if cand.kind == EffectKind::Contact {
         let (c, e, se) = scan_gap(cand, ctx, sel, r, sims)?;
         (c, e, Some(se))
     } else {
         (cand.clone(), evaluate(cand, ctx, sel, r, sims)?, None)
     };
+    let rss = ev.rss;
     let gain = if sel.rss > 0.0 {
         1.0 - rss / sel.rss
     } else {
         0.0
     };
-    let bic = sel.nobs * (rss.max(1e-300) / sel.rss.max(1e-300)).ln()
-        + cand.nparams() as f64 * sel.nobs.ln();
-    let dof = (sel.nobs - (sel.npar + cand.nparams()) as f64).max(1.0);
-    let se_th = (rss.max(0.0) / dof).sqrt() / col.norm().max(1e-300);
+    let npar = cand.nparams() + ev.cols.len() - 1;
+    let bic = sel.nobs * (rss.max(1e-300) / sel.rss.max(1e-300)).ln() + npar as f64 * sel.nobs.ln();
+    let dof = (sel.nobs - (sel.npar + npar) as f64).max(1.0);
+    let se_th = (rss.max(0.0) / dof * ev.var).max(0.0).sqrt();
     let mut parameters = vec![];
     let mut std_errors = vec![];
     if let Some(g) = cand.gap {
         parameters.push(("gap".to_string(), g));
         std_errors.push(gap_se.unwrap_or(f64::NAN));
     }
-    parameters.push((strength_name(cand.kind).to_string(), th));
+    parameters.push((strength_name(cand.kind).to_string(), ev.th));
     std_errors.push(se_th);
     Some(Scored {
         effect: RankedEffect {
@@ -575,9 +753,10 @@ fn score(
             residual_explained: gain,
             force_explained: None,
             bic_change: bic,
+            hidden: ev.hidden,
         },
-        col,
-        q,
+        cols: ev.cols,
+        qs: ev.qs,
     })
 }
 
