@@ -3,8 +3,12 @@
 //! [`newmark`]: Newmark average acceleration (γ = 1/2, β = 1/4) or HHT-α,
 //! with Newton iterations on the nonlinear elements, a fixed number of
 //! sub-steps per sample and the external force linearly interpolated
-//! between samples.
+//! between samples; [`Integrator::run_sensitivities`] also differentiates
+//! the discrete solution with respect to the initial state and model
+//! parameters (forward sensitivities).
 
 pub mod newmark;
 
-pub use newmark::{Integrator, SimSettings, SimStatus, Simulation};
+pub use newmark::{
+    ElementSeed, Integrator, ParamSeed, Seeds, Sensitivities, SimSettings, SimStatus, Simulation,
+};

@@ -21,7 +21,9 @@ use crate::model::Model;
 use nalgebra::{DMatrix, DMatrixView};
 
 mod dense;
+mod sensitivity;
 use dense::{chol_solve, cholesky_in_place, dim, lu_solve, mat_vec_axpy, max_abs};
+pub use sensitivity::{ElementSeed, ParamSeed, Seeds, Sensitivities};
 use serde::Serialize;
 
 /// Integrator settings.

@@ -203,6 +203,99 @@ impl Element {
     }
 }
 
+/// A parameter of an element, for derivatives of the internal force
+/// ([`Element::add_param_derivative`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ElementParam {
+    /// Contact gap, m.
+    Gap,
+    /// Contact penalty stiffness, N/m.
+    Stiffness,
+    /// Friction force level, N.
+    Level,
+    /// Cubic coefficient, N/m³.
+    K3,
+}
+
+impl ElementParam {
+    /// True when `element` has this parameter.
+    pub fn belongs_to(&self, element: &Element) -> bool {
+        matches!(
+            (self, element),
+            (
+                ElementParam::Gap | ElementParam::Stiffness,
+                Element::Contact { .. }
+            ) | (ElementParam::Level, Element::Friction { .. })
+                | (ElementParam::K3, Element::Cubic { .. })
+        )
+    }
+}
+
+impl Element {
+    /// Add `s ∂f/∂q` at (u, v) into `f`, for the element's parameter `q`:
+    ///
+    /// - contact, `p = δ − gap > 0`: `∂f/∂gap = −k_c`, `∂f/∂k_c = p`
+    ///   (both scattered `+` on i, `−` on j); 0 when open (at `p = 0` the law
+    ///   has a kink and the open side's 0 is returned);
+    /// - friction: `∂f/∂F = tanh(v/v_r)` (the same `tanh` as the force);
+    /// - cubic: `∂f/∂k_3 = δ³`.
+    ///
+    /// Returns false (and adds nothing) when the element has no such
+    /// parameter.
+    #[inline]
+    pub fn add_param_derivative(
+        &self,
+        q: ElementParam,
+        s: f64,
+        u: &[f64],
+        v: &[f64],
+        f: &mut [f64],
+    ) -> bool {
+        match (*self, q) {
+            (Element::Contact { i, j, gap, k }, ElementParam::Gap | ElementParam::Stiffness) => {
+                let p = rel(u, i, j) - gap;
+                if p > 0.0 {
+                    let d = if q == ElementParam::Gap { -k } else { p };
+                    scatter(f, i, j, s * d);
+                }
+            }
+            (Element::Friction { d, vreg, .. }, ElementParam::Level) => {
+                f[d] += s * fast_tanh(v[d] / vreg);
+            }
+            (Element::Cubic { i, j, .. }, ElementParam::K3) => {
+                let x = rel(u, i, j);
+                scatter(f, i, j, s * x * x * x);
+            }
+            _ => return false,
+        }
+        true
+    }
+
+    /// `y += c_u slope ∂f/∂u · x_u` (displacement laws) or
+    /// `y += c_v slope ∂f/∂v · x_v` (friction): the product of the tangent
+    /// that [`Element::add_slope`] assembles with vectors, without the
+    /// matrix.
+    #[inline]
+    pub fn add_slope_product(
+        &self,
+        slope: f64,
+        (cu, xu): (f64, &[f64]),
+        (cv, xv): (f64, &[f64]),
+        y: &mut [f64],
+    ) {
+        if slope == 0.0 {
+            return;
+        }
+        match *self {
+            Element::Contact { i, j, .. } | Element::Cubic { i, j, .. } => {
+                scatter(y, i, j, cu * slope * rel(xu, i, j))
+            }
+            Element::Friction { d, .. } => y[d] += cv * slope * xv[d],
+        }
+    }
+}
+
 /// Total internal force of a set of elements.
 pub fn internal_force(elements: &[Element], u: &[f64], v: &[f64], f: &mut [f64]) {
     f.iter_mut().for_each(|x| *x = 0.0);
@@ -283,6 +376,78 @@ mod tests {
         internal_force(&els, &u, &vp, &mut fp);
         internal_force(&els, &u, &vm, &mut fm);
         approx::assert_relative_eq!(tv[n + 1], (fp[1] - fm[1]) / 2e-7, max_relative = 1e-5);
+    }
+
+    #[test]
+    fn parameter_derivatives_match_central_differences() {
+        let (els, u, v) = sample();
+        let n = 3;
+        let with = |e: Element, q: ElementParam, dq: f64| -> Element {
+            match (e, q) {
+                (Element::Contact { i, j, gap, k }, ElementParam::Gap) => Element::Contact {
+                    i,
+                    j,
+                    gap: gap + dq,
+                    k,
+                },
+                (Element::Contact { i, j, gap, k }, _) => Element::Contact {
+                    i,
+                    j,
+                    gap,
+                    k: k + dq,
+                },
+                (Element::Friction { d, level, vreg }, _) => Element::Friction {
+                    d,
+                    level: level + dq,
+                    vreg,
+                },
+                (Element::Cubic { i, j, k3 }, _) => Element::Cubic { i, j, k3: k3 + dq },
+            }
+        };
+        let cases = [
+            (0, ElementParam::Gap, 1e-3),
+            (0, ElementParam::Stiffness, 2e6),
+            (1, ElementParam::Level, 0.3),
+            (2, ElementParam::K3, 1e9),
+            (3, ElementParam::K3, 3e8),
+        ];
+        for (e, q, size) in cases {
+            let mut d = vec![0.0; n];
+            assert!(els[e].add_param_derivative(q, 2.0, &u, &v, &mut d));
+            assert!(d.iter().any(|&x| x != 0.0), "{q:?}");
+            let h = 1e-6 * size;
+            let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
+            with(els[e], q, h).add_force(&u, &v, &mut fp);
+            with(els[e], q, -h).add_force(&u, &v, &mut fm);
+            for r in 0..n {
+                let fd = 2.0 * (fp[r] - fm[r]) / (2.0 * h);
+                approx::assert_relative_eq!(d[r], fd, max_relative = 1e-7, epsilon = 1e-12);
+            }
+        }
+        // a parameter of another kind adds nothing
+        let mut d = vec![0.0; n];
+        assert!(!els[1].add_param_derivative(ElementParam::Gap, 1.0, &u, &v, &mut d));
+        assert!(!ElementParam::K3.belongs_to(&els[0]));
+        assert_eq!(d, vec![0.0; n]);
+    }
+
+    #[test]
+    fn slope_products_equal_the_assembled_tangent() {
+        let (els, u, v) = sample();
+        let n = 3;
+        let (cu, cv) = (1.5, 0.25);
+        let t = tangent(&els, &u, &v, cu, cv, n);
+        let x = [0.3, -1.1, 0.7];
+        let mut y = vec![0.0; n];
+        let mut f = vec![0.0; n];
+        for e in &els {
+            let s = e.force_and_slope(&u, &v, &mut f);
+            e.add_slope_product(s, (cu, &x), (cv, &x), &mut y);
+        }
+        for r in 0..n {
+            let tx: f64 = (0..n).map(|c| t[c * n + r] * x[c]).sum();
+            approx::assert_relative_eq!(y[r], tx, max_relative = 1e-14);
+        }
     }
 
     #[test]

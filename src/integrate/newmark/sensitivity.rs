@@ -1,0 +1,700 @@
+//! Forward sensitivities of the Newmark / HHT-α scheme: the exact
+//! derivatives of the *discrete* solution with respect to the initial state
+//! and to model parameters, from one simulation.
+//!
+//! Each sub-step solves `R(u_{n+1}; u_n, v_n, a_n, g_n, p) = 0` with
+//!
+//! $$ R = M a_{n+1} + (1+α)\,g(u_{n+1}, v_{n+1}) − α\,g_n − f(t_n + (1+α)h), $$
+//!
+//! `g = C v + K u + f_int(u, v)`, `a_{n+1} = a_0 u_{n+1} + z`,
+//! `v_{n+1} = a_1 u_{n+1} + w` and the affine parts
+//! `z = −a_0 u_n − a_2 v_n − a_3 a_n`, `w = v_n + h(1−γ) a_n + hγ z`
+//! (the Newmark constants depend on `h` and `α` only). The implicit
+//! function theorem at the converged `u_{n+1}` gives, for one seed
+//! direction (a state direction or `∂/∂p` of a parameter),
+//!
+//! $$ J_T\,δu_{n+1} = −M δz − (1+α)(C + F_v) δw + α δg_n − δM a_{n+1}
+//!    − (1+α)\,q_{n+1}, $$
+//!
+//! with the converged tangent `J_T = J_0 + (1+α)(F_u + a_1 F_v)`
+//! (`F_u = ∂f_int/∂u`, `F_v = ∂f_int/∂v` at `(u_{n+1}, v_{n+1})`),
+//! `q = δC v + δK u + ∂f_int/∂p` at the new state, `δz`, `δw` the affine
+//! parts applied to `(δu_n, δv_n, δa_n)`, and then
+//! `δa_{n+1} = a_0 δu_{n+1} + δz`, `δv_{n+1} = a_1 δu_{n+1} + δw`. With
+//! HHT (`α ≠ 0`) the derivative of `g_{n+1}` is carried along:
+//! `δg = (C + F_v) δv + (K + F_u) δu + q`. The start is the derivative of
+//! the initial acceleration `a_0 = M⁻¹(f_0 − C v_0 − K u_0 − f_int)`:
+//! `M δa_0 = −δM a_0 − C δv_0 − K δu_0 − F_u δu_0 − F_v δv_0 − q_0`.
+//!
+//! `J_T` is factored once per sub-step (Cholesky, or LU when it is not
+//! positive definite), and the factor is reused while the element slopes
+//! do not change (a linear model, a closed contact without friction);
+//! every seed is one more pair of triangular solves. The primal run is
+//! [`Integrator::run`]'s own code, so the simulation is the same bit for
+//! bit.
+//!
+//! The derivative is that of the scheme's exact sub-step solution; the
+//! Newton iterate differs from it by the Newton tolerance. At a contact's
+//! switching point (`δ = gap` exactly at a sub-step) the law has a kink and
+//! the open side's derivative (0) is used.
+
+use super::dense::{chol_solve, cholesky_in_place, dim, mat_vec_axpy};
+use super::{Integrator, Outputs, SimStatus, Simulation, Work};
+use crate::error::{Result, TacitError};
+use crate::model::elements::{self, ElementParam};
+use nalgebra::{DMatrix, DMatrixView, Dyn, LU};
+use serde::Serialize;
+
+/// One element parameter in a [`ParamSeed`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ElementSeed {
+    /// Index of the element in the integrator's list
+    /// ([`Integrator::elements`]; for a model: contacts, then frictions,
+    /// then cubic springs, as [`elements::compile`] orders them).
+    pub element: usize,
+    /// Which of its parameters.
+    pub param: ElementParam,
+    /// `∂q/∂p`: the element parameter's change per unit of the seeded
+    /// parameter (1 for the parameter itself, its scale for a scaled one).
+    pub scale: f64,
+}
+
+/// The derivative of the model with respect to one parameter `p`: `∂M/∂p`,
+/// `∂C/∂p`, `∂K/∂p` (n × n, `None` = 0) and the element parameters it
+/// moves.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ParamSeed {
+    /// `∂M/∂p`.
+    pub dm: Option<DMatrix<f64>>,
+    /// `∂C/∂p`.
+    pub dc: Option<DMatrix<f64>>,
+    /// `∂K/∂p`.
+    pub dk: Option<DMatrix<f64>>,
+    /// Element parameters moved by `p`.
+    pub elements: Vec<ElementSeed>,
+}
+
+/// The directions to differentiate along: initial-state directions and
+/// parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Seeds {
+    /// `2n × s`: each column an initial direction `(δu_0; δv_0)`
+    /// (`2n × 0` for none).
+    pub state: DMatrix<f64>,
+    /// Parameters.
+    pub params: Vec<ParamSeed>,
+}
+
+impl Seeds {
+    /// Parameter seeds only, for `n` DOFs.
+    pub fn params(n: usize, params: Vec<ParamSeed>) -> Seeds {
+        Seeds {
+            state: DMatrix::zeros(2 * n, 0),
+            params,
+        }
+    }
+
+    /// Every initial-state direction (the `2n × 2n` identity): the
+    /// derivatives with respect to `u_0` (seeds `0..n`) and `v_0`
+    /// (`n..2n`).
+    pub fn initial_state(n: usize) -> Seeds {
+        Seeds {
+            state: DMatrix::identity(2 * n, 2 * n),
+            params: vec![],
+        }
+    }
+
+    /// Number of seeds (state directions, then parameters).
+    pub fn len(&self) -> usize {
+        self.state.ncols() + self.params.len()
+    }
+
+    /// True when there is no seed.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Derivatives of a [`Simulation`] along each seed (state seeds first, then
+/// parameters), in the simulation's layout: DOF × sample, column 0 the
+/// derivative of the initial state (for `a`: of the initial acceleration).
+/// Truncated where the simulation stops.
+#[derive(Debug, Clone)]
+pub struct Sensitivities {
+    /// `∂u/∂seed`, one matrix per seed.
+    pub du: Vec<DMatrix<f64>>,
+    /// `∂v/∂seed`.
+    pub dv: Vec<DMatrix<f64>>,
+    /// `∂a/∂seed`.
+    pub da: Vec<DMatrix<f64>>,
+    /// Factorizations of the converged tangent (the rest of the sub-steps
+    /// reused one).
+    pub factorizations: usize,
+    /// Time (s) of the first sub-step whose converged tangent was singular,
+    /// if any: the derivatives are NaN from there on (the simulation is
+    /// not affected).
+    pub singular_tangent: Option<f64>,
+}
+
+/// A parameter seed as column-major slices.
+struct Prepared {
+    dm: Option<Vec<f64>>,
+    dc: Option<Vec<f64>>,
+    dk: Option<Vec<f64>>,
+    elements: Vec<ElementSeed>,
+}
+
+/// The factor of the converged tangent in use.
+enum Factor {
+    /// None yet (or invalidated).
+    Stale,
+    /// `J_0`'s own Cholesky factor (no element slope).
+    J0,
+    /// Cholesky factor in `TangentFactor::l`.
+    Chol,
+    /// LU of an indefinite tangent.
+    Lu(Box<LU<f64, Dyn, Dyn>>),
+    /// Singular: no solve.
+    Singular,
+}
+
+struct TangentFactor {
+    factor: Factor,
+    /// Cholesky factor (column-major) when `factor` is `Chol`.
+    l: Vec<f64>,
+    /// Slopes the factor was built from.
+    slopes: Vec<f64>,
+    /// LU of `J_0` when it has no Cholesky factor.
+    j0_lu: Option<Box<LU<f64, Dyn, Dyn>>>,
+    count: usize,
+}
+
+/// Derivative state and scratch of one run, seed-major (seed `j` at
+/// `j n .. (j+1) n`).
+struct SensWork {
+    s: usize,
+    du: Vec<f64>,
+    dv: Vec<f64>,
+    da: Vec<f64>,
+    /// `δg` per seed (HHT only).
+    dg: Vec<f64>,
+    dz: Vec<f64>,
+    dw: Vec<f64>,
+    rhs: Vec<f64>,
+    /// `q` per parameter seed at the current state.
+    q: Vec<f64>,
+    /// `δM a + (1+α) q` per parameter seed.
+    p: Vec<f64>,
+    slopes0: Vec<f64>,
+    tangent: TangentFactor,
+    singular_at: Option<f64>,
+}
+
+impl Integrator {
+    /// The compiled nonlinear elements (indices of [`ElementSeed::element`]).
+    pub fn elements(&self) -> &[elements::Element] {
+        &self.elements
+    }
+
+    /// Simulate as [`Integrator::run`] (the same numbers bit for bit) and
+    /// propagate the derivatives of the discrete solution along `seeds`
+    /// (see the module documentation for the equations).
+    ///
+    /// Errors (bad input): `force` without `n` rows, `u0`/`v0` shorter than
+    /// `n`, a state seed matrix without `2n` rows, a seed matrix that is not
+    /// `n × n`, an element index out of range or a parameter the element
+    /// does not have. A simulation that stops is a status in the
+    /// [`Simulation`], and the derivatives stop with it.
+    pub fn run_sensitivities(
+        &self,
+        force: DMatrixView<'_, f64>,
+        u0: &[f64],
+        v0: &[f64],
+        seeds: &Seeds,
+    ) -> Result<(Simulation, Sensitivities)> {
+        let prep = self.check_seeds(force, u0, v0, seeds)?;
+        let st = &seeds.state;
+        Ok(match self.n {
+            1 => self.run_sens_n::<1>(force, u0, v0, st, &prep),
+            2 => self.run_sens_n::<2>(force, u0, v0, st, &prep),
+            3 => self.run_sens_n::<3>(force, u0, v0, st, &prep),
+            4 => self.run_sens_n::<4>(force, u0, v0, st, &prep),
+            5 => self.run_sens_n::<5>(force, u0, v0, st, &prep),
+            6 => self.run_sens_n::<6>(force, u0, v0, st, &prep),
+            7 => self.run_sens_n::<7>(force, u0, v0, st, &prep),
+            8 => self.run_sens_n::<8>(force, u0, v0, st, &prep),
+            _ => self.run_sens_n::<0>(force, u0, v0, st, &prep),
+        })
+    }
+
+    fn check_seeds(
+        &self,
+        force: DMatrixView<'_, f64>,
+        u0: &[f64],
+        v0: &[f64],
+        seeds: &Seeds,
+    ) -> Result<Vec<Prepared>> {
+        let n = self.n;
+        let err = |m: String| TacitError::Setting(format!("sensitivities: {m}"));
+        let bad = |m: String| Err(err(m));
+        if force.nrows() != n || u0.len() < n || v0.len() < n {
+            return bad(format!(
+                "force has {} rows, u0 {} and v0 {} values; the model has {n} DOFs",
+                force.nrows(),
+                u0.len(),
+                v0.len()
+            ));
+        }
+        if seeds.state.ncols() > 0 && seeds.state.nrows() != 2 * n {
+            return bad(format!(
+                "the state seeds have {} rows, expected 2n = {}",
+                seeds.state.nrows(),
+                2 * n
+            ));
+        }
+        let mut out = Vec::with_capacity(seeds.params.len());
+        for (j, p) in seeds.params.iter().enumerate() {
+            let mat = |m: &Option<DMatrix<f64>>, what: &str| -> Result<Option<Vec<f64>>> {
+                match m {
+                    Some(m) if m.shape() != (n, n) => Err(err(format!(
+                        "parameter seed {j}: {what} is {}x{}, expected {n}x{n}",
+                        m.nrows(),
+                        m.ncols()
+                    ))),
+                    Some(m) => Ok(Some(m.as_slice().to_vec())),
+                    None => Ok(None),
+                }
+            };
+            let (dm, dc, dk) = (mat(&p.dm, "dM")?, mat(&p.dc, "dC")?, mat(&p.dk, "dK")?);
+            for e in &p.elements {
+                match self.elements.get(e.element) {
+                    None => {
+                        return bad(format!(
+                            "parameter seed {j}: element {} of {}",
+                            e.element,
+                            self.elements.len()
+                        ))
+                    }
+                    Some(el) if !e.param.belongs_to(el) => {
+                        return bad(format!(
+                            "parameter seed {j}: element {} ({el:?}) has no {:?} parameter",
+                            e.element, e.param
+                        ))
+                    }
+                    _ => {}
+                }
+            }
+            out.push(Prepared {
+                dm,
+                dc,
+                dk,
+                elements: p.elements.clone(),
+            });
+        }
+        Ok(out)
+    }
+
+    /// [`Integrator::run_sensitivities`] with the kernels' size `N`; the
+    /// sample loop is [`Integrator::run_n`]'s with the derivative step added.
+    fn run_sens_n<const N: usize>(
+        &self,
+        force: DMatrixView<'_, f64>,
+        u0: &[f64],
+        v0: &[f64],
+        state: &DMatrix<f64>,
+        prep: &[Prepared],
+    ) -> (Simulation, Sensitivities) {
+        let n = self.n;
+        let ns = force.ncols();
+        let mut out = Outputs::new(n, ns);
+        let mut ws = Work::new(n, self.elements.len());
+        let mut sw = SensWork::new(self, state.ncols() + prep.len(), prep.len());
+        let mut dout = SensOutputs::new(n, ns, sw.s);
+        ws.u.copy_from_slice(&u0[..n]);
+        ws.v.copy_from_slice(&v0[..n]);
+        let mut status = SimStatus::Completed;
+        let (mut steps, mut iters, mut done) = (0, 0, 0usize);
+        if ns > 0 {
+            if !self.initial_acceleration(force, &mut ws) {
+                let sim = Outputs::new(n, 0).finish(
+                    SimStatus::NonFinite {
+                        time: 0.0,
+                        sample: 0,
+                    },
+                    0,
+                    0,
+                );
+                return (sim, dout.finish(0, &sw));
+            }
+            out.store(&ws, 0);
+            self.initial_sensitivities::<N>(&ws, &mut sw, state, prep);
+            dout.store(&sw, 0);
+            if self.alpha != 0.0 {
+                self.g_of::<N>(&mut ws);
+            }
+            done = 1;
+        }
+        'samples: for k in 1..ns {
+            for i in 0..n {
+                ws.f_prev[i] = force[(i, k - 1)];
+                ws.f_next[i] = force[(i, k)];
+            }
+            for sub in 0..self.settings.substeps {
+                let time = || (k - 1) as f64 / self.fs() + (sub + 1) as f64 * self.h;
+                match self.advance::<N>(&mut ws, sub) {
+                    Ok(it) => iters += it,
+                    Err((iterations, residual)) => {
+                        iters += iterations;
+                        status = SimStatus::NewtonFailed {
+                            time: time(),
+                            sample: k - 1,
+                            iterations,
+                            residual,
+                        };
+                        break 'samples;
+                    }
+                }
+                steps += 1;
+                if ws.u.iter().chain(&ws.v).any(|x| !x.is_finite()) {
+                    status = SimStatus::NonFinite {
+                        time: time(),
+                        sample: k - 1,
+                    };
+                    break 'samples;
+                }
+                if !self.sensitivity_step::<N>(&ws, &mut sw, prep) && sw.singular_at.is_none() {
+                    sw.singular_at = Some(time());
+                }
+                if self.alpha != 0.0 {
+                    self.g_of::<N>(&mut ws);
+                }
+            }
+            elements::internal_force(&self.elements, &ws.u, &ws.v, &mut ws.fnl);
+            out.store(&ws, k);
+            dout.store(&sw, k);
+            done = k + 1;
+        }
+        out.truncate(done);
+        (out.finish(status, steps, iters), dout.finish(done, &sw))
+    }
+
+    /// `q = δC v + δK u + ∂f_int/∂p` and `p = δM a + (1+α) q` of every
+    /// parameter seed at the state in `ws` (u, v, a).
+    fn parameter_terms<const N: usize>(&self, ws: &Work, sw: &mut SensWork, prep: &[Prepared]) {
+        let n = dim::<N>(self.n);
+        let c1 = 1.0 + self.alpha;
+        for (j, p) in prep.iter().enumerate() {
+            let q = &mut sw.q[j * n..(j + 1) * n];
+            q.fill(0.0);
+            if let Some(dc) = &p.dc {
+                mat_vec_axpy::<N>(dc, n, &ws.v, 1.0, q);
+            }
+            if let Some(dk) = &p.dk {
+                mat_vec_axpy::<N>(dk, n, &ws.u, 1.0, q);
+            }
+            for e in &p.elements {
+                self.elements[e.element].add_param_derivative(e.param, e.scale, &ws.u, &ws.v, q);
+            }
+            let pj = &mut sw.p[j * n..(j + 1) * n];
+            for i in 0..n {
+                pj[i] = c1 * q[i];
+            }
+            if let Some(dm) = &p.dm {
+                mat_vec_axpy::<N>(dm, n, &ws.a, 1.0, pj);
+            }
+        }
+    }
+
+    /// Derivatives of the initial state: the seeds' `(δu_0, δv_0)` and
+    /// `δa_0` from `M δa_0 = −δM a_0 − (C + F_v) δv_0 − (K + F_u) δu_0 − q_0`.
+    fn initial_sensitivities<const N: usize>(
+        &self,
+        ws: &Work,
+        sw: &mut SensWork,
+        state: &DMatrix<f64>,
+        prep: &[Prepared],
+    ) {
+        let n = dim::<N>(self.n);
+        let ns0 = state.ncols();
+        for j in 0..ns0 {
+            sw.du[j * n..(j + 1) * n].copy_from_slice(&state.as_slice()[j * 2 * n..j * 2 * n + n]);
+            sw.dv[j * n..(j + 1) * n]
+                .copy_from_slice(&state.as_slice()[j * 2 * n + n..(j + 1) * 2 * n]);
+        }
+        let mut f = vec![0.0; n];
+        for (e, s) in self.elements.iter().zip(sw.slopes0.iter_mut()) {
+            *s = e.force_and_slope(&ws.u, &ws.v, &mut f);
+        }
+        self.parameter_terms::<N>(ws, sw, prep);
+        let mchol = self.m.clone().cholesky();
+        for j in 0..sw.s {
+            let r = j * n..(j + 1) * n;
+            let mut g = vec![0.0; n];
+            self.g_derivative::<N>(&sw.slopes0, &sw.du[r.clone()], &sw.dv[r.clone()], &mut g);
+            let mut rhs = nalgebra::DVector::from_fn(n, |i, _| -g[i]);
+            if j >= ns0 {
+                let jp = j - ns0;
+                for i in 0..n {
+                    rhs[i] -= sw.q[jp * n + i];
+                }
+                if let Some(dm) = &prep[jp].dm {
+                    mat_vec_axpy::<N>(dm, n, &ws.a, -1.0, rhs.as_mut_slice());
+                }
+                g.iter_mut()
+                    .zip(&sw.q[jp * n..(jp + 1) * n])
+                    .for_each(|(gi, qi)| *gi += qi);
+            }
+            let da = match &mchol {
+                Some(ch) => ch.solve(&rhs),
+                None => nalgebra::DVector::from_element(n, f64::NAN),
+            };
+            sw.da[r.clone()].copy_from_slice(da.as_slice());
+            if self.alpha != 0.0 {
+                sw.dg[r].copy_from_slice(&g);
+            }
+        }
+    }
+
+    /// `y = (C + F_v) δv + (K + F_u) δu` (the state part of `δg`).
+    fn g_derivative<const N: usize>(&self, slopes: &[f64], du: &[f64], dv: &[f64], y: &mut [f64]) {
+        let n = dim::<N>(self.n);
+        y[..n].fill(0.0);
+        mat_vec_axpy::<N>(self.c.as_slice(), n, dv, 1.0, y);
+        mat_vec_axpy::<N>(self.k.as_slice(), n, du, 1.0, y);
+        for (e, &sl) in self.elements.iter().zip(slopes) {
+            e.add_slope_product(sl, (1.0, du), (1.0, dv), y);
+        }
+    }
+
+    /// Propagate every seed over the sub-step just taken (`ws` holds the
+    /// new state, the step's affine parts `z, w` and the element slopes at
+    /// the converged point). False when the converged tangent is singular
+    /// (the derivatives become NaN).
+    fn sensitivity_step<const N: usize>(
+        &self,
+        ws: &Work,
+        sw: &mut SensWork,
+        prep: &[Prepared],
+    ) -> bool {
+        let n = dim::<N>(self.n);
+        let (h, alpha, gamma, beta) = (self.h, self.alpha, self.gamma, self.beta);
+        let (a0, a1) = (1.0 / (beta * h * h), gamma / (beta * h));
+        let (a2, a3) = (1.0 / (beta * h), 0.5 / beta - 1.0);
+        let c1 = 1.0 + alpha;
+        let ok = self.factor_tangent::<N>(&ws.slopes, a1, &mut sw.tangent);
+        self.parameter_terms::<N>(ws, sw, prep);
+        let ns0 = sw.s - prep.len();
+        for j in 0..sw.s {
+            let r = j * n..(j + 1) * n;
+            let (du, dv, da) = (
+                &mut sw.du[r.clone()],
+                &mut sw.dv[r.clone()],
+                &mut sw.da[r.clone()],
+            );
+            let (dz, dw, rhs) = (&mut sw.dz[..n], &mut sw.dw[..n], &mut sw.rhs[..n]);
+            for i in 0..n {
+                dz[i] = -a0 * du[i] - a2 * dv[i] - a3 * da[i];
+                dw[i] = dv[i] + h * (1.0 - gamma) * da[i] + h * gamma * dz[i];
+            }
+            // rhs = −M δz − (1+α)(C + F_v) δw + α δg_n − p
+            match &self.m_diag {
+                Some(m) => (0..n).for_each(|i| rhs[i] = -m[i] * dz[i]),
+                None => {
+                    rhs.fill(0.0);
+                    mat_vec_axpy::<N>(self.m.as_slice(), n, dz, -1.0, rhs);
+                }
+            }
+            mat_vec_axpy::<N>(self.c.as_slice(), n, dw, -c1, rhs);
+            for (e, &sl) in self.elements.iter().zip(&ws.slopes) {
+                e.add_slope_product(sl, (0.0, dw), (-c1, dw), rhs);
+            }
+            if alpha != 0.0 {
+                for (x, g) in rhs.iter_mut().zip(&sw.dg[r.clone()]) {
+                    *x += alpha * g;
+                }
+            }
+            if j >= ns0 {
+                let jp = j - ns0;
+                for (x, p) in rhs.iter_mut().zip(&sw.p[jp * n..(jp + 1) * n]) {
+                    *x -= p;
+                }
+            }
+            if !self.solve_tangent::<N>(&sw.tangent, rhs) {
+                rhs.fill(f64::NAN);
+            }
+            for i in 0..n {
+                du[i] = rhs[i];
+                da[i] = a0 * rhs[i] + dz[i];
+                dv[i] = a1 * rhs[i] + dw[i];
+            }
+            if alpha != 0.0 {
+                let dg = &mut sw.dg[r];
+                self.g_derivative::<N>(&ws.slopes, du, dv, dg);
+                if j >= ns0 {
+                    let jp = j - ns0;
+                    for (x, q) in dg.iter_mut().zip(&sw.q[jp * n..(jp + 1) * n]) {
+                        *x += q;
+                    }
+                }
+            }
+        }
+        ok
+    }
+
+    /// Factor `J_T = J_0 + (1+α)(F_u + a_1 F_v)` for `slopes`, unless the
+    /// factor in `t` was built from the same slopes; false when singular.
+    fn factor_tangent<const N: usize>(
+        &self,
+        slopes: &[f64],
+        a1: f64,
+        t: &mut TangentFactor,
+    ) -> bool {
+        let n = dim::<N>(self.n);
+        if !slopes.iter().any(|&s| s != 0.0) {
+            t.factor = Factor::J0;
+            return self.j0_chol.is_some() || t.j0_lu.is_some();
+        }
+        let same = t.slopes == slopes;
+        match t.factor {
+            Factor::Chol | Factor::Lu(_) if same => return true,
+            Factor::Singular if same => return false,
+            _ => {}
+        }
+        t.slopes.copy_from_slice(slopes);
+        t.count += 1;
+        let c1 = 1.0 + self.alpha;
+        t.l.copy_from_slice(self.j0.as_slice());
+        for (e, &sl) in self.elements.iter().zip(slopes) {
+            e.add_slope(sl, c1, c1 * a1, &mut t.l, n);
+        }
+        let full = DMatrix::from_column_slice(n, n, &t.l);
+        if cholesky_in_place::<N>(&mut t.l, n) {
+            t.factor = Factor::Chol;
+            return true;
+        }
+        let lu = full.lu();
+        if lu.is_invertible() {
+            t.factor = Factor::Lu(Box::new(lu));
+            true
+        } else {
+            t.factor = Factor::Singular;
+            false
+        }
+    }
+
+    /// Solve `J_T x = b` in place with the current factor; false when
+    /// singular.
+    fn solve_tangent<const N: usize>(&self, t: &TangentFactor, b: &mut [f64]) -> bool {
+        let n = dim::<N>(self.n);
+        let lu_solve = |lu: &LU<f64, Dyn, Dyn>, b: &mut [f64]| {
+            let mut x = nalgebra::DVector::from_column_slice(&b[..n]);
+            let ok = lu.solve_mut(&mut x);
+            b[..n].copy_from_slice(x.as_slice());
+            ok
+        };
+        match &t.factor {
+            Factor::J0 => match (&self.j0_chol, &t.j0_lu) {
+                (Some(l), _) => {
+                    chol_solve::<N>(l, n, b);
+                    true
+                }
+                (None, Some(lu)) => lu_solve(lu, b),
+                (None, None) => false,
+            },
+            Factor::Chol => {
+                chol_solve::<N>(&t.l, n, b);
+                true
+            }
+            Factor::Lu(lu) => lu_solve(lu, b),
+            Factor::Stale | Factor::Singular => false,
+        }
+    }
+}
+
+impl SensWork {
+    fn new(integ: &Integrator, s: usize, np: usize) -> SensWork {
+        let n = integ.n;
+        let z = |k: usize| vec![0.0; k];
+        let j0_lu = if integ.j0_chol.is_none() {
+            let lu = integ.j0.clone().lu();
+            lu.is_invertible().then(|| Box::new(lu))
+        } else {
+            None
+        };
+        SensWork {
+            s,
+            du: z(n * s),
+            dv: z(n * s),
+            da: z(n * s),
+            dg: z(n * s),
+            dz: z(n),
+            dw: z(n),
+            rhs: z(n),
+            q: z(n * np),
+            p: z(n * np),
+            slopes0: z(integ.elements.len()),
+            tangent: TangentFactor {
+                factor: Factor::Stale,
+                l: z(n * n),
+                slopes: z(integ.elements.len()),
+                j0_lu,
+                count: 0,
+            },
+            singular_at: None,
+        }
+    }
+}
+
+/// The derivative matrices being filled.
+struct SensOutputs {
+    n: usize,
+    du: Vec<DMatrix<f64>>,
+    dv: Vec<DMatrix<f64>>,
+    da: Vec<DMatrix<f64>>,
+}
+
+impl SensOutputs {
+    fn new(n: usize, ns: usize, s: usize) -> SensOutputs {
+        let z = || (0..s).map(|_| DMatrix::zeros(n, ns)).collect::<Vec<_>>();
+        SensOutputs {
+            n,
+            du: z(),
+            dv: z(),
+            da: z(),
+        }
+    }
+
+    fn store(&mut self, sw: &SensWork, k: usize) {
+        let n = self.n;
+        for j in 0..sw.s {
+            let r = j * n..(j + 1) * n;
+            self.du[j].column_mut(k).copy_from_slice(&sw.du[r.clone()]);
+            self.dv[j].column_mut(k).copy_from_slice(&sw.dv[r.clone()]);
+            self.da[j].column_mut(k).copy_from_slice(&sw.da[r]);
+        }
+    }
+
+    fn finish(self, done: usize, sw: &SensWork) -> Sensitivities {
+        let cut = |v: Vec<DMatrix<f64>>| -> Vec<DMatrix<f64>> {
+            v.into_iter()
+                .map(|m| {
+                    if m.ncols() > done {
+                        m.columns(0, done).into_owned()
+                    } else {
+                        m
+                    }
+                })
+                .collect()
+        };
+        Sensitivities {
+            du: cut(self.du),
+            dv: cut(self.dv),
+            da: cut(self.da),
+            factorizations: sw.tangent.count,
+            singular_tangent: sw.singular_at,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,473 @@
+//! Sensitivities against central differences of [`Integrator::run`]: state
+//! seeds and every parameter kind (M, C, K through springs, masses and
+//! Rayleigh coefficients; contact gap and stiffness, friction level, cubic
+//! coefficient), on linear, cubic, friction and contact models, with
+//! α = 0 and HHT α = −0.1.
+
+use super::*;
+use crate::integrate::SimSettings;
+use crate::model::elements::Element;
+use crate::model::{Cubic, Damping, Friction, Model};
+
+/// A model parameter that the tests perturb and seed.
+#[derive(Debug, Clone, Copy)]
+enum P {
+    Spring(usize),
+    Mass(usize),
+    RayleighAlpha,
+    RayleighBeta,
+    Gap(usize),
+    Kc(usize),
+    Level(usize),
+    K3(usize),
+}
+
+fn value(m: &Model, p: P) -> f64 {
+    match (p, &m.damping) {
+        (P::Spring(i), _) => m.springs[i].stiffness,
+        (P::Mass(i), _) => m.masses[i],
+        (P::RayleighAlpha, Damping::Rayleigh { alpha, .. }) => *alpha,
+        (P::RayleighBeta, Damping::Rayleigh { beta, .. }) => *beta,
+        (P::Gap(i), _) => m.contacts[i].gap,
+        (P::Kc(i), _) => m.contacts[i].stiffness,
+        (P::Level(i), _) => m.frictions[i].level,
+        (P::K3(i), _) => m.cubics[i].k3,
+        _ => unreachable!("Rayleigh parameter without Rayleigh damping"),
+    }
+}
+
+fn with(m: &Model, p: P, x: f64) -> Model {
+    let mut m = m.clone();
+    match (p, &mut m.damping) {
+        (P::Spring(i), _) => m.springs[i].stiffness = x,
+        (P::Mass(i), _) => m.masses[i] = x,
+        (P::RayleighAlpha, Damping::Rayleigh { alpha, .. }) => *alpha = x,
+        (P::RayleighBeta, Damping::Rayleigh { beta, .. }) => *beta = x,
+        (P::Gap(i), _) => m.contacts[i].gap = x,
+        (P::Kc(i), _) => m.contacts[i].stiffness = x,
+        (P::Level(i), _) => m.frictions[i].level = x,
+        (P::K3(i), _) => m.cubics[i].k3 = x,
+        _ => unreachable!(),
+    }
+    m
+}
+
+/// The seed of ∂/∂p (Rayleigh damping: C = a M + b K moves with M and K).
+fn seed(m: &Model, p: P) -> ParamSeed {
+    let n = m.ndof();
+    let (ra, rb) = match m.damping {
+        Damping::Rayleigh { alpha, beta } => (alpha, beta),
+        _ => (0.0, 0.0),
+    };
+    let nc = m.contacts.len();
+    let nf = m.frictions.len();
+    let el = |element, param| ParamSeed {
+        elements: vec![ElementSeed {
+            element,
+            param,
+            scale: 1.0,
+        }],
+        ..Default::default()
+    };
+    match p {
+        P::Spring(i) => {
+            let mut dk = DMatrix::zeros(n, n);
+            crate::model::add_spring(&mut dk, m.springs[i].ends(), 1.0);
+            ParamSeed {
+                dc: Some(&dk * rb),
+                dk: Some(dk),
+                ..Default::default()
+            }
+        }
+        P::Mass(i) => {
+            let mut dm = DMatrix::zeros(n, n);
+            dm[(i, i)] = 1.0;
+            ParamSeed {
+                dc: Some(&dm * ra),
+                dm: Some(dm),
+                ..Default::default()
+            }
+        }
+        P::RayleighAlpha => ParamSeed {
+            dc: Some(m.mass_matrix()),
+            ..Default::default()
+        },
+        P::RayleighBeta => ParamSeed {
+            dc: Some(m.stiffness_matrix()),
+            ..Default::default()
+        },
+        P::Gap(i) => el(i, ElementParam::Gap),
+        P::Kc(i) => el(i, ElementParam::Stiffness),
+        P::Level(i) => el(nc + i, ElementParam::Level),
+        P::K3(i) => el(nc + nf + i, ElementParam::K3),
+    }
+}
+
+/// Largest difference between `a` and `b` relative to `b`'s largest entry.
+fn rel_diff(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+    assert_eq!(a.shape(), b.shape());
+    (a - b).amax() / b.amax().max(f64::MIN_POSITIVE)
+}
+
+struct Case {
+    model: Model,
+    fs: f64,
+    settings: SimSettings,
+    force: DMatrix<f64>,
+    u0: Vec<f64>,
+    v0: Vec<f64>,
+}
+
+impl Case {
+    fn integ(&self, m: &Model) -> Integrator {
+        Integrator::new(m, self.fs, self.settings).unwrap()
+    }
+
+    fn run(&self, m: &Model, u0: &[f64], v0: &[f64]) -> Simulation {
+        let sim = self.integ(m).run(self.force.as_view(), u0, v0);
+        assert!(sim.completed(), "{:?}", sim.status);
+        sim
+    }
+
+    /// Worst relative difference (over u, v, a) between the sensitivities
+    /// of every state direction `state` (2n × s) and parameter in `params`
+    /// and central differences of `run`, Richardson-extrapolated
+    /// (`(4 D(h/2) − D(h))/3`, error O(h⁴)), with the relative step `eps`.
+    fn worst(&self, state: &DMatrix<f64>, params: &[P], eps: f64) -> Vec<f64> {
+        let n = self.model.ndof();
+        let seeds = Seeds {
+            state: state.clone(),
+            params: params.iter().map(|&p| seed(&self.model, p)).collect(),
+        };
+        let integ = self.integ(&self.model);
+        let (sim, sens) = integ
+            .run_sensitivities(self.force.as_view(), &self.u0, &self.v0, &seeds)
+            .unwrap();
+        // the simulation is run()'s, bit for bit
+        let plain = integ.run(self.force.as_view(), &self.u0, &self.v0);
+        assert_eq!((&sim.u, &sim.v, &sim.a), (&plain.u, &plain.v, &plain.a));
+        assert_eq!(sim.newton_iterations, plain.newton_iterations);
+        assert_eq!(sens.du.len(), seeds.len());
+        // central differences of run() along `shifted`, extrapolated
+        let fd = |shifted: &dyn Fn(f64) -> Simulation, h: f64| {
+            let d = |h: f64| {
+                let (p, m) = (shifted(h), shifted(-h));
+                [(&p.u, &m.u), (&p.v, &m.v), (&p.a, &m.a)].map(|(x, y)| (x - y) / (2.0 * h))
+            };
+            let (d1, d2) = (d(h), d(h / 2.0));
+            [0, 1, 2].map(|q| (&d2[q] * 4.0 - &d1[q]) / 3.0)
+        };
+        let compare = |j: usize, d: &[DMatrix<f64>; 3]| {
+            rel_diff(&sens.du[j], &d[0])
+                .max(rel_diff(&sens.dv[j], &d[1]))
+                .max(rel_diff(&sens.da[j], &d[2]))
+        };
+        let mut out = vec![];
+        let su = self.u0.iter().fold(1e-4f64, |a, b| a.max(b.abs()));
+        let sv = self.v0.iter().fold(1e-2f64, |a, b| a.max(b.abs()));
+        for j in 0..state.ncols() {
+            let col = state.column(j);
+            let norm = (0..n)
+                .map(|i| col[i].abs() / su)
+                .chain((0..n).map(|i| col[n + i].abs() / sv));
+            let h = eps / norm.fold(0.0, f64::max);
+            let shifted = |t: f64| {
+                let u: Vec<f64> = (0..n).map(|i| self.u0[i] + t * col[i]).collect();
+                let v: Vec<f64> = (0..n).map(|i| self.v0[i] + t * col[n + i]).collect();
+                self.run(&self.model, &u, &v)
+            };
+            out.push(compare(j, &fd(&shifted, h)));
+        }
+        for (jp, &p) in params.iter().enumerate() {
+            let x = value(&self.model, p);
+            let shifted = |t: f64| self.run(&with(&self.model, p, x + t), &self.u0, &self.v0);
+            let d = fd(&shifted, eps * x.abs());
+            assert!(d[0].amax() > 0.0, "{p:?} moves nothing");
+            out.push(compare(state.ncols() + jp, &d));
+        }
+        out
+    }
+}
+
+fn lanl(contact: bool) -> Model {
+    let p = if contact {
+        "data/lanl8dof-contact.toml"
+    } else {
+        "data/lanl8dof.toml"
+    };
+    Model::from_file(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(p)).unwrap()
+}
+
+fn shaker(ns: usize, amplitude: f64) -> DMatrix<f64> {
+    let x = crate::signal::random_band(ns, 512.0, (5.0, 200.0), amplitude, 7).unwrap();
+    let mut f = DMatrix::zeros(8, ns);
+    f.row_mut(0).copy_from_slice(&x);
+    f
+}
+
+fn settings(alpha: f64) -> SimSettings {
+    SimSettings {
+        hht_alpha: alpha,
+        newton_tol: 1e-13,
+        ..Default::default()
+    }
+}
+
+fn assert_below(worst: &[f64], tol: f64, what: &str) {
+    let shown: Vec<String> = worst.iter().map(|w| format!("{w:.1e}")).collect();
+    eprintln!("{what}: worst relative differences {}", shown.join(" "));
+    for (j, w) in worst.iter().enumerate() {
+        assert!(*w < tol, "{what}: seed {j} differs by {w:e}");
+    }
+}
+
+/// A few state directions of lanl8dof: u at DOFs 1 and 5, v at DOFs 2 and
+/// 8, and a mixed one.
+fn some_state_directions() -> DMatrix<f64> {
+    let mut s = DMatrix::zeros(16, 5);
+    s[(0, 0)] = 1.0;
+    s[(4, 1)] = 1.0;
+    s[(9, 2)] = 1.0;
+    s[(15, 3)] = 1.0;
+    for i in 0..16 {
+        s[(i, 4)] = (i as f64 * 0.7).sin();
+    }
+    s
+}
+
+#[test]
+fn linear_rayleigh_model_state_and_matrix_parameters() {
+    for alpha in [0.0, -0.1] {
+        let mut model = lanl(false);
+        // damping strong enough (ζ ≈ 3–6 %) for its coefficients to move
+        // the response well above the differences' rounding noise
+        model.damping = Damping::Rayleigh {
+            alpha: 20.0,
+            beta: 1e-4,
+        };
+        let case = Case {
+            model,
+            fs: 512.0,
+            settings: settings(alpha),
+            force: shaker(300, 20.0),
+            u0: (0..8).map(|i| 1e-4 * (i as f64 - 3.0)).collect(),
+            v0: (0..8).map(|i| 1e-2 * (i as f64).cos()).collect(),
+        };
+        let params = [P::Spring(2), P::Mass(1), P::RayleighAlpha, P::RayleighBeta];
+        let w = case.worst(&DMatrix::identity(16, 16), &params, 1e-3);
+        assert_below(&w, 1e-6, &format!("linear, alpha {alpha}"));
+    }
+}
+
+#[test]
+fn cubic_model() {
+    // the Table 4 system released from 10 mm, softening cubic added
+    // between DOFs 2 and 3
+    let mut model =
+        Model::from_toml_str(crate::update::table4::MODEL_TOML, "fourdof-cubic").unwrap();
+    model.cubics.push(Cubic {
+        dofs: vec![2, 3],
+        k3: -2e8,
+    });
+    model.damping = Damping::Rayleigh {
+        alpha: 1.0,
+        beta: 1e-5,
+    };
+    for alpha in [0.0, -0.1] {
+        let case = Case {
+            model: model.clone(),
+            fs: 995.0,
+            settings: settings(alpha),
+            force: DMatrix::zeros(4, 200),
+            u0: vec![4e-3, 6e-3, 8e-3, 1e-2],
+            v0: vec![0.0, 0.1, 0.0, -0.2],
+        };
+        let params = [P::Spring(2), P::Mass(3), P::K3(0), P::K3(1)];
+        let w = case.worst(&DMatrix::identity(8, 8), &params, 1e-3);
+        assert_below(&w, 1e-6, &format!("cubic, alpha {alpha}"));
+    }
+}
+
+#[test]
+fn friction_model() {
+    // friction at three masses of the free-free chain, undamped otherwise
+    let mut model = lanl(false);
+    model.damping = Damping::None;
+    model.frictions = [2, 5, 8]
+        .iter()
+        .map(|&d| Friction {
+            dof: d,
+            level: 0.4,
+            velocity: 5e-3,
+        })
+        .collect();
+    for alpha in [0.0, -0.1] {
+        let case = Case {
+            model: model.clone(),
+            fs: 512.0,
+            settings: settings(alpha),
+            force: shaker(256, 10.0),
+            u0: vec![0.0; 8],
+            v0: (0..8).map(|i| 2e-2 * (i as f64 * 1.3).sin()).collect(),
+        };
+        let params = [P::Level(0), P::Level(2), P::Spring(4), P::Mass(6)];
+        // steps of 1e-3 and more already move the stick-slip pattern
+        let w = case.worst(&some_state_directions(), &params, 3e-4);
+        assert_below(&w, 1e-6, &format!("friction, alpha {alpha}"));
+    }
+}
+
+/// Smallest |penetration| over every sub-step of a run of `case`, from a
+/// run at the sub-step rate (one sub-step per sample, force interpolated
+/// as the integrator does).
+fn closest_to_switching(case: &Case) -> (f64, usize) {
+    let s = case.settings.substeps;
+    let ns = case.force.ncols();
+    let fine_ns = (ns - 1) * s + 1;
+    let f = DMatrix::from_fn(8, fine_ns, |i, k| {
+        let (a, b) = (k / s, k % s);
+        if b == 0 {
+            case.force[(i, a)]
+        } else {
+            let t = b as f64 / s as f64;
+            case.force[(i, a)] * (1.0 - t) + case.force[(i, a + 1)] * t
+        }
+    });
+    let fine = Integrator::new(
+        &case.model,
+        case.fs * s as f64,
+        SimSettings {
+            substeps: 1,
+            ..case.settings
+        },
+    )
+    .unwrap()
+    .run(f.as_view(), &case.u0, &case.v0);
+    let c = &case.model.contacts[0];
+    let (i, j) = (c.dofs[0] - 1, c.dofs[1] - 1);
+    let pens: Vec<f64> = (0..fine.len())
+        .map(|k| fine.u[(i, k)] - fine.u[(j, k)] - c.gap)
+        .collect();
+    let closed = pens.iter().filter(|&&p| p > 0.0).count();
+    (
+        pens.iter().fold(f64::INFINITY, |a, p| a.min(p.abs())),
+        closed,
+    )
+}
+
+#[test]
+fn contact_model_away_from_switching_points() {
+    // the bumper 5→6 of lanl8dof, 25 N shaker force, 100 samples (0.2 s),
+    // with modal damping replaced by Rayleigh (exact dC); friction at DOF 3
+    let mut model = lanl(true);
+    model.damping = Damping::Rayleigh {
+        alpha: 1.0,
+        beta: 1e-5,
+    };
+    model.frictions = vec![Friction {
+        dof: 3,
+        level: 0.2,
+        velocity: 1e-2,
+    }];
+    for alpha in [0.0, -0.1] {
+        let case = Case {
+            model: model.clone(),
+            fs: 512.0,
+            settings: settings(alpha),
+            force: shaker(100, 25.0),
+            u0: vec![0.0; 8],
+            v0: vec![0.0; 8],
+        };
+        // the case is chosen (force amplitude and length scanned) so that
+        // the contact closes in some 36 sub-steps and no sub-step lands
+        // within 4e-6 m of the switching point (maximum penetration about
+        // 1e-5 m): the differences (gap ± 3.8e-7 m, the start state
+        // ± 1e-7 m) see the same open/closed pattern as the sensitivities.
+        // (At steps of 3e-3 the gap's differences do cross a switch and
+        // disagree by 3 %.)
+        let (closest, closed) = closest_to_switching(&case);
+        assert!(closed > 30, "contact closed in {closed} sub-steps only");
+        assert!(
+            closest > 4e-6,
+            "a sub-step sits {closest:e} m from the switch"
+        );
+        let params = [P::Gap(0), P::Kc(0), P::Spring(4), P::Level(0)];
+        let w = case.worst(&some_state_directions(), &params, 1e-3);
+        assert_below(&w, 1e-6, &format!("contact, alpha {alpha}"));
+    }
+}
+
+#[test]
+fn unrolled_and_generic_kernels_agree_bit_for_bit() {
+    let mut model = lanl(true);
+    model.frictions = vec![Friction {
+        dof: 2,
+        level: 0.3,
+        velocity: 1e-3,
+    }];
+    let integ = Integrator::new(&model, 512.0, settings(-0.1)).unwrap();
+    let f = shaker(200, 20.0);
+    let seeds = Seeds {
+        state: some_state_directions(),
+        params: vec![seed(&model, P::Gap(0)), seed(&model, P::Spring(3))],
+    };
+    let prep = integ
+        .check_seeds(f.as_view(), &[0.0; 8], &[0.0; 8], &seeds)
+        .unwrap();
+    let (_, fast) = integ.run_sens_n::<8>(f.as_view(), &[0.0; 8], &[0.0; 8], &seeds.state, &prep);
+    let (_, generic) =
+        integ.run_sens_n::<0>(f.as_view(), &[0.0; 8], &[0.0; 8], &seeds.state, &prep);
+    assert_eq!(fast.du, generic.du);
+    assert_eq!(fast.da, generic.da);
+    assert!(fast.factorizations > 0 && fast.factorizations == generic.factorizations);
+}
+
+#[test]
+fn a_failed_run_truncates_the_derivatives_and_bad_seeds_are_errors() {
+    let model = lanl(true);
+    let s = SimSettings {
+        substeps: 1,
+        max_newton: 1,
+        ..Default::default()
+    };
+    let integ = Integrator::new(&model, 512.0, s).unwrap();
+    let mut f = DMatrix::zeros(8, 200);
+    f.row_mut(4).fill(400.0);
+    let seeds = Seeds {
+        state: some_state_directions(),
+        params: vec![seed(&model, P::Gap(0))],
+    };
+    let (sim, sens) = integ
+        .run_sensitivities(f.as_view(), &[0.0; 8], &[0.0; 8], &seeds)
+        .unwrap();
+    assert!(matches!(sim.status, SimStatus::NewtonFailed { .. }));
+    assert!(sim.len() > 1 && sim.len() < 200);
+    assert!(sens.du.iter().all(|m| m.ncols() == sim.len()));
+    let bad = |seeds: &Seeds| {
+        integ
+            .run_sensitivities(f.as_view(), &[0.0; 8], &[0.0; 8], seeds)
+            .unwrap_err()
+            .to_string()
+    };
+    let e = bad(&Seeds {
+        state: DMatrix::zeros(8, 1),
+        params: vec![],
+    });
+    assert!(e.contains("8 rows") && e.contains("2n = 16"), "{e}");
+    let mut wrong = seed(&model, P::Gap(0));
+    wrong.elements[0].param = ElementParam::Level;
+    let e = bad(&Seeds::params(8, vec![wrong]));
+    assert!(e.contains("element 0") && e.contains("Level"), "{e}");
+    let e = bad(&Seeds::params(
+        8,
+        vec![ParamSeed {
+            dk: Some(DMatrix::zeros(7, 8)),
+            ..Default::default()
+        }],
+    ));
+    assert!(e.contains("dK is 7x8"), "{e}");
+    let mut far = seed(&model, P::Gap(0));
+    far.elements[0].element = 3;
+    assert!(bad(&Seeds::params(8, vec![far])).contains("element 3 of 1"));
+    assert!(matches!(integ.elements()[0], Element::Contact { .. }));
+}
