@@ -11,24 +11,26 @@
 //!
 //! with Gauss–Newton steps `δ = J⁺ r` from the reconstructed state. For a
 //! linear model the Jacobian is exact, `∂ŷ_k/∂x_0 = C_y A^k`, and one step
-//! solves the problem (the only one taken). For a nonlinear model it is a
-//! forward-difference Jacobian of the nonlinear simulation (2n simulations
-//! of every segment per iteration, step `10⁻⁵ v_ref` in scaled states), and
-//! the iterations go on; a step that does not lower `J_s` is halved, up to
-//! four times, else the segment keeps its state. `J⁺` is the pseudo-inverse
-//! in states scaled to a common unit (displacements × ω), singular values
-//! below 1e-8 (linear) or 1e-6 (forward differences) of the largest
-//! dropped: directions the outputs never see (a free-free model's
+//! solves the problem (the only one taken). For a nonlinear model it is the
+//! forward sensitivity of the nonlinear simulation
+//! ([`Integrator::run_sensitivities`], the exact derivative of the discrete
+//! solution: one simulation of every segment per iteration, with 2n seeds),
+//! and the iterations go on; a step that does not lower `J_s` is halved, up
+//! to four times, else the segment keeps its state. `J⁺` is the
+//! pseudo-inverse in states scaled to a common unit (displacements × ω),
+//! singular values below 1e-8 of the largest dropped: directions the outputs never see (a free-free model's
 //! rigid-body displacement under acceleration data) keep the reconstructed
 //! value. Every model — the declared one before, the fitted one after — is
 //! scored the same way.
 
 use super::errors::Comparison;
-use crate::integrate::SimSettings;
+use crate::integrate::{Integrator, Seeds, SimSettings};
 use crate::linear::SampledModel;
 use crate::model::Model;
+use crate::record::Quantity;
 use crate::update::shooting::Segment;
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -154,15 +156,15 @@ fn predict_each(
     out
 }
 
-/// Gauss–Newton steps from a forward-difference Jacobian of the nonlinear
-/// simulation: one simulation of every segment per state component.
-#[allow(clippy::too_many_arguments)]
-fn fd_steps(
+/// Gauss–Newton steps from the forward sensitivities of the nonlinear
+/// simulation ([`Integrator::run_sensitivities`]): one simulation of every
+/// segment with the `2n` initial-state seeds. A segment whose simulation or
+/// derivatives fail gets no step.
+fn sens_steps(
     cmp: &Comparison,
     model: &Model,
     sim: SimSettings,
     segs: &[Segment],
-    y: &DMatrix<f64>,
     res: &[Option<(DVector<f64>, f64)>],
     scale: &DVector<f64>,
     count: &mut usize,
@@ -170,49 +172,41 @@ fn fd_steps(
     let n = model.ndof();
     let nx = 2 * n;
     let p = cmp.observations.len();
-    let vref = (segs
-        .iter()
-        .flat_map(|s| s.v0.iter())
-        .map(|v| v * v)
-        .sum::<f64>()
-        / (segs.len() * n).max(1) as f64)
-        .sqrt()
-        .max(1e-9);
-    let mut jac: Vec<DMatrix<f64>> = segs.iter().map(|s| DMatrix::zeros(s.len * p, nx)).collect();
-    for q in 0..nx {
-        let h = 1e-5 * vref * scale[q];
-        let trial: Vec<Segment> = segs
-            .iter()
-            .map(|s| {
-                let mut t = s.clone();
-                if q < n {
-                    t.u0[q] += h;
-                } else {
-                    t.v0[q - n] += h;
-                }
-                t
-            })
-            .collect();
-        let yt = predict_each(cmp, model, &trial, sim, count);
-        for (i, s) in segs.iter().enumerate() {
-            for k in 0..s.len {
+    let Ok(integ) = Integrator::new(model, cmp.fs, sim) else {
+        return vec![None; segs.len()];
+    };
+    let seeds = Seeds::initial_state(n);
+    *count += res.iter().filter(|r| r.is_some()).count();
+    // segments are independent: in parallel, collected in order (the same
+    // numbers whatever the thread count)
+    segs.par_iter()
+        .zip(res)
+        .map(|(s, r)| {
+            let (r, _) = r.as_ref()?;
+            let force = cmp.force.columns(s.start, s.len);
+            let (run, d) = integ.run_sensitivities(force, &s.u0, &s.v0, &seeds).ok()?;
+            if !run.completed() || d.singular_tangent.is_some() {
+                return None;
+            }
+            let mut j = DMatrix::zeros(s.len * p, nx);
+            for q in 0..nx {
                 for (c, o) in cmp.observations.iter().enumerate() {
-                    let d = (yt[(c, s.start + k)] - y[(c, s.start + k)]) / h;
-                    jac[i][(k * p + c, q)] = o.weight * d * scale[q];
+                    let src = match o.quantity {
+                        Quantity::Disp => &d.du[q],
+                        Quantity::Vel => &d.dv[q],
+                        _ => &d.da[q],
+                    };
+                    for k in 0..s.len {
+                        j[(k * p + c, q)] = o.weight * src[(o.dof - 1, k)] * scale[q];
+                    }
                 }
             }
-        }
-    }
-    jac.into_iter()
-        .zip(res)
-        .map(|(j, r)| {
-            let (r, _) = r.as_ref()?;
             if j.iter().any(|v| !v.is_finite()) {
                 return None;
             }
             let svd = j.svd(true, true);
             let smax = svd.singular_values.max();
-            let d = svd.solve(r, 1e-6 * smax).ok()?;
+            let d = svd.solve(r, 1e-8 * smax).ok()?;
             Some(d.component_mul(scale))
         })
         .collect()
@@ -269,7 +263,7 @@ pub fn refine(
                 .zip(&res)
                 .map(|(s, r)| Some(jac.pinv(s.len)? * &r.as_ref()?.0))
                 .collect(),
-            None => fd_steps(cmp, model, sim, &segs, &y, &res, &scale, &mut sims),
+            None => sens_steps(cmp, model, sim, &segs, &res, &scale, &mut sims),
         };
         let mut pending: Vec<usize> = (0..segs.len()).filter(|&i| steps[i].is_some()).collect();
         let mut t = 1.0;
