@@ -140,8 +140,17 @@ impl Default for DiagnoseSettings {
 
 /// Sub-steps that resolve the stiffest element of `model`:
 /// `ω h ≤ omega_h` with ω the contact (or stiffest spring) frequency of the
-/// lightest masses it joins; at least `base`, at most `max`.
-pub fn auto_substeps(model: &Model, fs: f64, base: usize, omega_h: f64, max: usize) -> usize {
+/// lightest masses it joins, and for a cubic spring its tangent stiffness
+/// `3 k_3 δ_max²` at the largest relative displacement of `states` (2n × N,
+/// when given); at least `base`, at most `max`.
+pub fn auto_substeps(
+    model: &Model,
+    fs: f64,
+    base: usize,
+    omega_h: f64,
+    max: usize,
+    states: Option<&DMatrix<f64>>,
+) -> usize {
     let inv_m = |d: usize| 1.0 / model.masses[d - 1];
     let mut w2: f64 = 0.0;
     for c in &model.contacts {
@@ -152,12 +161,30 @@ pub fn auto_substeps(model: &Model, fs: f64, base: usize, omega_h: f64, max: usi
         let s: f64 = sp.dofs.iter().map(|&d| inv_m(d)).sum();
         w2 = w2.max(sp.stiffness * s);
     }
+    if let Some(x) = states {
+        for c in &model.cubics {
+            let rel = |k: usize| match c.dofs.as_slice() {
+                [i, j] => x[(i - 1, k)] - x[(j - 1, k)],
+                [i] => x[(i - 1, k)],
+                _ => 0.0,
+            };
+            let dmax = (0..x.ncols()).map(|k| rel(k).abs()).fold(0.0, f64::max);
+            let s: f64 = c.dofs.iter().map(|&d| inv_m(d)).sum();
+            w2 = w2.max(3.0 * c.k3.abs() * dmax * dmax * s);
+        }
+    }
     let need = (w2.sqrt() / (omega_h * fs)).ceil() as usize;
     need.clamp(base.max(1), max.max(base))
 }
 
-/// Integrator settings with [`auto_substeps`] for `model`.
-fn resolved(model: &Model, fs: f64, settings: &DiagnoseSettings) -> SimSettings {
+/// Integrator settings with [`auto_substeps`] for `model` (cubic springs
+/// judged on the reconstructed `states`).
+fn resolved(
+    model: &Model,
+    fs: f64,
+    settings: &DiagnoseSettings,
+    states: &DMatrix<f64>,
+) -> SimSettings {
     SimSettings {
         substeps: auto_substeps(
             model,
@@ -165,6 +192,7 @@ fn resolved(model: &Model, fs: f64, settings: &DiagnoseSettings) -> SimSettings 
             settings.substeps,
             settings.omega_h,
             settings.max_substeps,
+            Some(states),
         ),
         ..Default::default()
     }
@@ -588,7 +616,7 @@ pub fn diagnose(
     let prep = prepare(declared, rec, sensors, settings)?;
     timings.insert("identify".into(), prep.recon.elapsed_s);
     let cmp = &prep.comparison;
-    let sim0 = resolved(declared, rec.fs, settings);
+    let sim0 = resolved(declared, rec.fs, settings, &prep.recon.states);
     let base_sub = sim0.substeps;
     progress("errors before");
     let (before, pred_before) = cmp.errors(declared, sim0);
@@ -682,7 +710,7 @@ pub fn diagnose(
             settings,
         )?;
         sims += fit_sims;
-        let sim = resolved(&fitted, rec.fs, settings);
+        let sim = resolved(&fitted, rec.fs, settings, &prep.recon.states);
         let sub = sim.substeps;
         let pred = cmp.shoot(&fitted, sim);
         sims += shot_simulations(pred.as_ref().ok().and_then(|p| p.2.as_ref()), cmp);
@@ -736,7 +764,7 @@ pub fn diagnose(
     };
     let (after, pred_after) = cmp.errors(&current, sim1);
     sims += error_simulations(&after, cmp);
-    let effects = report_effects(&current, &added, cmp, rec.fs, settings, &mut sims);
+    let effects = report_effects(&current, &added, cmp, sim1, settings, &mut sims);
     let validation = match validation {
         Some(v) => {
             progress("validation");
@@ -826,7 +854,7 @@ fn scan_contact(
             let mut m = trial.clone();
             m.contacts[ci].gap = g;
             m.contacts[ci].stiffness = kc;
-            let sim = resolved(&m, fs, settings);
+            let sim = resolved(&m, fs, settings, states);
             evals += 1;
             if let Ok(y) = cmp.predict(&m, segments, sim) {
                 scored.push((cmp.total_error(&y), g, kc));
@@ -897,7 +925,7 @@ fn fit_effects(
             }
         }
     }
-    problem.sim = resolved(&stiffest, fs, settings);
+    problem.sim = resolved(&stiffest, fs, settings, states);
     let sub = problem.sim.substeps;
     let (best, results) = crate::update::fit_multistart(&problem, &settings.fit, &starts)?;
     sims += results.iter().map(|r| r.simulations).sum::<usize>();
@@ -971,7 +999,7 @@ fn report_effects(
     model: &Model,
     added: &[(AddedEffect, RankedEffect, Score)],
     cmp: &Comparison,
-    fs: f64,
+    sim: SimSettings,
     settings: &DiagnoseSettings,
     sims: &mut usize,
 ) -> Vec<EffectReport> {
@@ -987,11 +1015,7 @@ fn report_effects(
                 }
             }
         }
-        let mut problem = cmp.problem(
-            model,
-            spread(&cmp.segments, settings.fit_segments),
-            resolved(model, fs, settings),
-        );
+        let mut problem = cmp.problem(model, spread(&cmp.segments, settings.fit_segments), sim);
         problem.parameters = params;
         let fs_ = FitSettings {
             max_iterations: 1,
