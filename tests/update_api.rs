@@ -264,8 +264,10 @@ fn sensitivity_jacobian_matches_finite_differences_on_a_shooting_problem() {
 #[test]
 fn reduced_problems_fall_back_to_finite_differences_and_say_so() {
     let case = table4::case(0.0, 1).unwrap();
-    let mut s = FitSettings::default();
-    s.max_iterations = 1;
+    let mut s = FitSettings {
+        max_iterations: 1,
+        ..Default::default()
+    };
     let r = update::fit(&table4::problem(&case, &table4::columns()[0]).unwrap(), &s).unwrap();
     assert_eq!(r.jacobian, update::JacobianMethod::CentralDifference);
     assert!(r.jacobian_note.as_deref().unwrap().contains("reduced"));
