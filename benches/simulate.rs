@@ -1,10 +1,13 @@
 //! Simulator speed: lanl8dof with the bumper and 0.3 N friction on every
 //! mass, 4096 samples × 10 sub-steps (issue target: under 20 ms; a
-//! pure-NumPy Newmark takes about 3.4 s).
+//! pure-NumPy Newmark takes about 3.4 s). Also the same run with forward
+//! sensitivities: 16 state seeds (every initial displacement and velocity)
+//! and 2 parameter seeds (the bumper's gap and stiffness).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
-use tacit::integrate::{Integrator, SimSettings};
+use tacit::integrate::{ElementSeed, Integrator, ParamSeed, Seeds, SimSettings};
+use tacit::model::elements::ElementParam;
 use tacit::model::{Friction, Model};
 
 fn testbed() -> Model {
@@ -39,6 +42,42 @@ fn bench(c: &mut Criterion) {
     c.bench_function("lanl8dof_contact_friction_4096x10", |b| {
         b.iter(|| black_box(integ.run(black_box(f.as_view()), &[0.0; 8], &[0.0; 8])))
     });
+    let state = Seeds::initial_state(8);
+    let params = Seeds::params(
+        8,
+        [ElementParam::Gap, ElementParam::Stiffness]
+            .map(|param| ParamSeed {
+                elements: vec![ElementSeed {
+                    element: 0,
+                    param,
+                    scale: 1.0,
+                }],
+                ..Default::default()
+            })
+            .to_vec(),
+    );
+    for (name, seeds) in [("16_state", &state), ("2_param", &params)] {
+        let (_, sens) = integ
+            .run_sensitivities(f.as_view(), &[0.0; 8], &[0.0; 8], seeds)
+            .unwrap();
+        eprintln!(
+            "sensitivities {name}: {} tangent factorizations",
+            sens.factorizations
+        );
+        c.bench_function(
+            &format!("lanl8dof_contact_friction_4096x10_sens_{name}"),
+            |b| {
+                b.iter(|| {
+                    black_box(integ.run_sensitivities(
+                        black_box(f.as_view()),
+                        &[0.0; 8],
+                        &[0.0; 8],
+                        seeds,
+                    ))
+                })
+            },
+        );
+    }
     let linear = model.linear_part();
     let integ_l = Integrator::new(&linear, fs, SimSettings::default()).unwrap();
     c.bench_function("lanl8dof_linear_4096x10", |b| {

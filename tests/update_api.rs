@@ -169,3 +169,118 @@ fn a_failed_simulation_is_a_status_not_a_number() {
     );
     assert!(r.cost_history.is_empty());
 }
+
+/// A small multiple-shooting problem: lanl8dof with its bumper (5→6), 0.3 N
+/// friction at DOF 3 and modal damping, 600 samples in segments of 51 from
+/// the true states, accelerations at 1, 5, 6 and displacements at 5, 6;
+/// free gap, contact stiffness, friction level and spring k5.
+fn shooting_problem() -> Problem {
+    use tacit::model::Friction;
+    use tacit::simulate::{simulate_record, RecordSpec};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/lanl8dof-contact.toml");
+    let mut truth = Model::from_file(&path).unwrap();
+    truth.frictions = vec![Friction {
+        dof: 3,
+        level: 0.3,
+        velocity: 1e-2,
+    }];
+    let spec = RecordSpec {
+        samples: 600,
+        sensors: vec![1, 5, 6],
+        kinds: vec![Quantity::Accel, Quantity::Disp],
+        ..Default::default()
+    };
+    let (rec, _) = simulate_record(&truth, &spec).unwrap();
+    let params = vec![
+        Parameter::relative(&truth, Target::ContactGap(0)).unwrap(),
+        Parameter::relative(&truth, Target::ContactStiffness(0)).unwrap(),
+        Parameter::relative(&truth, Target::FrictionLevel(0)).unwrap(),
+        Parameter::relative(&truth, Target::SpringStiffness(4)).unwrap(),
+    ];
+    let n = truth.ndof();
+    let mut p = Problem::from_record(
+        &truth,
+        &rec,
+        &[Quantity::Accel, Quantity::Disp],
+        Some(&[1, 5, 6]),
+        params,
+        vec![0.0; n],
+        vec![0.0; n],
+    )
+    .unwrap();
+    p.segments = update::shooting::from_truth(&rec, 51).unwrap();
+    // Newton converged to rounding, so that the differences measure the
+    // scheme and not the Newton tolerance
+    p.sim.newton_tol = 1e-13;
+    p
+}
+
+#[test]
+fn sensitivity_jacobian_matches_finite_differences_on_a_shooting_problem() {
+    let mut p = shooting_problem();
+    assert_eq!(p.segments.len(), 12);
+    // away from the truth, so that the residual is not zero
+    let x = [0.12, -0.2, 0.3, 0.04];
+    let (lo, hi) = ([-0.9; 4], [0.9; 4]);
+    // reference: centered differences of the residual, Richardson-
+    // extrapolated ((4 D(h/2) − D(h))/3), with a step per parameter: for the
+    // gap and spring the largest that keeps the contact's open/closed
+    // pattern in every segment (larger steps differ by 1–50 %), for the
+    // friction level and contact stiffness, whose effect is small, the
+    // smallest above the simulations' rounding noise
+    let steps = [1e-4, 1e-3, 3e-3, 3e-5];
+    for (metric, alpha, tol) in [
+        (update::Metric::Gls, 0.0, 1e-6),
+        (update::Metric::Gls, 0.5, 1e-6),
+        (update::Metric::pcd(), 0.0, 3e-6),
+    ] {
+        p.metric = metric;
+        p.alpha = alpha;
+        let mut ev = Evaluator::new(&p);
+        let r0 = ev.residual(&x).unwrap();
+        let sims = ev.simulations;
+        let js = ev.sensitivity_jacobian(&x, 1e-5).unwrap();
+        // one simulation with sensitivities per segment for all parameters
+        assert_eq!(ev.simulations - sims, 12);
+        assert_eq!(ev.sensitivity_simulations, 12);
+        let sims = ev.simulations;
+        let mut fd = |h: f64| optimize::jacobian(&mut ev, &x, &r0, &lo, &hi, h).unwrap();
+        for (j, &h) in steps.iter().enumerate() {
+            let jf = (fd(h / 2.0) * 4.0 - fd(h)) / 3.0;
+            assert_eq!(js.shape(), jf.shape());
+            let (s, f) = (js.column(j), jf.column(j));
+            let e = (s - f).norm() / f.norm();
+            eprintln!(
+                "{metric:?} alpha {alpha}: parameter {}: |J| {:.3e}, relative difference {e:.1e}",
+                p.parameters[j].name,
+                f.norm()
+            );
+            assert!(e < tol, "{metric:?}, parameter {j}: {e:e}");
+        }
+        assert_eq!(ev.simulations - sims, 4 * 2 * 2 * 4 * 12);
+    }
+}
+
+#[test]
+fn reduced_problems_fall_back_to_finite_differences_and_say_so() {
+    let case = table4::case(0.0, 1).unwrap();
+    let mut s = FitSettings {
+        max_iterations: 1,
+        ..Default::default()
+    };
+    let r = update::fit(&table4::problem(&case, &table4::columns()[0]).unwrap(), &s).unwrap();
+    assert_eq!(r.jacobian, update::JacobianMethod::CentralDifference);
+    assert!(r.jacobian_note.as_deref().unwrap().contains("reduced"));
+    assert_eq!(r.sensitivity_simulations, 0);
+    let r = update::fit(&table4::problem(&case, &table4::columns()[2]).unwrap(), &s).unwrap();
+    assert_eq!(r.jacobian, update::JacobianMethod::Sensitivity);
+    assert!(r.jacobian_note.is_none());
+    // the optimizer's Jacobian and the identifiability report's: one
+    // sensitivity simulation each (one segment)
+    assert_eq!((r.jacobians, r.sensitivity_simulations), (2, 2));
+    assert_eq!(r.sensitivity_fallbacks, 0);
+    s.jacobian = update::JacobianMethod::CentralDifference;
+    let r = update::fit(&table4::problem(&case, &table4::columns()[2]).unwrap(), &s).unwrap();
+    assert_eq!(r.jacobian, update::JacobianMethod::CentralDifference);
+    assert_eq!(r.sensitivity_simulations, 0);
+}

@@ -57,6 +57,11 @@ fn update_writes_summary_report_and_figures() {
         "{k3} {cubic}"
     );
     assert!(v["errors_after"]["overall"].as_f64().unwrap() < 0.05);
+    // a reduced model: sensitivities requested (the default), finite
+    // differences used, and the summary says why
+    assert_eq!(v["jacobian"], "central_difference");
+    assert!(v["jacobian_note"].as_str().unwrap().contains("reduced"));
+    assert_eq!(v["sensitivity_simulations"], 0);
     assert!(
         v["identifiability"]["singular_values"]
             .as_array()
@@ -80,11 +85,12 @@ fn bad_input_fails_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let rec = record_file(dir.path());
     let model = dir.path().join("model.toml");
-    let cases: [(&[&str], &str); 4] = [
+    let cases: [(&[&str], &str); 5] = [
         (&["--free", "k9"], "'k9'"),
         (&["--free", "k1", "--data", "strain"], "strain"),
         (&["--free", "k1", "--data", "accel"], "accel"),
         (&["--free", "k1", "--dofs", "2"], "disp_2"),
+        (&["--free", "k1", "--jacobian", "exact"], "sens"),
     ];
     for (i, (args, needle)) in cases.iter().enumerate() {
         let out = dir.path().join(format!("out{i}"));

@@ -6,7 +6,9 @@ use tacit::integrate::SimSettings;
 use tacit::model::Model;
 use tacit::plot;
 use tacit::record::{self, Quantity, Record};
-use tacit::update::{self, shooting, FitResult, FitSettings, Metric, Optimizer, Problem};
+use tacit::update::{
+    self, shooting, FitResult, FitSettings, JacobianMethod, Metric, Optimizer, Problem,
+};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum MetricArg {
@@ -50,6 +52,11 @@ pub struct Args {
     /// Optimizer.
     #[arg(long, value_enum, default_value = "lm")]
     optimizer: Optimizer,
+    /// Jacobian: forward sensitivities of the integrator (one simulation
+    /// per segment; full-order models, reduced ones fall back to fd) or
+    /// centered finite differences.
+    #[arg(long, value_enum, default_value = "sens")]
+    jacobian: JacobianMethod,
     /// Weight α of the minimum-change term.
     #[arg(long, default_value_t = 0.0)]
     alpha: f64,
@@ -82,6 +89,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let problem = build_problem(&a, &model, &rec)?;
     problem.validate()?;
     let mut settings = FitSettings::with(a.optimizer);
+    settings.jacobian = a.jacobian;
     if let Some(m) = a.max_iterations {
         settings.max_iterations = m;
     }
@@ -205,9 +213,29 @@ fn print_summary(r: &FitResult) {
         "termination: {:?}; {} iterations, {} simulations, {:.2} s",
         r.termination, r.iterations, r.simulations, r.elapsed_s
     );
+    println!("jacobian: {}", jacobian_line(r));
     if let Some(id) = &r.identifiability {
         println!("identifiability: {}", id.verdict);
     }
+}
+
+/// Method, counts and time of the Jacobians, and why the method differs
+/// from the requested one.
+fn jacobian_line(r: &FitResult) -> String {
+    let mut s = format!(
+        "{:?}, {} Jacobians ({} simulations with sensitivities), {:.2} s",
+        r.jacobian, r.jacobians, r.sensitivity_simulations, r.jacobian_s
+    );
+    if let Some(note) = &r.jacobian_note {
+        s.push_str(&format!(" ({note})"));
+    }
+    if r.sensitivity_fallbacks > 0 {
+        s.push_str(&format!(
+            "; {} sensitivity Jacobians failed and were replaced by finite differences",
+            r.sensitivity_fallbacks
+        ));
+    }
+    s
 }
 
 fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
@@ -239,6 +267,7 @@ fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
         "\nTermination: {:?}. Iterations {}, cost evaluations {}, simulations {}, failed trials {}, {:.2} s.\n\n",
         r.termination, r.iterations, r.evaluations, r.simulations, r.failed_trials, r.elapsed_s
     ));
+    s.push_str(&format!("Jacobian: {}.\n\n", jacobian_line(r)));
     s.push_str("| channel | error before | error after |\n|---|---|---|\n");
     if let (Some(b), Some(f)) = (&r.errors_before, &r.errors_after) {
         for (x, y) in b.channels.iter().zip(&f.channels) {

@@ -26,10 +26,44 @@
 //!
 //! The residual is zero exactly when the kept components coincide, and
 //! the metric ignores the discarded components (so noise is filtered).
+//!
+//! **Jacobian from sensitivities** ([`Evaluator::sensitivity_jacobian`],
+//! full-order problems): one simulation per segment gives the channels `y`
+//! and `∂y/∂x_j` ([`super::sensitivity`]). GLS: `∂r/∂x_j = −W ∂y/∂x_j`
+//! exactly. PCD: the residual is a function of the weighted model matrix
+//! `Y`, differentiated along `∂Y/∂x_j` by central differences of that
+//! function, `(r(Y + t ∂Y) − r(Y − t ∂Y)) / 2t` with the optimizers'
+//! finite-difference step `t`: two SVDs per parameter and segment, no
+//! simulation. The minimum-change rows add `√α I`.
 
 use super::forward::{self, Failure, SegmentResponse};
 use super::problem::{Metric, Problem};
 use nalgebra::{DMatrix, DVector};
+
+/// The work counted by an [`Evaluator`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Counters {
+    /// Segment simulations (those with sensitivities included).
+    pub simulations: usize,
+    /// Jacobians computed.
+    pub jacobians: usize,
+    /// Segment simulations with forward sensitivities.
+    pub sensitivity_simulations: usize,
+    /// Sensitivity Jacobians replaced by finite differences.
+    pub sensitivity_fallbacks: usize,
+    /// Wall time in Jacobians, s.
+    pub jacobian_seconds: f64,
+}
+
+impl std::ops::AddAssign for Counters {
+    fn add_assign(&mut self, o: Counters) {
+        self.simulations += o.simulations;
+        self.jacobians += o.jacobians;
+        self.sensitivity_simulations += o.sensitivity_simulations;
+        self.sensitivity_fallbacks += o.sensitivity_fallbacks;
+        self.jacobian_seconds += o.jacobian_seconds;
+    }
+}
 
 /// Evaluates residuals of a problem and counts the work.
 #[derive(Debug)]
@@ -41,8 +75,18 @@ pub struct Evaluator<'a> {
     weights: Vec<f64>,
     /// Cost evaluations (one per parameter vector).
     pub evaluations: usize,
-    /// Segment simulations.
+    /// Segment simulations (those with sensitivities included).
     pub simulations: usize,
+    /// Jacobians computed (any method).
+    pub jacobians: usize,
+    /// Segment simulations run with forward sensitivities (each also
+    /// counted in `simulations`).
+    pub sensitivity_simulations: usize,
+    /// Sensitivity Jacobians that failed and were replaced by finite
+    /// differences.
+    pub sensitivity_fallbacks: usize,
+    /// Wall time spent in Jacobians, s.
+    pub jacobian_seconds: f64,
 }
 
 impl<'a> Evaluator<'a> {
@@ -64,12 +108,27 @@ impl<'a> Evaluator<'a> {
             weights,
             evaluations: 0,
             simulations: 0,
+            jacobians: 0,
+            sensitivity_simulations: 0,
+            sensitivity_fallbacks: 0,
+            jacobian_seconds: 0.0,
         }
     }
 
     /// The problem.
     pub fn problem(&self) -> &Problem {
         self.problem
+    }
+
+    /// The work counted so far.
+    pub fn counters(&self) -> Counters {
+        Counters {
+            simulations: self.simulations,
+            jacobians: self.jacobians,
+            sensitivity_simulations: self.sensitivity_simulations,
+            sensitivity_fallbacks: self.sensitivity_fallbacks,
+            jacobian_seconds: self.jacobian_seconds,
+        }
     }
 
     /// Simulated responses at `x` (unweighted).
@@ -93,6 +152,64 @@ impl<'a> Evaluator<'a> {
             }
         }
         Ok(r)
+    }
+
+    /// Jacobian of the residual `[r_data; √α x]` at `x` from one simulation
+    /// with forward sensitivities per segment (see the module docs; `h` is
+    /// the step of the PCD residual's differences along `∂Y/∂x_j`, scaled
+    /// as the finite differences' `h (1 + |x_j|)`). Counts one evaluation
+    /// and one simulation per segment. Fails for reduced problems
+    /// ([`super::sensitivity::unsupported`]) and when a simulation fails.
+    pub fn sensitivity_jacobian(&mut self, x: &[f64], h: f64) -> Result<DMatrix<f64>, Failure> {
+        self.evaluations += 1;
+        let (res, count) = super::sensitivity::simulate(self.problem, x);
+        self.simulations += count;
+        self.sensitivity_simulations += count;
+        let segs = res?;
+        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); x.len()];
+        for (s, (sd, meas)) in segs.iter().zip(&self.measured).enumerate() {
+            let fail = |reason: String| Failure {
+                segment: Some(s),
+                reason,
+            };
+            match self.problem.metric {
+                Metric::Gls => {
+                    for (col, dy) in cols.iter_mut().zip(&sd.dy) {
+                        col.extend(scale_rows(dy, &self.weights).iter().map(|v| -v));
+                    }
+                }
+                Metric::Pcd { energy } => {
+                    let ys = scale_rows(&sd.y, &self.weights);
+                    for (j, (col, dy)) in cols.iter_mut().zip(&sd.dy).enumerate() {
+                        let t = h * (1.0 + x[j].abs());
+                        let d = scale_rows(dy, &self.weights) * t;
+                        let rp = pcd_residual(meas, &(&ys + &d), energy).map_err(fail)?;
+                        let rm = pcd_residual(meas, &(&ys - &d), energy).map_err(fail)?;
+                        if rp.len() != rm.len() {
+                            return Err(fail("PCD residuals of different lengths".into()));
+                        }
+                        col.extend(((rp - rm) / (2.0 * t)).iter());
+                    }
+                }
+            }
+        }
+        let a = self.problem.alpha;
+        let rows = cols.first().map_or(0, Vec::len);
+        let extra = if a > 0.0 { x.len() } else { 0 };
+        let mut jac = DMatrix::zeros(rows + extra, x.len());
+        for (j, col) in cols.iter().enumerate() {
+            jac.view_mut((0, j), (rows, 1)).copy_from_slice(col);
+            if a > 0.0 {
+                jac[(rows + j, j)] = a.sqrt();
+            }
+        }
+        if jac.iter().any(|v| !v.is_finite()) {
+            return Err(Failure {
+                segment: None,
+                reason: "the sensitivity Jacobian is not finite".into(),
+            });
+        }
+        Ok(jac)
     }
 
     /// Number of data rows of the residual (without the minimum-change

@@ -46,8 +46,8 @@ impl std::fmt::Display for Failure {
 pub type SegmentResponse = DMatrix<f64>;
 
 /// A compiled simulator for one parameter vector.
-struct Compiled {
-    integ: Integrator,
+pub(super) struct Compiled {
+    pub(super) integ: Integrator,
     /// Reduction basis transposed (m × n) when reduced.
     tt: Option<DMatrix<f64>>,
     /// Mass-metric projection `(TᵀMT)⁻¹ TᵀM` (m × n) of full-order states
@@ -55,7 +55,7 @@ struct Compiled {
     proj: Option<DMatrix<f64>>,
     /// Position of each model DOF in the simulated coordinates (None: not
     /// simulated).
-    pos: Vec<Option<usize>>,
+    pub(super) pos: Vec<Option<usize>>,
 }
 
 /// Simulate every segment of `problem` for the scaled parameters `x`.
@@ -118,7 +118,7 @@ pub fn reduction_error(problem: &Problem, x: &[f64]) -> Option<f64> {
     Some(crate::metrics::ratio(num, den))
 }
 
-fn compile(problem: &Problem, model: &Model) -> std::result::Result<Compiled, Failure> {
+pub(super) fn compile(problem: &Problem, model: &Model) -> std::result::Result<Compiled, Failure> {
     let fail = |reason: String| Failure {
         segment: None,
         reason,
@@ -222,15 +222,24 @@ fn remap(e: Element, pos: &[Option<usize>]) -> Option<Element> {
 }
 
 fn extract(problem: &Problem, sim: &Simulation, pos: &[Option<usize>]) -> SegmentResponse {
-    let len = sim.len();
-    let mut out = DMatrix::zeros(problem.observations.len(), len);
+    extract_channels(problem, (&sim.u, &sim.v, &sim.a), pos)
+}
+
+/// The observed rows of (displacement, velocity, acceleration) matrices
+/// (DOF × sample, simulated coordinates): one row per observation.
+pub(super) fn extract_channels(
+    problem: &Problem,
+    (u, v, a): (&DMatrix<f64>, &DMatrix<f64>, &DMatrix<f64>),
+    pos: &[Option<usize>],
+) -> SegmentResponse {
+    let mut out = DMatrix::zeros(problem.observations.len(), u.ncols());
     for (r, o) in problem.observations.iter().enumerate() {
         // measured DOFs are always kept (see `kept_dofs`)
         let p = pos[o.dof - 1].unwrap_or(0);
         let src = match o.quantity {
-            Quantity::Disp => &sim.u,
-            Quantity::Vel => &sim.v,
-            _ => &sim.a,
+            Quantity::Disp => u,
+            Quantity::Vel => v,
+            _ => a,
         };
         out.row_mut(r).copy_from(&src.row(p));
     }

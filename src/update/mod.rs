@@ -11,7 +11,9 @@
 //!    (eqs 11–12) ([`cost`]);
 //! 3. minimise `‖r‖² + α‖x − x0‖²` (eq. 10, squared) with Levenberg–Marquardt,
 //!    Gauss–Newton, BFGS or the simplex ([`optimize`]), with bounds and
-//!    centered finite-difference derivatives;
+//!    derivatives from forward sensitivities of the integrator
+//!    ([`sensitivity`]; full-order problems) or centered finite
+//!    differences ([`JacobianMethod`]);
 //! 4. report the parameters, the errors before and after, and whether the
 //!    data determine them ([`identifiability`]).
 //!
@@ -43,19 +45,20 @@ pub mod identifiability;
 pub mod optimize;
 pub mod param;
 pub mod problem;
+pub mod sensitivity;
 pub mod shooting;
 pub mod table4;
 
 pub use forward::Failure;
 pub use identifiability::Identifiability;
-pub use optimize::{FitSettings, Optimizer, Termination};
+pub use optimize::{FitSettings, JacobianMethod, Optimizer, Termination};
 pub use param::{parse_free, Parameter, Scaling, Target};
 pub use problem::{Metric, Observation, Problem};
 pub use shooting::Segment;
 
 use crate::error::Result;
 use crate::model::Model;
-use cost::Evaluator;
+use cost::{Counters, Evaluator};
 use serde::Serialize;
 
 /// A fitted parameter.
@@ -109,6 +112,12 @@ pub struct FitResult {
     pub x: Vec<f64>,
     /// Optimizer used.
     pub optimizer: Optimizer,
+    /// Jacobian method used (the requested one, or finite differences
+    /// where sensitivities do not apply; see `jacobian_note`).
+    pub jacobian: JacobianMethod,
+    /// Why the Jacobian method differs from the requested one (None: it
+    /// does not).
+    pub jacobian_note: Option<String>,
     /// Metric used.
     pub metric: Metric,
     /// Reduction used (None: full order).
@@ -120,8 +129,19 @@ pub struct FitResult {
     /// Cost evaluations (parameter vectors) by the optimizer.
     pub evaluations: usize,
     /// Segment simulations, all included (optimizer, final Jacobian, error
-    /// reports).
+    /// reports); a simulation with sensitivities counts as one.
     pub simulations: usize,
+    /// Jacobians computed (optimizer and identifiability report).
+    pub jacobians: usize,
+    /// Of `simulations`, those run with forward sensitivities (each costs
+    /// about 1.3–2× a plain simulation for two parameters; see
+    /// docs/updating.md).
+    pub sensitivity_simulations: usize,
+    /// Sensitivity Jacobians that failed and were replaced by finite
+    /// differences.
+    pub sensitivity_fallbacks: usize,
+    /// Wall time spent in Jacobians (any method), s.
+    pub jacobian_s: f64,
     /// Rejected trial points whose evaluation failed.
     pub failed_trials: usize,
     /// Cost J at the start and after each iteration.
@@ -166,18 +186,21 @@ pub fn fit(problem: &Problem, settings: &FitSettings) -> Result<FitResult> {
     let x0 = problem.x_start();
     let (lo, hi) = problem.x_bounds();
     let out = optimize::minimize(&mut ev, &x0, &lo, &hi, settings);
-    let (evaluations, mut simulations) = (ev.evaluations, ev.simulations);
+    let evaluations = ev.evaluations;
+    let mut work = ev.counters();
     let (errors_before, n1) = error_report(problem, &x0);
     let (errors_after, n2) = error_report(problem, &out.x);
-    let (identifiability, n3) = if matches!(out.termination, Termination::StartFailed { .. }) {
-        (None, 0)
+    let (identifiability, w3) = if matches!(out.termination, Termination::StartFailed { .. }) {
+        (None, Default::default())
     } else {
         identify(problem, &out.x, settings)
     };
-    simulations += n1 + n2 + n3;
+    work += w3;
+    work.simulations += n1 + n2;
+    let (jacobian, jacobian_note) = settings.jacobian.resolve(problem);
     let reduction_error = forward::reduction_error(problem, &out.x);
     if reduction_error.is_some() {
-        simulations += 2 * problem.segments.len();
+        work.simulations += 2 * problem.segments.len();
     }
     let parameters = problem
         .parameters
@@ -203,12 +226,18 @@ pub fn fit(problem: &Problem, settings: &FitSettings) -> Result<FitResult> {
         model: problem.model_at(&out.x),
         x: out.x,
         optimizer: settings.optimizer,
+        jacobian,
+        jacobian_note,
         metric: problem.metric,
         reduction: problem.reduction,
         termination: out.termination,
         iterations: out.iterations,
         evaluations,
-        simulations,
+        simulations: work.simulations,
+        jacobians: work.jacobians,
+        sensitivity_simulations: work.sensitivity_simulations,
+        sensitivity_fallbacks: work.sensitivity_fallbacks,
+        jacobian_s: work.jacobian_seconds,
         failed_trials: out.failed_trials,
         cost_history: out.history,
         errors_before,
@@ -297,9 +326,9 @@ fn error_report(problem: &Problem, x: &[f64]) -> (Option<ErrorReport>, usize) {
     (Some(ErrorReport { channels, overall }), n)
 }
 
-/// Identifiability on the GLS residual at `x`; returns the report and the
-/// simulations spent.
-fn identify(problem: &Problem, x: &[f64], s: &FitSettings) -> (Option<Identifiability>, usize) {
+/// Identifiability on the GLS residual at `x` (Jacobian by the method of
+/// `s`); returns the report and the work spent.
+fn identify(problem: &Problem, x: &[f64], s: &FitSettings) -> (Option<Identifiability>, Counters) {
     let gls = Problem {
         metric: Metric::Gls,
         alpha: 0.0,
@@ -307,11 +336,11 @@ fn identify(problem: &Problem, x: &[f64], s: &FitSettings) -> (Option<Identifiab
     };
     let mut ev = Evaluator::new(&gls);
     let Ok(r0) = ev.residual(x) else {
-        return (None, ev.simulations);
+        return (None, ev.counters());
     };
     let (lo, hi) = gls.x_bounds();
-    let jac = optimize::jacobian(&mut ev, x, &r0, &lo, &hi, s.fd_step);
-    let sims = ev.simulations;
+    let jac = optimize::jacobian_with(&mut ev, x, &r0, &lo, &hi, s);
+    let sims = ev.counters();
     let Ok(jac) = jac else {
         return (None, sims);
     };

@@ -1,6 +1,9 @@
 //! The optimizers of §5.1: Nelder–Mead simplex (order zero), Gauss–Newton,
-//! BFGS and Levenberg–Marquardt (order one), all with bounds and centered
-//! finite-difference derivatives (the paper's choice).
+//! BFGS and Levenberg–Marquardt (order one), all with bounds. The
+//! derivatives ([`JacobianMethod`]) come from forward sensitivities of the
+//! integrator (one simulation per segment gives the Jacobian) where the
+//! problem allows it, else from centered finite differences (the paper's
+//! choice, two simulations per parameter and segment).
 //!
 //! They minimise `J(x) = ‖r(x)‖²` over the box `lo ≤ x ≤ hi` of scaled
 //! parameters. A failed model evaluation (a simulation that stops, a
@@ -29,10 +32,44 @@ pub enum Optimizer {
     Lm,
     /// Gauss–Newton with a backtracking line search.
     Gn,
-    /// BFGS (quasi-Newton) on finite-difference gradients of J.
+    /// BFGS (quasi-Newton) on the gradient `2 Jᵀ r` of J.
     Bfgs,
     /// Nelder–Mead simplex.
     Simplex,
+}
+
+/// How the Jacobian of the residual is computed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum JacobianMethod {
+    /// Forward sensitivities of the integrator
+    /// ([`super::cost::Evaluator::sensitivity_jacobian`]): one simulation
+    /// per segment. Full-order problems only; a reduced problem (whose
+    /// basis depends on the parameters) falls back to
+    /// [`JacobianMethod::CentralDifference`], and so does a single
+    /// evaluation whose sensitivities fail. PCD residuals are
+    /// differentiated along the sensitivities by differences of the
+    /// residual map (no simulation).
+    #[value(name = "sens")]
+    Sensitivity,
+    /// Centered finite differences of step `fd_step (1 + |x|)` (one-sided
+    /// at a bound): two simulations per parameter and segment.
+    #[value(name = "fd")]
+    CentralDifference,
+}
+
+impl JacobianMethod {
+    /// The method used for `problem` when `self` is requested, and why it
+    /// differs (if it does).
+    pub fn resolve(self, problem: &super::Problem) -> (JacobianMethod, Option<String>) {
+        match (self, super::sensitivity::unsupported(problem)) {
+            (JacobianMethod::Sensitivity, Some(why)) => (
+                JacobianMethod::CentralDifference,
+                Some(format!("finite differences: {why}")),
+            ),
+            (m, _) => (m, None),
+        }
+    }
 }
 
 /// Settings of the optimizers.
@@ -53,7 +90,12 @@ pub struct FitSettings {
     /// Converged when the projected gradient of J is below `g_tol`
     /// (default 1e-12; J is dimensionless).
     pub g_tol: f64,
-    /// Step of the centered differences in scaled parameters (default 1e-5).
+    /// Jacobian method (default [`JacobianMethod::Sensitivity`], with the
+    /// fallbacks it documents).
+    pub jacobian: JacobianMethod,
+    /// Step of the centered differences in scaled parameters (default
+    /// 1e-5; also the step of the PCD residual's differences along the
+    /// sensitivities).
     pub fd_step: f64,
     /// Initial Levenberg–Marquardt damping relative to `diag(JᵀJ)`
     /// (default 1e-3).
@@ -78,6 +120,7 @@ impl Default for FitSettings {
             x_tol: 1e-7,
             f_tol: 1e-10,
             g_tol: 1e-12,
+            jacobian: JacobianMethod::Sensitivity,
             fd_step: 1e-5,
             lm_lambda: 1e-3,
             simplex_size: 0.05,
@@ -203,6 +246,32 @@ pub fn minimize(
         Optimizer::Bfgs => st.bfgs(x0),
         Optimizer::Simplex => st.simplex(x0),
     }
+}
+
+/// Jacobian of the residual at `x` by the method of `s` (resolved with
+/// [`JacobianMethod::resolve`]; a failed sensitivity evaluation falls back
+/// to finite differences and is counted in `ev.sensitivity_fallbacks`).
+/// Counts the Jacobian and its time in `ev`.
+pub fn jacobian_with(
+    ev: &mut Evaluator<'_>,
+    x: &[f64],
+    r0: &DVector<f64>,
+    lo: &[f64],
+    hi: &[f64],
+    s: &FitSettings,
+) -> Result<DMatrix<f64>, Failure> {
+    let t0 = std::time::Instant::now();
+    ev.jacobians += 1;
+    let mut out = None;
+    if s.jacobian.resolve(ev.problem()).0 == JacobianMethod::Sensitivity {
+        match ev.sensitivity_jacobian(x, s.fd_step) {
+            Ok(j) if j.shape() == (r0.len(), x.len()) => out = Some(Ok(j)),
+            _ => ev.sensitivity_fallbacks += 1,
+        }
+    }
+    let out = out.unwrap_or_else(|| jacobian(ev, x, r0, lo, hi, s.fd_step));
+    ev.jacobian_seconds += t0.elapsed().as_secs_f64();
+    out
 }
 
 /// Centered finite-difference Jacobian of the residual at `x` (one-sided
@@ -337,7 +406,7 @@ impl State<'_, '_, '_> {
             if self.out_of_budget() {
                 break Termination::EvaluationLimit;
             }
-            let jac = match jacobian(self.ev, &x, &r, self.lo, self.hi, self.s.fd_step) {
+            let jac = match jacobian_with(self.ev, &x, &r, self.lo, self.hi, self.s) {
                 Ok(j) => j,
                 Err(f) => {
                     break Termination::Stalled {
@@ -463,10 +532,10 @@ impl State<'_, '_, '_> {
         Step::Failed("Gauss-Newton line search found no lower cost".into())
     }
 
-    /// Cost and centered-difference gradient of J at x.
+    /// Gradient `2 Jᵀ r` of J at x.
     fn cost_grad(&mut self, x: &[f64], r: &DVector<f64>) -> Result<DVector<f64>, String> {
         let jac =
-            jacobian(self.ev, x, r, self.lo, self.hi, self.s.fd_step).map_err(|f| f.to_string())?;
+            jacobian_with(self.ev, x, r, self.lo, self.hi, self.s).map_err(|f| f.to_string())?;
         Ok(jac.transpose() * r * 2.0)
     }
 

@@ -1,0 +1,247 @@
+//! Derivatives of the simulated channels with respect to the scaled
+//! parameters, from forward sensitivities of the integrator
+//! ([`crate::integrate::Integrator::run_sensitivities`]): one simulation per
+//! segment gives the responses and all their derivatives.
+//!
+//! A parameter `p = p0 + s x` ([`Parameter::from_x`]) moves the model by
+//! `∂/∂x = s ∂/∂p`:
+//!
+//! | target | `∂M/∂p` | `∂K/∂p` | `∂C/∂p` | element |
+//! |---|---|---|---|---|
+//! | spring `k` between i, j | 0 | `(e_i − e_j)(e_i − e_j)ᵀ` | Rayleigh: `β ∂K`; modal: see below | – |
+//! | mass of DOF i | `e_i e_iᵀ` | 0 | Rayleigh: `α ∂M`; modal: see below | – |
+//! | modal damping ratio ζ | 0 | 0 | `C(ζ = 1)` (C is linear in ζ) | – |
+//! | contact gap / stiffness, friction level, cubic k3 | 0 | 0 | 0 | `∂f_int/∂p` |
+//!
+//! Modal damping `C = MΦ diag(2ζω) ΦᵀM` moves with M and K through the modes;
+//! its derivative is taken by central differences of
+//! [`crate::model::damping_matrix`] (step `1e-5 |p|`, an `n × n` eigenproblem
+//! per side, no simulation; truncation and rounding ~1e-10 relative).
+//!
+//! Only full-order problems: in a reduced problem the basis follows the
+//! parameters, and its derivative is not propagated
+//! ([`unsupported`] says why; the optimizers then use finite differences).
+//! The start states of the segments are data and do not depend on the
+//! parameters.
+
+use super::forward::{self, Failure, SegmentResponse};
+use super::param::{Parameter, Target};
+use super::problem::Problem;
+use crate::integrate::{ElementSeed, ParamSeed, Seeds};
+use crate::model::elements::ElementParam;
+use crate::model::{Damping, Model};
+use nalgebra::DMatrix;
+
+/// Why the sensitivity Jacobian cannot be used for `problem` (None: it
+/// can).
+pub fn unsupported(problem: &Problem) -> Option<String> {
+    problem.reduction.map(|m| {
+        format!(
+            "reduced model ({m:?}): the basis depends on the parameters and its derivative is not propagated"
+        )
+    })
+}
+
+/// Simulated channels of one segment and their derivatives with respect to
+/// each scaled parameter (observation × sample each).
+#[derive(Debug, Clone)]
+pub struct SegmentDerivatives {
+    /// Channels, as [`forward::simulate`] gives them.
+    pub y: SegmentResponse,
+    /// `∂y/∂x_j`, one matrix per parameter.
+    pub dy: Vec<DMatrix<f64>>,
+}
+
+/// Simulate every segment of a full-order `problem` at scaled parameters
+/// `x` with forward sensitivities. Returns the channels and derivatives and
+/// the number of segment simulations run (each a simulation with
+/// sensitivities).
+pub fn simulate(
+    problem: &Problem,
+    x: &[f64],
+) -> (std::result::Result<Vec<SegmentDerivatives>, Failure>, usize) {
+    let fail = |segment, reason: String| Failure { segment, reason };
+    if let Some(why) = unsupported(problem) {
+        return (Err(fail(None, why)), 0);
+    }
+    let model = problem.model_at(x);
+    let compiled = match forward::compile(problem, &model) {
+        Ok(c) => c,
+        Err(f) => return (Err(f), 0),
+    };
+    let seeds = match param_seeds(&model, &problem.parameters) {
+        Ok(p) => Seeds::params(model.ndof(), p),
+        Err(e) => return (Err(fail(None, e)), 0),
+    };
+    let mut out = Vec::with_capacity(problem.segments.len());
+    let mut count = 0;
+    for (i, seg) in problem.segments.iter().enumerate() {
+        let force = problem.force.columns(seg.start, seg.len);
+        let run = compiled
+            .integ
+            .run_sensitivities(force, &seg.u0, &seg.v0, &seeds);
+        count += 1;
+        let (sim, sens) = match run {
+            Ok(r) => r,
+            Err(e) => return (Err(fail(Some(i), e.to_string())), count),
+        };
+        if !sim.completed() {
+            let reason = format!("simulation stopped: {:?}", sim.status);
+            return (Err(fail(Some(i), reason)), count);
+        }
+        if let Some(t) = sens.singular_tangent {
+            let reason = format!("the converged tangent is singular at t = {t} s");
+            return (Err(fail(Some(i), reason)), count);
+        }
+        let pos = &compiled.pos;
+        let y = forward::extract_channels(problem, (&sim.u, &sim.v, &sim.a), pos);
+        let dy = (0..seeds.params.len())
+            .map(|j| {
+                forward::extract_channels(problem, (&sens.du[j], &sens.dv[j], &sens.da[j]), pos)
+            })
+            .collect();
+        out.push(SegmentDerivatives { y, dy });
+    }
+    (Ok(out), count)
+}
+
+/// The seeds `∂(M, C, K, elements)/∂x_j` of the parameters at `model`
+/// (the model at the current values). Errors name the parameter.
+pub fn param_seeds(
+    model: &Model,
+    parameters: &[Parameter],
+) -> std::result::Result<Vec<ParamSeed>, String> {
+    parameters
+        .iter()
+        .map(|p| {
+            target_seed(model, p.target, p.scale())
+                .map_err(|e| format!("parameter {}: {e}", p.name))
+        })
+        .collect()
+}
+
+/// `s ∂(model)/∂p` for one target.
+pub fn target_seed(
+    model: &Model,
+    target: Target,
+    s: f64,
+) -> std::result::Result<ParamSeed, String> {
+    let n = model.ndof();
+    let (nc, nf) = (model.contacts.len(), model.frictions.len());
+    let element = |element, param| ParamSeed {
+        elements: vec![ElementSeed {
+            element,
+            param,
+            scale: s,
+        }],
+        ..Default::default()
+    };
+    Ok(match target {
+        Target::SpringStiffness(i) => {
+            let mut dk = DMatrix::zeros(n, n);
+            crate::model::add_spring(&mut dk, model.springs[i].ends(), s);
+            ParamSeed {
+                dc: damping_derivative(model, target, s, &dk)?,
+                dk: Some(dk),
+                ..Default::default()
+            }
+        }
+        Target::Mass(i) => {
+            let mut dm = DMatrix::zeros(n, n);
+            dm[(i, i)] = s;
+            ParamSeed {
+                dc: damping_derivative(model, target, s, &dm)?,
+                dm: Some(dm),
+                ..Default::default()
+            }
+        }
+        Target::DampingRatio => {
+            let unit = Damping::Modal {
+                ratio: Some(1.0),
+                ratios: vec![],
+            };
+            let c1 = crate::model::damping_matrix(
+                &unit,
+                &model.mass_matrix(),
+                &model.stiffness_matrix(),
+            )
+            .map_err(|e| e.to_string())?;
+            ParamSeed {
+                dc: Some(c1 * s),
+                ..Default::default()
+            }
+        }
+        Target::ContactGap(i) => element(i, ElementParam::Gap),
+        Target::ContactStiffness(i) => element(i, ElementParam::Stiffness),
+        Target::FrictionLevel(i) => element(nc + i, ElementParam::Level),
+        Target::CubicK3(i) => element(nc + nf + i, ElementParam::K3),
+    })
+}
+
+/// `s ∂C/∂p` for a spring or mass target whose matrix derivative (times
+/// `s`) is `dmat`: Rayleigh `C = a M + b K` exactly, modal damping by
+/// central differences of the damping matrix.
+fn damping_derivative(
+    model: &Model,
+    target: Target,
+    s: f64,
+    dmat: &DMatrix<f64>,
+) -> std::result::Result<Option<DMatrix<f64>>, String> {
+    match model.damping {
+        Damping::None => Ok(None),
+        Damping::Rayleigh { alpha, beta } => {
+            let c = if matches!(target, Target::Mass(_)) {
+                alpha
+            } else {
+                beta
+            };
+            Ok((c != 0.0).then(|| dmat * c))
+        }
+        Damping::Modal { .. } => {
+            let p = target.get(model).map_err(|e| e.to_string())?;
+            let h = 1e-5 * p.abs();
+            let at = |v: f64| {
+                let mut m = model.clone();
+                target.set(&mut m, v);
+                m.damping_matrix().map_err(|e| e.to_string())
+            };
+            let (cp, cm) = (at(p + h)?, at(p - h)?);
+            Ok(Some((cp - cm) * (s / (2.0 * h))))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The modal damping derivative against the eigenvalue sensitivity of
+    /// an SDOF: C = 2 ζ √(k m), ∂C/∂k = ζ √(m/k), ∂C/∂m = ζ √(k/m).
+    #[test]
+    fn modal_damping_derivative_of_an_oscillator() {
+        let model = Model::from_toml_str(
+            "masses = [2.0]\n[[spring]]\ndofs = [1]\nstiffness = 800.0\n[damping]\nkind = \"modal\"\nratio = 0.05\n",
+            "sdof",
+        )
+        .unwrap();
+        let dk = target_seed(&model, Target::SpringStiffness(0), 3.0).unwrap();
+        approx::assert_relative_eq!(
+            dk.dc.unwrap()[(0, 0)],
+            3.0 * 0.05 * (2.0f64 / 800.0).sqrt(),
+            max_relative = 1e-9
+        );
+        assert_eq!(dk.dk.unwrap()[(0, 0)], 3.0);
+        let dm = target_seed(&model, Target::Mass(0), 0.5).unwrap();
+        approx::assert_relative_eq!(
+            dm.dc.unwrap()[(0, 0)],
+            0.5 * 0.05 * (800.0f64 / 2.0).sqrt(),
+            max_relative = 1e-9
+        );
+        let dz = target_seed(&model, Target::DampingRatio, 0.05).unwrap();
+        approx::assert_relative_eq!(
+            dz.dc.unwrap()[(0, 0)],
+            0.05 * 2.0 * (800.0f64 * 2.0).sqrt(),
+            max_relative = 1e-12
+        );
+    }
+}
