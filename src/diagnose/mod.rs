@@ -906,6 +906,22 @@ fn fit_effects(
     let mut starts = vec![vec![0.0; np]];
     let mut sims = 0;
     let mut stiffest = trial.clone();
+    // a cubic spring: the segment error has local minima in k3 (the
+    // traced value comes from linear-model states), so two more starts
+    // bracket it
+    if let Some(last) = all.last() {
+        if last.candidate.kind == crate::trace::EffectKind::Cubic {
+            let p = &problem.parameters[np - 1];
+            let k3 = trial.cubics[trial.cubics.len() - 1].k3;
+            for f in [0.6, 1.6] {
+                let mut s = vec![0.0; np];
+                s[np - 1] = p.to_x((k3 * f).clamp(p.lower, p.upper));
+                starts.push(s);
+            }
+            let c = stiffest.cubics.len() - 1;
+            stiffest.cubics[c].k3 = k3 * 1.6;
+        }
+    }
     // a contact: starts from a scan of gap and stiffness (CONTEXT fact 6)
     if let Some(last) = all.last() {
         if last.candidate.kind == crate::trace::EffectKind::Contact {

@@ -39,6 +39,8 @@ use std::collections::BTreeMap;
 pub struct StartFit {
     /// Gauss–Newton iterations run.
     pub iterations: usize,
+    /// Segments that took the previous segment's end state as their start.
+    pub continued: usize,
     /// Segment simulations run.
     pub simulations: usize,
     /// Weighted squared error summed over segments, before and after.
@@ -212,6 +214,67 @@ fn sens_steps(
         .collect()
 }
 
+/// Continuity starts: every segment that directly follows another is tried
+/// from the state where the previous one ends (its simulation carried one
+/// sample further); the trial is kept when it lowers the segment's error.
+/// Returns the number of segments changed.
+fn continuity(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    segs: &mut [Segment],
+    y: &mut DMatrix<f64>,
+    res: &mut [Option<(DVector<f64>, f64)>],
+    count: &mut usize,
+) -> usize {
+    let Ok(integ) = Integrator::new(model, cmp.fs, sim) else {
+        return 0;
+    };
+    let n = model.ndof();
+    let ns = cmp.force.ncols();
+    let follows = |i: usize| i > 0 && segs[i - 1].start + segs[i - 1].len == segs[i].start;
+    let idx: Vec<usize> = (1..segs.len())
+        .filter(|&i| follows(i) && segs[i].start < ns)
+        .collect();
+    *count += idx.len();
+    let trials: Vec<Option<Segment>> = idx
+        .par_iter()
+        .map(|&i| {
+            let p = &segs[i - 1];
+            let run = integ.run(cmp.force.columns(p.start, p.len + 1), &p.u0, &p.v0);
+            if !run.completed() || run.len() != p.len + 1 {
+                return None;
+            }
+            Some(Segment {
+                start: segs[i].start,
+                len: segs[i].len,
+                u0: (0..n).map(|q| run.u[(q, p.len)]).collect(),
+                v0: (0..n).map(|q| run.v[(q, p.len)]).collect(),
+            })
+        })
+        .collect();
+    let ok: Vec<(usize, Segment)> = idx
+        .into_iter()
+        .zip(trials)
+        .filter_map(|(i, t)| Some((i, t?)))
+        .collect();
+    let trial_segs: Vec<Segment> = ok.iter().map(|(_, t)| t.clone()).collect();
+    let yt = predict_each(cmp, model, &trial_segs, sim, count);
+    let mut changed = 0;
+    for (i, t) in &ok {
+        let old = res[*i].as_ref().map_or(f64::INFINITY, |r| r.1);
+        if let Some(r) = residual(cmp, t, &yt) {
+            if r.1 < old {
+                copy_segment(y, &yt, t);
+                segs[*i] = t.clone();
+                res[*i] = Some(r);
+                changed += 1;
+            }
+        }
+    }
+    changed
+}
+
 /// Refine the start states of `segments` for `model` (module docs).
 /// Returns the refined segments, their predictions (p × N, NaN outside the
 /// segments and where a simulation failed) and what was done.
@@ -234,6 +297,7 @@ pub fn refine(
             iterations: 0,
             simulations: sims,
             cost: (cost0, cost0),
+            continued: 0,
             stalled: segs.len(),
             note: "the linear part of the model could not be sampled; start states kept".into(),
         };
@@ -254,8 +318,16 @@ pub fn refine(
     };
     let mut stalled = 0;
     let mut done = 0;
-    for _ in 0..iterations {
+    let mut continued = 0;
+    for it in 0..iterations {
         done += 1;
+        // from the second iteration of a nonlinear model: a segment may
+        // start instead from where the previous one ends (continuity),
+        // when that predicts it better (a refinement stuck in a local
+        // minimum; CONTEXT fact 6)
+        if exact.is_none() && it == 1 {
+            continued = continuity(cmp, model, sim, &mut segs, &mut y, &mut res, &mut sims);
+        }
         // steps
         let steps: Vec<Option<DVector<f64>>> = match exact.as_mut() {
             Some(jac) => segs
@@ -310,6 +382,7 @@ pub fn refine(
     let cost1: f64 = res.iter().flatten().map(|r| r.1).sum();
     let fit = StartFit {
         iterations: done,
+        continued,
         simulations: sims,
         cost: (cost0, cost1),
         stalled,
