@@ -20,6 +20,7 @@ use crate::model::elements::{self, Element};
 use crate::model::Model;
 use crate::record::Quantity;
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// Why an evaluation of the model failed (a status, not an error: the
@@ -69,33 +70,38 @@ pub fn simulate(
         Ok(c) => c,
         Err(f) => return (Err(f), 0),
     };
-    let mut out = Vec::with_capacity(problem.segments.len());
-    let mut count = 0;
-    for (i, seg) in problem.segments.iter().enumerate() {
-        let force = problem.force.columns(seg.start, seg.len);
-        let sim = match &compiled.tt {
-            None => compiled.integ.run(force, &seg.u0, &seg.v0),
-            Some(tt) => {
-                let fa = tt * force;
-                let proj = compiled.proj.as_ref().unwrap_or(tt);
-                let ua = proj * DVector::from_column_slice(&seg.u0);
-                let va = proj * DVector::from_column_slice(&seg.v0);
-                compiled
-                    .integ
-                    .run(fa.as_view(), ua.as_slice(), va.as_slice())
-            }
-        };
-        count += 1;
-        if !sim.completed() {
-            let f = Failure {
-                segment: Some(i),
-                reason: format!("simulation stopped: {:?}", sim.status),
+    // segments are independent: simulated in parallel and collected in
+    // order, so the result (and the first failure reported) does not depend
+    // on the thread count; every segment is simulated and counted
+    let runs: Vec<std::result::Result<SegmentResponse, Failure>> = problem
+        .segments
+        .par_iter()
+        .enumerate()
+        .map(|(i, seg)| {
+            let force = problem.force.columns(seg.start, seg.len);
+            let sim = match &compiled.tt {
+                None => compiled.integ.run(force, &seg.u0, &seg.v0),
+                Some(tt) => {
+                    let fa = tt * force;
+                    let proj = compiled.proj.as_ref().unwrap_or(tt);
+                    let ua = proj * DVector::from_column_slice(&seg.u0);
+                    let va = proj * DVector::from_column_slice(&seg.v0);
+                    compiled
+                        .integ
+                        .run(fa.as_view(), ua.as_slice(), va.as_slice())
+                }
             };
-            return (Err(f), count);
-        }
-        out.push(extract(problem, &sim, &compiled.pos));
-    }
-    (Ok(out), count)
+            if !sim.completed() {
+                return Err(Failure {
+                    segment: Some(i),
+                    reason: format!("simulation stopped: {:?}", sim.status),
+                });
+            }
+            Ok(extract(problem, &sim, &compiled.pos))
+        })
+        .collect();
+    let count = runs.len();
+    (runs.into_iter().collect(), count)
 }
 
 /// Relative difference between the reduced and the full-order responses

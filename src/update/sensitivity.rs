@@ -31,6 +31,7 @@ use crate::integrate::{ElementSeed, ParamSeed, Seeds};
 use crate::model::elements::ElementParam;
 use crate::model::{Damping, Model};
 use nalgebra::DMatrix;
+use rayon::prelude::*;
 
 /// Why the sensitivity Jacobian cannot be used for `problem` (None: it
 /// can).
@@ -73,36 +74,37 @@ pub fn simulate(
         Ok(p) => Seeds::params(model.ndof(), p),
         Err(e) => return (Err(fail(None, e)), 0),
     };
-    let mut out = Vec::with_capacity(problem.segments.len());
-    let mut count = 0;
-    for (i, seg) in problem.segments.iter().enumerate() {
-        let force = problem.force.columns(seg.start, seg.len);
-        let run = compiled
-            .integ
-            .run_sensitivities(force, &seg.u0, &seg.v0, &seeds);
-        count += 1;
-        let (sim, sens) = match run {
-            Ok(r) => r,
-            Err(e) => return (Err(fail(Some(i), e.to_string())), count),
-        };
-        if !sim.completed() {
-            let reason = format!("simulation stopped: {:?}", sim.status);
-            return (Err(fail(Some(i), reason)), count);
-        }
-        if let Some(t) = sens.singular_tangent {
-            let reason = format!("the converged tangent is singular at t = {t} s");
-            return (Err(fail(Some(i), reason)), count);
-        }
-        let pos = &compiled.pos;
-        let y = forward::extract_channels(problem, (&sim.u, &sim.v, &sim.a), pos);
-        let dy = (0..seeds.params.len())
-            .map(|j| {
-                forward::extract_channels(problem, (&sens.du[j], &sens.dv[j], &sens.da[j]), pos)
-            })
-            .collect();
-        out.push(SegmentDerivatives { y, dy });
-    }
-    (Ok(out), count)
+    // in parallel, collected in order (as forward::simulate)
+    let runs: Vec<std::result::Result<SegmentDerivatives, Failure>> = problem
+        .segments
+        .par_iter()
+        .enumerate()
+        .map(|(i, seg)| {
+            let force = problem.force.columns(seg.start, seg.len);
+            let (sim, sens) = compiled
+                .integ
+                .run_sensitivities(force, &seg.u0, &seg.v0, &seeds)
+                .map_err(|e| fail(Some(i), e.to_string()))?;
+            if !sim.completed() {
+                let reason = format!("simulation stopped: {:?}", sim.status);
+                return Err(fail(Some(i), reason));
+            }
+            if let Some(t) = sens.singular_tangent {
+                let reason = format!("the converged tangent is singular at t = {t} s");
+                return Err(fail(Some(i), reason));
+            }
+            let pos = &compiled.pos;
+            let y = forward::extract_channels(problem, (&sim.u, &sim.v, &sim.a), pos);
+            let dy = (0..seeds.params.len())
+                .map(|j| {
+                    forward::extract_channels(problem, (&sens.du[j], &sens.dv[j], &sens.da[j]), pos)
+                })
+                .collect();
+            Ok(SegmentDerivatives { y, dy })
+        })
+        .collect();
+    let count = runs.len();
+    (runs.into_iter().collect(), count)
 }
 
 /// The seeds `∂(M, C, K, elements)/∂x_j` of the parameters at `model`
