@@ -99,6 +99,7 @@ fn bumper_case(gap: f64, sensors: &[usize], seed: u64, on_validation: f64) {
         stiffness: 2e6,
     }];
     let d = run(&truth, sensors, seed);
+    assert_eq!(d.effects.len(), 1, "{}", d.verdict);
     assert_eq!(d.effects[0].kind, "contact");
     assert_eq!(d.effects[0].dofs, vec![5, 6]);
     within(param(&d, "contact", "gap"), gap, 0.1);
@@ -213,7 +214,7 @@ fn ground_spring_at_dof_1() {
 }
 
 #[test]
-#[ignore = "not met yet: the contact is found, but its fit absorbs the 14 % softer spring 5 (stiffness −36 %) and the spring is not proposed (see the issue note)"]
+#[ignore = "not met yet: both are found (contact 5→6, then stiffness 5–6 fitted jointly as a linear change along the located pair), but on this record (seed 51) delta ends at −10.8 % and the contact stiffness at −25 %, 66 % → 19 % (3.4×); the example matrix (seed 101): delta −12.8 %, 72 % → 5.2 %"]
 fn bumper_with_softer_spring_5() {
     let mut truth = lanl();
     truth.contacts = vec![Contact {

@@ -30,7 +30,7 @@ use crate::integrate::SimSettings;
 use crate::linear::SampledModel;
 use crate::model::Model;
 use crate::record::{Quantity, Record};
-use crate::trace::{self, RankedEffect, TraceInput, TraceSettings};
+use crate::trace::{self, EffectKind, RankedEffect, TraceInput, TraceSettings};
 use crate::update::optimize::FitSettings;
 use crate::update::problem::Observation;
 use crate::update::shooting::{self, Segment};
@@ -67,6 +67,10 @@ pub struct DiagnoseSettings {
     /// squared multiple-shooting error, or it is withdrawn (default 0.05,
     /// the trace's threshold).
     pub min_improvement: f64,
+    /// The same for a linear change along the located force direction that
+    /// the screen did not propose, fitted after a nonlinear effect there
+    /// (default 0.5: it must explain half of what remains).
+    pub companion_improvement: f64,
     /// Multiple-shooting relative error at or below which the model is taken
     /// to explain the record up to noise and integration error, and no
     /// effect is sought (default 0.025: 2.5 × a 1 % noise level).
@@ -127,6 +131,7 @@ impl Default for DiagnoseSettings {
             omega_h: 0.15,
             max_substeps: 80,
             min_improvement: 0.05,
+            companion_improvement: 0.5,
             noise_floor: 0.025,
             states: StatesSource::Lifted,
             locate_ratio: 0.8,
@@ -677,7 +682,35 @@ pub fn diagnose(
         if round == 0 {
             ranking = tr.ranking.iter().take(10).cloned().collect();
         }
-        let Some(best) = tr.selected.first().cloned() else {
+        // below the screen's threshold, a linear change along the located
+        // direction is still fitted once, jointly with the effects found:
+        // a nonlinear effect's fit absorbs a linear change at the same
+        // place (a bumper's gap and penalty stiffness trade against a
+        // softer spring beside it), so the screen, run after that fit,
+        // cannot see it; the fit decides whether it pays
+        let companion = || {
+            let dirs = located.as_ref().filter(|d| d.ncols() > 0)?;
+            let nonlinear_added = added.iter().any(|a| {
+                !matches!(
+                    a.0.candidate.kind,
+                    EffectKind::Stiffness | EffectKind::GroundSpring | EffectKind::Damping
+                )
+            });
+            if !nonlinear_added {
+                return None;
+            }
+            tr.ranking
+                .iter()
+                .find(|e| {
+                    matches!(
+                        e.candidate.kind,
+                        EffectKind::Stiffness | EffectKind::GroundSpring
+                    ) && trace::acts_along(&e.candidate, dirs)
+                })
+                .cloned()
+        };
+        let screened = !tr.selected.is_empty();
+        let Some(best) = tr.selected.first().cloned().or_else(companion) else {
             rounds.push(Round {
                 proposed: None,
                 kept: false,
@@ -715,24 +748,61 @@ pub fn diagnose(
         let pred = cmp.shoot(&fitted, sim);
         sims += shot_simulations(pred.as_ref().ok().and_then(|p| p.2.as_ref()), cmp);
         let new_err = pred.as_ref().ok().map(|y| cmp.total_error(&y.0));
-        let pays = match (current_err, new_err) {
-            (Some(a), Some(b)) => b * b < a * a * (1.0 - settings.min_improvement),
-            (None, Some(_)) => true,
-            _ => false,
+        // a change the screen did not propose must explain more
+        let need = if screened {
+            settings.min_improvement
+        } else {
+            settings.companion_improvement
+        };
+        // a companion fitted to a negligible change (below 2 % of the
+        // spring, or a ground spring below 2 % of the stiffest spring at
+        // its DOF) only refitted the other effects: not an effect
+        let negligible = !screened && {
+            let v = effects::values(&fitted, &eff).first().map_or(0.0, |p| p.1);
+            match eff.candidate.kind {
+                EffectKind::Stiffness => v.abs() < 0.02,
+                EffectKind::GroundSpring => {
+                    let d = eff.candidate.dofs[0] + 1;
+                    let kmax = declared
+                        .springs
+                        .iter()
+                        .filter(|s| s.dofs.contains(&d))
+                        .map(|s| s.stiffness)
+                        .fold(0.0, f64::max);
+                    v.abs() < 0.02 * kmax
+                }
+                _ => false,
+            }
+        };
+        let pays = !negligible
+            && match (current_err, new_err) {
+                (Some(a), Some(b)) => b * b < a * a * (1.0 - need),
+                (None, Some(_)) => true,
+                _ => false,
+            };
+        let why = if screened {
+            String::new()
+        } else {
+            format!(
+                " (below the screen: {}; fitted as a linear change along the located direction)",
+                tr.stop_reason
+            )
         };
         rounds.push(Round {
             proposed: Some(best.label.clone()),
             kept: pays,
             note: if pays {
                 format!(
-                    "kept: multiple-shooting error {:.4} → {:.4}",
+                    "kept: multiple-shooting error {:.4} → {:.4}{why}",
                     current_err.unwrap_or(f64::NAN),
                     new_err.unwrap_or(f64::NAN)
                 )
+            } else if negligible {
+                format!("withdrawn: the fitted change is below 2 %{why}")
             } else {
                 format!(
-                    "withdrawn: the fitted effect does not remove {:.0} % of the squared multiple-shooting error ({:.4} → {:.4})",
-                    100.0 * settings.min_improvement,
+                    "withdrawn: the fitted effect does not remove {:.0} % of the squared multiple-shooting error ({:.4} → {:.4}){why}",
+                    100.0 * need,
                     current_err.unwrap_or(f64::NAN),
                     new_err.unwrap_or(f64::NAN)
                 )

@@ -18,4 +18,4 @@ pub mod candidates;
 pub mod regress;
 
 pub use candidates::{Candidate, EffectKind};
-pub use regress::{trace, RankedEffect, TraceInput, TraceResult, TraceSettings};
+pub use regress::{acts_along, trace, RankedEffect, TraceInput, TraceResult, TraceSettings};

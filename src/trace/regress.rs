@@ -481,7 +481,7 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
 }
 
 /// The candidate's force lies in the span of the columns of `dirs`.
-fn acts_along(cand: &Candidate, dirs: &DMatrix<f64>) -> bool {
+pub fn acts_along(cand: &Candidate, dirs: &DMatrix<f64>) -> bool {
     let Some(d) = cand.direction(dirs.nrows()) else {
         return false;
     };
