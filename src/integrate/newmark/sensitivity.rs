@@ -210,6 +210,8 @@ struct SensWork {
     closed: Vec<Option<bool>>,
     /// Sub-steps where a contact's side differed from the accepted point.
     side_steps: usize,
+    /// C = 0 (undamped): its products are skipped.
+    c_zero: bool,
     tangent: TangentFactor,
     singular_at: Option<f64>,
 }
@@ -579,7 +581,9 @@ impl Integrator {
                     mat_vec_axpy::<N>(self.m.as_slice(), n, dz, -1.0, rhs);
                 }
             }
-            mat_vec_axpy::<N>(self.c.as_slice(), n, dw, -c1, rhs);
+            if !sw.c_zero {
+                mat_vec_axpy::<N>(self.c.as_slice(), n, dw, -c1, rhs);
+            }
             for (e, &sl) in self.elements.iter().zip(&sw.eff) {
                 e.add_slope_product(sl, (0.0, dw), (-c1, dw), rhs);
             }
@@ -712,6 +716,7 @@ impl SensWork {
             eff: z(integ.elements.len()),
             closed: vec![None; integ.elements.len()],
             side_steps: 0,
+            c_zero: integ.c.iter().all(|&x| x == 0.0),
             slopes0: z(integ.elements.len()),
             tangent: TangentFactor {
                 factor: Factor::Stale,
