@@ -46,8 +46,11 @@
 //! default tolerance 1e-10, about one such sub-step per run made the gap's
 //! Jacobian column differ by 3 % from the differences of the computed
 //! trajectory, enough to stall Levenberg–Marquardt. (`g_{n+1}` for HHT is
-//! the actual law at the accepted point, and so is `δg`.) At a contact's
-//! switching point itself (`δ = gap` exactly) the open side is used.
+//! the actual law at the accepted point, and so is `δg`.) When Newton
+//! accepts the predictor without a step (its residual already below the
+//! tolerance), the sub-step is differentiated as the exact solution at that
+//! point, not as the explicit predictor. At a contact's switching point
+//! itself (`δ = gap` exactly) the open side is used.
 
 use super::dense::{chol_solve, cholesky_in_place, dim, mat_vec_axpy};
 use super::{Integrator, Outputs, SimStatus, Simulation, Work};
