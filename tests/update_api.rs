@@ -284,3 +284,82 @@ fn reduced_problems_fall_back_to_finite_differences_and_say_so() {
     assert_eq!(r.jacobian, update::JacobianMethod::CentralDifference);
     assert_eq!(r.sensitivity_simulations, 0);
 }
+
+#[test]
+fn contact_jacobian_follows_the_computed_trajectory_at_the_default_newton_tolerance() {
+    // the bumper fit of examples/update_contact_shooting (80 segments of
+    // 0.1 s, 40 sub-steps, default Newton tolerance 1e-10) at a point where
+    // Levenberg-Marquardt once stalled: a few sub-steps end with an iterate
+    // accepted within the tolerance across the contact's switch from the
+    // side of its Newton matrix. Their derivative is that side's; the other
+    // side's (the tangent at the accepted point) made the gap column differ
+    // by 3 % from the differences of the computed cost.
+    use tacit::integrate::{Integrator, Seeds};
+    use tacit::simulate::{simulate_record, RecordSpec};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/lanl8dof-contact.toml");
+    let truth = Model::from_file(&path).unwrap();
+    let spec = RecordSpec {
+        samples: 4096,
+        sensors: vec![1, 5, 6],
+        kinds: vec![Quantity::Accel],
+        noise: 0.01,
+        seed: 7,
+        settings: SimSettings {
+            substeps: 40,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let (rec, _) = simulate_record(&truth, &spec).unwrap();
+    let params = vec![
+        Parameter::relative(&truth, Target::ContactGap(0)).unwrap(),
+        Parameter::relative(&truth, Target::ContactStiffness(0)).unwrap(),
+    ];
+    let mut p = Problem::from_record(
+        &truth,
+        &rec,
+        &[Quantity::Accel],
+        None,
+        params,
+        vec![0.0; 8],
+        vec![0.0; 8],
+    )
+    .unwrap();
+    p.sim.substeps = 40;
+    p.segments = update::shooting::from_truth(&rec, 51).unwrap();
+    let x = [0.018958583497239268, 0.009842814501277523];
+    // sub-steps across the switch, over all segments
+    let model = p.model_at(&x);
+    let integ = Integrator::new(&model, p.fs, p.sim).unwrap();
+    let seeds = Seeds::params(
+        8,
+        update::sensitivity::param_seeds(&model, &p.parameters).unwrap(),
+    );
+    let across: usize = p
+        .segments
+        .iter()
+        .map(|s| {
+            let f = p.force.columns(s.start, s.len);
+            integ
+                .run_sensitivities(f, &s.u0, &s.v0, &seeds)
+                .unwrap()
+                .1
+                .newton_side_steps
+        })
+        .sum();
+    assert!(across >= 1, "no sub-step across the switch");
+    let mut ev = Evaluator::new(&p);
+    let r0 = ev.residual(&x).unwrap();
+    let js = ev.sensitivity_jacobian(&x, 1e-5).unwrap();
+    // differences small enough (3.8e-10 m on the gap) to keep every
+    // contact's pattern; larger steps already differ by 2-50 %
+    let jf = optimize::jacobian(&mut ev, &x, &r0, &[-0.9; 2], &[0.9; 2], 1e-6).unwrap();
+    for j in 0..2 {
+        let e = (js.column(j) - jf.column(j)).norm() / jf.column(j).norm();
+        eprintln!("{across} sub-steps across; parameter {j}: relative difference {e:.1e}");
+        assert!(e < 1e-4, "parameter {j}: {e:e}");
+    }
+    // the gradient of the cost, which the fit follows, agrees too
+    let (gs, gf) = (js.transpose() * &r0, jf.transpose() * &r0);
+    assert!((gs[0] - gf[0]).abs() < 1e-3 * gf[0].abs(), "{gs} {gf}");
+}

@@ -32,6 +32,10 @@ pub struct Args {
     /// from the stiffest element).
     #[arg(long, default_value_t = 10)]
     substeps: usize,
+    /// Jacobian of the effect fits: forward sensitivities of the integrator
+    /// or centered finite differences.
+    #[arg(long, value_enum, default_value = "sens")]
+    jacobian: tacit::update::JacobianMethod,
     /// Use the truth stored in a simulated record as the states (checks the
     /// later steps independently of the identification).
     #[arg(long, hide = true)]
@@ -53,7 +57,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if !(a.segment > 0.0) {
         anyhow::bail!("--segment {} must be > 0", a.segment);
     }
+    let defaults = DiagnoseSettings::default();
     let settings = DiagnoseSettings {
+        fit: tacit::update::FitSettings {
+            jacobian: a.jacobian,
+            ..defaults.fit
+        },
         segment_seconds: a.segment,
         max_effects: a.max_effects,
         substeps: a.substeps,
@@ -62,7 +71,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         } else {
             diagnose::StatesSource::Lifted
         },
-        ..Default::default()
+        ..defaults
     };
     let sensors = a.sensors.as_ref().map(|d| d.0.clone());
     let bar = if std::io::stderr().is_terminal() {

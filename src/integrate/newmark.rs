@@ -285,7 +285,7 @@ impl Integrator {
             }
             for sub in 0..self.settings.substeps {
                 let time = || (k - 1) as f64 / self.fs() + (sub + 1) as f64 * self.h;
-                match self.advance::<N>(&mut ws, sub) {
+                match self.advance::<N, false>(&mut ws, sub) {
                     Ok(it) => iters += it,
                     Err((iterations, residual)) => {
                         iters += iterations;
@@ -345,7 +345,9 @@ impl Integrator {
     /// One sub-step (number `sub` within the sample) from `ws.u, v, a`, the
     /// force interpolated between `ws.f_prev` and `ws.f_next`; the state is
     /// advanced in place. Ok(Newton iterations) or Err((iterations, residual)).
-    fn advance<const N: usize>(
+    /// `REC`: record the slopes of the last Newton matrix (for the
+    /// sensitivities; compiled out of [`Integrator::run`]).
+    fn advance<const N: usize, const REC: bool>(
         &self,
         ws: &mut Work,
         sub: usize,
@@ -354,7 +356,7 @@ impl Integrator {
         let (h, gamma, beta) = (self.h, self.gamma, self.beta);
         let (a0, a1) = (1.0 / (beta * h * h), gamma / (beta * h));
         self.step_setup::<N>(ws, sub);
-        let it = self.newton::<N>(ws, a1)?;
+        let it = self.newton::<N, REC>(ws, a1)?;
         let (u, v, a) = (&mut ws.u[..n], &mut ws.v[..n], &mut ws.a[..n]);
         for i in 0..n {
             let un = ws.un[i];
@@ -443,7 +445,9 @@ impl Integrator {
     }
 
     /// Newton iterations on ws.un; Ok(iterations) or Err((iterations, residual)).
-    fn newton<const N: usize>(
+    /// With `REC`, `ws.iterated` says whether a Newton step was taken and
+    /// `ws.dir_slopes` holds the slopes of the last step's matrix.
+    fn newton<const N: usize, const REC: bool>(
         &self,
         ws: &mut Work,
         a1: f64,
@@ -459,11 +463,18 @@ impl Integrator {
         }
         let (mut rn, mut scale) = self.residual::<N>(ws, a1);
         let mut it = 0;
+        if REC {
+            ws.iterated = false;
+        }
         while !(rn <= tol * scale || rn == 0.0) {
             if it >= self.settings.max_newton || !rn.is_finite() {
                 return Err((it, rn));
             }
             it += 1;
+            if REC {
+                ws.dir_slopes.copy_from_slice(&ws.slopes);
+                ws.iterated = true;
+            }
             if !self.newton_direction::<N>(ws, a1) {
                 return Err((it, rn));
             }
@@ -598,6 +609,10 @@ struct Work {
     jac_factored: bool,
     jac_slopes: Vec<f64>,
     slopes: Vec<f64>,
+    /// Slopes of the last Newton step's matrix and whether a step was
+    /// taken in the current sub-step (recorded for the sensitivities only).
+    dir_slopes: Vec<f64>,
+    iterated: bool,
 }
 
 impl Work {
@@ -624,6 +639,8 @@ impl Work {
             jac_factored: false,
             jac_slopes: vec![0.0; n_elements],
             slopes: vec![0.0; n_elements],
+            dir_slopes: vec![0.0; n_elements],
+            iterated: false,
         }
     }
 }

@@ -252,10 +252,30 @@ impl Element {
         v: &[f64],
         f: &mut [f64],
     ) -> bool {
+        self.add_param_derivative_on(q, s, u, v, None, f)
+    }
+
+    /// [`Element::add_param_derivative`] with a contact's side of the
+    /// switch given: `Some(true)` uses the closed law `k_c p` (its
+    /// penetration `p` extended linearly, even if ≤ 0), `Some(false)` the
+    /// open one (0); `None` takes the side from the sign of `p`. Ignored by
+    /// the other elements. (A Newton iterate computed with one side's
+    /// matrix may be accepted just across the switch; its derivative is
+    /// that side's.)
+    #[inline]
+    pub fn add_param_derivative_on(
+        &self,
+        q: ElementParam,
+        s: f64,
+        u: &[f64],
+        v: &[f64],
+        closed: Option<bool>,
+        f: &mut [f64],
+    ) -> bool {
         match (*self, q) {
             (Element::Contact { i, j, gap, k }, ElementParam::Gap | ElementParam::Stiffness) => {
                 let p = rel(u, i, j) - gap;
-                if p > 0.0 {
+                if closed.unwrap_or(p > 0.0) {
                     let d = if q == ElementParam::Gap { -k } else { p };
                     scatter(f, i, j, s * d);
                 }

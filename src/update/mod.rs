@@ -134,7 +134,7 @@ pub struct FitResult {
     /// Jacobians computed (optimizer and identifiability report).
     pub jacobians: usize,
     /// Of `simulations`, those run with forward sensitivities (each costs
-    /// about 1.3–2× a plain simulation for two parameters; see
+    /// about 1.8–2.3× a plain simulation for two parameters; see
     /// docs/updating.md).
     pub sensitivity_simulations: usize,
     /// Sensitivity Jacobians that failed and were replaced by finite
