@@ -143,6 +143,14 @@ impl SampledModel {
         (omega, if mref > 0.0 { mref } else { 1.0 })
     }
 
+    /// Diagonal state scaling to velocity units, `[1/ω …; 1 …]` (2n) with ω
+    /// from [`SampledModel::reference_scales`]: scaled states `x_i / d_i`.
+    pub fn state_scale(&self) -> DVector<f64> {
+        let (omega, _) = self.reference_scales();
+        let n = self.n;
+        DVector::from_fn(2 * n, |i, _| if i < n { 1.0 / omega } else { 1.0 })
+    }
+
     /// Output rows for measured channels `(quantity, dof0)`:
     /// `y_k = C_y x_k + D_y f_k` (p × 2n and p × n).
     pub fn outputs(&self, channels: &[(Quantity, usize)]) -> Result<(DMatrix<f64>, DMatrix<f64>)> {

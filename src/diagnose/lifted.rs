@@ -356,7 +356,7 @@ impl Scaled {
         let wsqrt = channel_weights(measured, s.noise_fraction)?;
         // reference frequency and mass (as the horizon smoother)
         let (omega, mref) = sm.reference_scales();
-        let dx = DVector::from_fn(nx, |i, _| if i < n { 1.0 / omega } else { 1.0 });
+        let dx = sm.state_scale();
         let df = mref * omega;
         let a = DMatrix::from_fn(nx, nx, |i, j| lm.a[(i, j)] * dx[j] / dx[i]);
         let mut g = DMatrix::zeros(nx, nu);

@@ -690,22 +690,14 @@ pub fn diagnose(
         // cannot see it; the fit decides whether it pays
         let companion = || {
             let dirs = located.as_ref().filter(|d| d.ncols() > 0)?;
-            let nonlinear_added = added.iter().any(|a| {
-                !matches!(
-                    a.0.candidate.kind,
-                    EffectKind::Stiffness | EffectKind::GroundSpring | EffectKind::Damping
-                )
-            });
-            if !nonlinear_added {
+            if added.iter().all(|a| a.0.candidate.kind.linear_in_state()) {
                 return None;
             }
+            // (a damping change acts along no single direction)
             tr.ranking
                 .iter()
                 .find(|e| {
-                    matches!(
-                        e.candidate.kind,
-                        EffectKind::Stiffness | EffectKind::GroundSpring
-                    ) && trace::acts_along(&e.candidate, dirs)
+                    e.candidate.kind.linear_in_state() && trace::acts_along(&e.candidate, dirs)
                 })
                 .cloned()
         };

@@ -17,8 +17,9 @@
 //! solution: one simulation of every segment per iteration, with 2n seeds),
 //! and the iterations go on; a step that does not lower `J_s` is halved, up
 //! to four times, else the segment keeps its state. `J⁺` is the
-//! pseudo-inverse in states scaled to a common unit (displacements × ω),
-//! singular values below 1e-8 of the largest dropped: directions the outputs never see (a free-free model's
+//! pseudo-inverse in states scaled to a common unit (displacements × ω,
+//! [`SampledModel::state_scale`]), singular values below 1e-8 of the
+//! largest dropped: directions the outputs never see (a free-free model's
 //! rigid-body displacement under acceleration data) keep the reconstructed
 //! value. Every model — the declared one before, the fitted one after — is
 //! scored the same way.
@@ -51,12 +52,6 @@ pub struct StartFit {
     pub note: String,
 }
 
-/// State scaling to a common unit: displacements × ω (velocity units).
-fn state_scale(sm: &SampledModel) -> DVector<f64> {
-    let (omega, _) = sm.reference_scales();
-    DVector::from_fn(2 * sm.n, |i, _| if i < sm.n { 1.0 / omega } else { 1.0 })
-}
-
 /// Pseudo-inverses of the start-state Jacobian of the linear part, one per
 /// segment length (in unscaled states; singular values below 1e-8 of the
 /// largest, in scaled states, dropped).
@@ -80,7 +75,7 @@ impl Jacobians {
             a: sm.a.clone(),
             cy,
             w: cmp.observations.iter().map(|o| o.weight).collect(),
-            scale: state_scale(sm),
+            scale: sm.state_scale(),
             pinv: BTreeMap::new(),
         })
     }
@@ -310,7 +305,7 @@ pub fn refine(
     } else {
         Jacobians::new(&sm, cmp)
     };
-    let scale = state_scale(&sm);
+    let scale = sm.state_scale();
     let iterations = if exact.is_some() {
         iterations.min(1)
     } else {

@@ -23,6 +23,15 @@ pub enum EffectKind {
 }
 
 impl EffectKind {
+    /// The internal force is linear in the state (a stiffness change, a
+    /// spring to ground, a damping change).
+    pub fn linear_in_state(self) -> bool {
+        matches!(
+            self,
+            EffectKind::Stiffness | EffectKind::GroundSpring | EffectKind::Damping
+        )
+    }
+
     /// Name as in reports.
     pub fn name(self) -> &'static str {
         match self {

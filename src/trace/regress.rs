@@ -119,8 +119,7 @@ pub struct TraceResult {
 /// acts on the absolute displacement the data do not fix.
 pub fn hidden_trajectories(sm: &SampledModel, cy: &DMatrix<f64>, ns: usize) -> Vec<DMatrix<f64>> {
     let n = sm.n;
-    let (omega, _) = sm.reference_scales();
-    let d = DVector::from_fn(2 * n, |i, _| if i < n { 1.0 / omega } else { 1.0 });
+    let d = sm.state_scale();
     let a_s = DMatrix::from_fn(2 * n, 2 * n, |r, c| sm.a[(r, c)] * d[c] / d[r]);
     let h_s = DMatrix::from_fn(cy.nrows(), 2 * n, |r, c| cy[(r, c)] * d[c]);
     let null = crate::linear::unobservable(&a_s, &h_s);
@@ -261,6 +260,14 @@ struct Selection {
     npar: usize,
 }
 
+/// `t ← t − Σ (q·t) q` over the orthonormal vectors `qs`.
+fn project_out(t: &mut DVector<f64>, qs: &[DVector<f64>]) {
+    for q in qs {
+        let c = q.dot(t);
+        t.axpy(-c, q, 1.0);
+    }
+}
+
 /// A block of columns fitted to the residual on top of the selection.
 struct Fit {
     /// RSS after adding the block.
@@ -282,22 +289,16 @@ impl Selection {
             .iter()
             .map(|s| {
                 let mut t = s.clone();
-                for q in &self.q {
-                    let c = q.dot(&t);
-                    t.axpy(-c, q, 1.0);
-                }
+                project_out(&mut t, &self.q);
                 t
             })
             .collect();
         let mut qs: Vec<DVector<f64>> = vec![];
         for (t, s) in proj.iter().zip(cols) {
             let mut t = t.clone();
-            for _ in 0..2 {
-                for q in &qs {
-                    let c = q.dot(&t);
-                    t.axpy(-c, q, 1.0);
-                }
-            }
+            // twice: Gram–Schmidt loses orthogonality on near-dependent columns
+            project_out(&mut t, &qs);
+            project_out(&mut t, &qs);
             let nn = t.norm();
             if !(nn > 1e-10 * s.norm()) {
                 return None;
@@ -449,10 +450,7 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
             );
             break;
         }
-        for q in &best.qs {
-            let c = q.dot(&r);
-            r.axpy(-c, q, 1.0);
-        }
+        project_out(&mut r, &best.qs);
         sel.npar += best.effect.candidate.nparams() + best.cols.len() - 1;
         sel.q.extend(best.qs);
         sel.blocks.push(best.cols);
@@ -571,14 +569,6 @@ struct Eval {
     hidden: Vec<f64>,
 }
 
-/// Force linear in the state (so the hidden trajectories enter linearly).
-fn linear_in_state(kind: EffectKind) -> bool {
-    matches!(
-        kind,
-        EffectKind::Stiffness | EffectKind::GroundSpring | EffectKind::Damping
-    )
-}
-
 /// Weighted stacked response column of a candidate at unit strength on the
 /// node states `hires` (internal force on the left-hand side → minus on
 /// the right).
@@ -608,7 +598,7 @@ fn evaluate(
     let col = column(cand, ctx, ctx.hires);
     let mut cols = vec![col];
     let mut used = vec![];
-    if linear_in_state(cand.kind) {
+    if cand.kind.linear_in_state() {
         for (j, e) in ctx.hidden.iter().enumerate() {
             *sims += 1;
             let c = column(cand, ctx, e);
