@@ -280,6 +280,74 @@ pub fn refine(
     segments: &[Segment],
     iterations: usize,
 ) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
+    let (mut segs, mut y, mut fit) = refine_local(cmp, model, sim, segments, iterations, true);
+    if !model.is_nonlinear() || iterations == 0 {
+        return (segs, y, fit);
+    }
+    // segments left far above the others: run in again from where the
+    // (now refined) segment before ends, then refine those alone
+    let mut res: Vec<Option<(DVector<f64>, f64)>> =
+        segs.iter().map(|s| residual(cmp, s, &y)).collect();
+    let mut tried = vec![false; segs.len()];
+    for _ in 0..RUN_IN_PASSES {
+        let costs: Vec<f64> = res
+            .iter()
+            .map(|r| r.as_ref().map_or(f64::INFINITY, |r| r.1))
+            .collect();
+        let mut sorted = costs.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        let picks: Vec<usize> = (1..segs.len())
+            .filter(|&i| {
+                !tried[i]
+                    && costs[i] > OUTLIER * median
+                    && segs[i - 1].start + segs[i - 1].len == segs[i].start
+            })
+            .collect();
+        if picks.is_empty() {
+            break;
+        }
+        let preds: Vec<(usize, Segment)> = picks
+            .iter()
+            .map(|&i| {
+                tried[i] = true;
+                (i, segs[i - 1].clone())
+            })
+            .collect();
+        let (changed, n) = run_in_refined(cmp, model, sim, &mut segs, &preds, iterations);
+        fit.simulations += n;
+        fit.continued += changed.len();
+        if changed.is_empty() {
+            break;
+        }
+        let moved: Vec<Segment> = changed.iter().map(|&i| segs[i].clone()).collect();
+        let yt = predict_each(cmp, model, &moved, sim, &mut fit.simulations);
+        for (&i, s) in changed.iter().zip(&moved) {
+            copy_segment(&mut y, &yt, s);
+            res[i] = residual(cmp, s, &y);
+        }
+    }
+    fit.cost.1 = res.iter().flatten().map(|r| r.1).sum();
+    (segs, y, fit)
+}
+
+/// A segment whose cost exceeds this multiple of the median is taken to
+/// be started in a wrong basin.
+pub const OUTLIER: f64 = 8.0;
+
+/// Run-in passes over such segments in [`refine`].
+const RUN_IN_PASSES: usize = 2;
+
+/// [`refine`] without the run-in passes (and without continuity starts
+/// when `continue_from` is false).
+fn refine_local(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    segments: &[Segment],
+    iterations: usize,
+    continue_from: bool,
+) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
     let mut sims = 0;
     let mut segs = segments.to_vec();
     let mut y = predict_each(cmp, model, &segs, sim, &mut sims);
@@ -320,7 +388,7 @@ pub fn refine(
         // start instead from where the previous one ends (continuity),
         // when that predicts it better (a refinement stuck in a local
         // minimum; CONTEXT fact 6)
-        if exact.is_none() && it == 1 {
+        if continue_from && exact.is_none() && it == 1 {
             continued = continuity(cmp, model, sim, &mut segs, &mut y, &mut res, &mut sims);
         }
         // steps
@@ -384,4 +452,86 @@ pub fn refine(
         note: String::new(),
     };
     (segs, y, fit)
+}
+
+/// Run-in starts for chosen segments, given as `(index in segs, the
+/// segment just before it)` with the predecessor's reconstructed start
+/// state: the predecessors are refined for `model` ([`refine`]) and
+/// simulated one sample past their end; the state there, refined in turn,
+/// replaces the segment's start when it predicts the segment better (a
+/// start state stuck in a wrong basin — the wrong side of an impact — that
+/// the local refinement cannot leave; CONTEXT fact 6). Returns the indices
+/// changed and the simulations run.
+pub fn run_in(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    segs: &mut [Segment],
+    picks: &[(usize, Segment)],
+    iterations: usize,
+) -> (Vec<usize>, usize) {
+    let mut sims = 0;
+    let preds: Vec<Segment> = picks.iter().map(|p| p.1.clone()).collect();
+    let (preds, _, f) = refine_local(cmp, model, sim, &preds, iterations, false);
+    sims += f.simulations;
+    let picks: Vec<(usize, Segment)> = picks.iter().map(|p| p.0).zip(preds).collect();
+    let (changed, n) = run_in_refined(cmp, model, sim, segs, &picks, iterations);
+    (changed, sims + n)
+}
+
+/// [`run_in`] from predecessors already refined.
+fn run_in_refined(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    segs: &mut [Segment],
+    picks: &[(usize, Segment)],
+    iterations: usize,
+) -> (Vec<usize>, usize) {
+    let Ok(integ) = Integrator::new(model, cmp.fs, sim) else {
+        return (vec![], 0);
+    };
+    let n = model.ndof();
+    let mut sims = picks.len();
+    let cands: Vec<Option<(usize, Segment)>> = picks
+        .par_iter()
+        .map(|(i, p)| {
+            let i = *i;
+            let s = &segs[i];
+            if p.start + p.len != s.start {
+                return None;
+            }
+            let run = integ.run(cmp.force.columns(p.start, p.len + 1), &p.u0, &p.v0);
+            if !run.completed() || run.len() != p.len + 1 {
+                return None;
+            }
+            Some((
+                i,
+                Segment {
+                    start: s.start,
+                    len: s.len,
+                    u0: (0..n).map(|q| run.u[(q, p.len)]).collect(),
+                    v0: (0..n).map(|q| run.v[(q, p.len)]).collect(),
+                },
+            ))
+        })
+        .collect();
+    let cands: Vec<(usize, Segment)> = cands.into_iter().flatten().collect();
+    if cands.is_empty() {
+        return (vec![], sims);
+    }
+    let old: Vec<Segment> = cands.iter().map(|c| segs[c.0].clone()).collect();
+    let y_old = predict_each(cmp, model, &old, sim, &mut sims);
+    let trial: Vec<Segment> = cands.iter().map(|c| c.1.clone()).collect();
+    let (trial, y_new, f) = refine_local(cmp, model, sim, &trial, iterations, false);
+    sims += f.simulations;
+    let mut changed = vec![];
+    for ((i, _), (o, t)) in cands.iter().zip(old.iter().zip(&trial)) {
+        let before = residual(cmp, o, &y_old).map_or(f64::INFINITY, |r| r.1);
+        if residual(cmp, t, &y_new).is_some_and(|r| r.1 < before) {
+            segs[*i] = t.clone();
+            changed.push(*i);
+        }
+    }
+    (changed, sims)
 }

@@ -1,0 +1,507 @@
+//! Effect parameters and segment start states fitted together.
+//!
+//! The multiple-shooting cost of a fit depends on the parameters `x` and on
+//! the start state `s_i` of every segment:
+//!
+//! $$ J(x, s) = \sum_i \lVert r_i(x, s_i) \rVert^2, \qquad
+//!    r_i = W (y_i - \hat y_i(x, s_i)). $$
+//!
+//! Fitting `x` with the states fixed and then the states with `x` fixed, in
+//! turn, creeps along the valley where the two trade (a contact's gap
+//! against where the segment starts); so both are stepped at once, with
+//! Levenberg–Marquardt on the whole vector. One simulation of every segment
+//! with forward sensitivities ([`Integrator::run_sensitivities`], `2n`
+//! state seeds and one seed per parameter) gives `r_i`, `J_s,i = ∂r_i/∂s_i`
+//! and `J_p,i = ∂r_i/∂x`. The normal equations are block-arrow shaped: the
+//! states of a segment couple only to themselves and to `x`. With Marquardt
+//! damping `λ diag(·)` on every block, each segment's block
+//! `A_i = J_sᵀJ_s + λ D_i` is eliminated (Schur complement):
+//!
+//! $$ \Big(\sum_i J_pᵀJ_p - B_iᵀ A_i^{-1} B_i + λ D_p\Big) δx
+//!    = \sum_i J_pᵀ r_i - B_iᵀ A_i^{-1} J_sᵀ r_i, \qquad
+//!    δs_i = A_i^{-1}(J_sᵀ r_i - B_i δx), $$
+//!
+//! with `B_i = J_sᵀ J_p`: the cost of a step is a `2n × 2n` Cholesky per
+//! segment and one `n_p × n_p` solve. States are scaled to a common unit
+//! ([`crate::linear::SampledModel::state_scale`]) and `D_i` is floored at
+//! `1e-10` of its largest entry, so directions the outputs never see (a
+//! free-free model's rigid-body position under acceleration data) take no
+//! step. A step is accepted when the cost falls (λ ÷ 3), else λ × 4 and the
+//! step is recomputed; the fit stops when an accepted step with light
+//! damping (λ ≤ 0.01 after it) lowers the cost by less than the relative
+//! `f_tol` (at least 1e-4), when λ exceeds 1e6 (stalled: the cost
+//! is rough at the sub-step scale), or at the iteration limit.
+
+use crate::integrate::{Integrator, Seeds};
+use crate::record::Quantity;
+use crate::update::optimize::FitSettings;
+use crate::update::{Problem, Segment};
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+
+/// How a joint fit ended.
+#[derive(Debug, Clone)]
+pub struct JointFit {
+    /// Scaled parameters at the end.
+    pub x: Vec<f64>,
+    /// Segments with their fitted start states.
+    pub segments: Vec<Segment>,
+    /// Cost of each segment at the end.
+    pub segment_costs: Vec<f64>,
+    /// Cost at the start and at the end.
+    pub cost: (f64, f64),
+    /// Accepted steps.
+    pub iterations: usize,
+    /// Segment simulations run (with or without sensitivities).
+    pub simulations: usize,
+    /// Why it stopped.
+    pub termination: String,
+}
+
+/// One segment linearized: residual, state and parameter Jacobians
+/// (states scaled).
+struct Lin {
+    r: DVector<f64>,
+    js: DMatrix<f64>,
+    jp: DMatrix<f64>,
+}
+
+/// Weighted residual of every segment at `x` with `segs`; `None` when a
+/// simulation fails.
+fn residuals(problem: &Problem, x: &[f64], segs: &[Segment]) -> Option<Vec<DVector<f64>>> {
+    let model = problem.model_at(x);
+    let integ = Integrator::new(&model, problem.fs, problem.sim).ok()?;
+    let out: Vec<Option<DVector<f64>>> = segs
+        .par_iter()
+        .map(|s| {
+            let run = integ.run(problem.force.columns(s.start, s.len), &s.u0, &s.v0);
+            if !run.completed() {
+                return None;
+            }
+            let p = problem.observations.len();
+            let mut r = DVector::zeros(s.len * p);
+            for (c, o) in problem.observations.iter().enumerate() {
+                let src = match o.quantity {
+                    Quantity::Disp => &run.u,
+                    Quantity::Vel => &run.v,
+                    _ => &run.a,
+                };
+                for k in 0..s.len {
+                    r[k * p + c] = o.weight * (o.data[s.start + k] - src[(o.dof - 1, k)]);
+                }
+            }
+            r.iter().all(|v| v.is_finite()).then_some(r)
+        })
+        .collect();
+    out.into_iter().collect()
+}
+
+/// Residuals and Jacobians of every segment at `x` (`None` when a
+/// simulation or its derivatives fail).
+fn linearize(
+    problem: &Problem,
+    x: &[f64],
+    segs: &[Segment],
+    scale: &DVector<f64>,
+) -> Option<Vec<Lin>> {
+    let model = problem.model_at(x);
+    let n = model.ndof();
+    let integ = Integrator::new(&model, problem.fs, problem.sim).ok()?;
+    let params = crate::update::sensitivity::param_seeds(&model, &problem.parameters).ok()?;
+    let np = params.len();
+    let seeds = Seeds {
+        state: DMatrix::identity(2 * n, 2 * n),
+        params,
+    };
+    let out: Vec<Option<Lin>> = segs
+        .par_iter()
+        .map(|s| {
+            let force = problem.force.columns(s.start, s.len);
+            let (run, d) = integ.run_sensitivities(force, &s.u0, &s.v0, &seeds).ok()?;
+            if !run.completed() || d.singular_tangent.is_some() {
+                return None;
+            }
+            let p = problem.observations.len();
+            let m = s.len * p;
+            let mut r = DVector::zeros(m);
+            let mut js = DMatrix::zeros(m, 2 * n);
+            let mut jp = DMatrix::zeros(m, np);
+            for (c, o) in problem.observations.iter().enumerate() {
+                let q = o.dof - 1;
+                let pick = |u: &DMatrix<f64>, v: &DMatrix<f64>, a: &DMatrix<f64>, k: usize| match o
+                    .quantity
+                {
+                    Quantity::Disp => u[(q, k)],
+                    Quantity::Vel => v[(q, k)],
+                    _ => a[(q, k)],
+                };
+                for k in 0..s.len {
+                    let row = k * p + c;
+                    r[row] = o.weight * (o.data[s.start + k] - pick(&run.u, &run.v, &run.a, k));
+                    // ∂r/∂θ = −w ∂ŷ/∂θ
+                    for j in 0..2 * n {
+                        js[(row, j)] = -o.weight * pick(&d.du[j], &d.dv[j], &d.da[j], k) * scale[j];
+                    }
+                    for j in 0..np {
+                        let t = 2 * n + j;
+                        jp[(row, j)] = -o.weight * pick(&d.du[t], &d.dv[t], &d.da[t], k);
+                    }
+                }
+            }
+            let finite = r
+                .iter()
+                .chain(js.iter())
+                .chain(jp.iter())
+                .all(|v| v.is_finite());
+            finite.then_some(Lin { r, js, jp })
+        })
+        .collect();
+    out.into_iter().collect()
+}
+
+/// `JᵀJ` with Marquardt damping `λ D`, `D` its diagonal floored at 1e-10
+/// of the largest entry (directions the outputs never see get the floor
+/// itself, so they take no step).
+fn damped_gram(j: &DMatrix<f64>, lambda: f64) -> DMatrix<f64> {
+    let mut a = j.tr_mul(j);
+    let dmax = a.diagonal().max().max(f64::MIN_POSITIVE);
+    for k in 0..a.nrows() {
+        let akk = a[(k, k)];
+        let d = akk.max(1e-10 * dmax);
+        a[(k, k)] = d + lambda * d;
+    }
+    a
+}
+
+/// Per segment, the eliminated block: `A⁻¹B` and `A⁻¹ J_sᵀ r`.
+struct Eliminated {
+    x: DMatrix<f64>,
+    z: DVector<f64>,
+}
+
+/// The damped step `(δx, δs_i)` at `λ` (states scaled), or `None` when a
+/// block cannot be factored.
+fn step(lins: &[Lin], lambda: f64) -> Option<(DVector<f64>, Vec<DVector<f64>>)> {
+    let np = lins.first()?.jp.ncols();
+    let mut s = DMatrix::<f64>::zeros(np, np);
+    let mut h = DVector::<f64>::zeros(np);
+    let mut elim = Vec::with_capacity(lins.len());
+    for l in lins {
+        let a = damped_gram(&l.js, lambda);
+        let b = l.js.tr_mul(&l.jp);
+        // the Gauss–Newton direction: r(θ + δ) ≈ r + J δ, so JᵀJ δ = −Jᵀ r
+        let gs = -l.js.tr_mul(&l.r);
+        let gp = -l.jp.tr_mul(&l.r);
+        let ch = a.cholesky()?;
+        let x = ch.solve(&b);
+        let z = ch.solve(&gs);
+        s += l.jp.tr_mul(&l.jp) - b.tr_mul(&x);
+        h += gp - b.tr_mul(&z);
+        elim.push(Eliminated { x, z });
+    }
+    let smax = s.diagonal().max().max(f64::MIN_POSITIVE);
+    for j in 0..np {
+        let d = s[(j, j)].max(1e-12 * smax);
+        s[(j, j)] += lambda * d + 1e-14 * smax;
+    }
+    let dx = s.cholesky()?.solve(&h);
+    let ds = elim.iter().map(|e| &e.z - &e.x * &dx).collect();
+    Some((dx, ds))
+}
+
+/// Fit `problem`'s parameters (from `x0`) and its segments' start states
+/// together (module docs). Full-order GLS problems only.
+pub fn fit(
+    problem: &Problem,
+    x0: &[f64],
+    scale: &DVector<f64>,
+    settings: &FitSettings,
+) -> Option<JointFit> {
+    if problem.reduction.is_some() || problem.parameters.len() != x0.len() {
+        return None;
+    }
+    let n = problem.model.ndof();
+    let (lo, hi) = problem.x_bounds();
+    let nseg = problem.segments.len();
+    let cost_of = |r: &[DVector<f64>]| r.iter().map(|v| v.norm_squared()).sum::<f64>();
+    let mut x = x0.to_vec();
+    let mut segs = problem.segments.clone();
+    let mut sims = nseg;
+    let mut cost = cost_of(&residuals(problem, &x, &segs)?);
+    let cost0 = cost;
+    let mut lambda = settings.lm_lambda.max(1e-6);
+    let mut iterations = 0;
+    let mut termination = "iteration limit".to_string();
+    'outer: while iterations < settings.max_iterations {
+        sims += nseg;
+        let Some(lins) = linearize(problem, &x, &segs, scale) else {
+            termination = "a simulation or its derivatives failed at the current point".into();
+            break;
+        };
+        loop {
+            if lambda > 1e6 {
+                termination =
+                    "stalled: steps vanish (the cost is rough at this scale or the derivatives unreliable)".into();
+                break 'outer;
+            }
+            let Some((dx, ds)) = step(&lins, lambda) else {
+                lambda *= 4.0;
+                continue;
+            };
+            let xt: Vec<f64> = (0..x.len())
+                .map(|j| (x[j] + dx[j]).clamp(lo[j], hi[j]))
+                .collect();
+            let st: Vec<Segment> = segs
+                .iter()
+                .zip(&ds)
+                .map(|(s, d)| Segment {
+                    start: s.start,
+                    len: s.len,
+                    u0: (0..n).map(|q| s.u0[q] + d[q] * scale[q]).collect(),
+                    v0: (0..n).map(|q| s.v0[q] + d[n + q] * scale[n + q]).collect(),
+                })
+                .collect();
+            sims += nseg;
+            let ct = residuals(problem, &xt, &st).map(|r| cost_of(&r));
+            match ct {
+                Some(c) if c < cost => {
+                    let gain = 1.0 - c / cost;
+                    x = xt;
+                    segs = st;
+                    cost = c;
+                    iterations += 1;
+                    lambda = (lambda / 3.0).max(1e-9);
+                    // a small gain under heavy damping is a short step,
+                    // not a minimum
+                    if gain < settings.f_tol.max(1e-4) && lambda <= 1e-2 {
+                        termination = "converged (cost)".into();
+                        break 'outer;
+                    }
+                    continue 'outer;
+                }
+                _ => lambda *= 4.0,
+            }
+        }
+    }
+    sims += nseg;
+    let segment_costs = residuals(problem, &x, &segs)?
+        .iter()
+        .map(|r| r.norm_squared())
+        .collect();
+    Some(JointFit {
+        segment_costs,
+        x,
+        segments: segs,
+        cost: (cost0, cost),
+        iterations,
+        simulations: sims,
+        termination,
+    })
+}
+
+/// How much of the cost the last `extra` parameters of `problem` are
+/// predicted to remove, at `x` with the segments' start states free: the
+/// Gauss–Newton predicted cost `Σ‖r_i + J_s δs_i + J_p δx‖²` (lightly
+/// damped) with all parameters, against the same with the last `extra`
+/// held, as a fraction of the cost now. Also returns the predicted step
+/// of the parameters. One simulation with sensitivities per segment.
+pub fn predicted_gain(
+    problem: &Problem,
+    x: &[f64],
+    scale: &DVector<f64>,
+    extra: usize,
+) -> Option<(f64, Vec<f64>, usize)> {
+    let np = problem.parameters.len();
+    if problem.reduction.is_some() || np != x.len() || extra == 0 || extra > np {
+        return None;
+    }
+    let lins = linearize(problem, x, &problem.segments, scale)?;
+    let sims = lins.len();
+    let cost: f64 = lins.iter().map(|l| l.r.norm_squared()).sum();
+    let predicted = |lins: &[Lin]| -> Option<(f64, DVector<f64>)> {
+        let (dx, ds) = step(lins, 1e-3)?;
+        let c = lins
+            .iter()
+            .zip(&ds)
+            .map(|(l, d)| (&l.r + &l.js * d + &l.jp * &dx).norm_squared())
+            .sum();
+        Some((c, dx))
+    };
+    let (with, dx) = predicted(&lins)?;
+    let held: Vec<Lin> = lins
+        .into_iter()
+        .map(|l| Lin {
+            jp: l.jp.columns(0, np - extra).into_owned(),
+            ..l
+        })
+        .collect();
+    let without = if np > extra {
+        predicted(&held)?.0
+    } else {
+        let (_, ds) = step_states(&held)?;
+        held.iter()
+            .zip(&ds)
+            .map(|(l, d)| (&l.r + &l.js * d).norm_squared())
+            .sum()
+    };
+    let gain = if cost > 0.0 {
+        ((without - with) / cost).max(0.0)
+    } else {
+        0.0
+    };
+    Some((gain, dx.iter().copied().collect(), sims))
+}
+
+/// States-only steps (no parameter), lightly damped.
+fn step_states(lins: &[Lin]) -> Option<((), Vec<DVector<f64>>)> {
+    let ds = lins
+        .iter()
+        .map(|l| {
+            damped_gram(&l.js, 1e-3)
+                .cholesky()
+                .map(|c| c.solve(&-l.js.tr_mul(&l.r)))
+        })
+        .collect::<Option<Vec<_>>>()?;
+    Some(((), ds))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrate::SimSettings;
+    use crate::model::Model;
+    use crate::update::{Metric, Observation, Parameter, Target};
+
+    /// Two masses, a spring to ground, a spring between them and a cubic
+    /// spring from mass 2 to ground; accelerations at both.
+    fn truth() -> Model {
+        Model::from_toml_str(
+            "masses = [1.0, 0.8]\n[[spring]]\ndofs = [1]\nstiffness = 2000.0\n[[spring]]\ndofs = [1, 2]\nstiffness = 1500.0\n[damping]\nkind = \"modal\"\nratio = 0.02\n[[cubic]]\ndofs = [2]\nk3 = 4.0e8\n",
+            "two",
+        )
+        .unwrap()
+    }
+
+    /// A record of `model` under a multi-sine on mass 1, cut into ten
+    /// 40-sample segments with their true start states, as a problem on
+    /// `start` with no parameter.
+    fn problem(model: &Model, start: &Model) -> Problem {
+        let (fs, ns) = (200.0, 400);
+        let force = DMatrix::from_fn(2, ns, |i, k| {
+            let t = k as f64 / fs;
+            if i == 0 {
+                30.0 * ((2.0 * 3.0 * t).sin() + 0.7 * (2.0 * 7.3 * t + 1.0).sin())
+            } else {
+                0.0
+            }
+        });
+        let sim = SimSettings::default();
+        let run = Integrator::new(model, fs, sim).unwrap().run(
+            force.columns(0, ns),
+            &[0.0; 2],
+            &[0.0; 2],
+        );
+        assert!(run.completed());
+        let observations = (0..2)
+            .map(|d| {
+                let data: Vec<f64> = run.a.row(d).iter().copied().collect();
+                let norm = data.iter().map(|v| v * v).sum::<f64>().sqrt();
+                Observation {
+                    quantity: Quantity::Accel,
+                    dof: d + 1,
+                    weight: 1.0 / norm,
+                    data,
+                }
+            })
+            .collect();
+        let segments = (0..10)
+            .map(|i| Segment {
+                start: 40 * i,
+                len: 40,
+                u0: (0..2).map(|d| run.u[(d, 40 * i)]).collect(),
+                v0: (0..2).map(|d| run.v[(d, 40 * i)]).collect(),
+            })
+            .collect();
+        Problem {
+            model: start.clone(),
+            fs,
+            force,
+            observations,
+            parameters: vec![],
+            segments,
+            reduction: None,
+            metric: Metric::Gls,
+            alpha: 0.0,
+            sim,
+        }
+    }
+
+    fn scale(model: &Model) -> DVector<f64> {
+        crate::linear::SampledModel::from_model(&model.linear_part(), 200.0, 10)
+            .unwrap()
+            .state_scale()
+    }
+
+    /// k3 started 40 % low and every start state off by 10 % of its size:
+    /// the joint fit recovers both (noise-free record).
+    #[test]
+    fn recovers_a_parameter_and_the_start_states_together() {
+        let t = truth();
+        let mut start = t.clone();
+        start.cubics[0].k3 *= 0.6;
+        let mut p = problem(&t, &start);
+        let exact = p.segments.clone();
+        for (i, s) in p.segments.iter_mut().enumerate() {
+            let f = if i % 2 == 0 { 1.1 } else { 0.9 };
+            s.u0.iter_mut().for_each(|u| *u *= f);
+            s.v0.iter_mut().for_each(|v| *v *= 2.0 - f);
+        }
+        p.parameters = vec![Parameter::relative(&start, Target::CubicK3(0)).unwrap()];
+        let settings = FitSettings {
+            max_iterations: 40,
+            ..Default::default()
+        };
+        let fit = fit(&p, &[0.0], &scale(&t), &settings).unwrap();
+        let k3 = p.model_at(&fit.x).cubics[0].k3;
+        approx::assert_relative_eq!(k3, 4.0e8, max_relative = 1e-4);
+        assert!(fit.cost.1 < 1e-8 * fit.cost.0, "{:?}", fit.cost);
+        for (a, b) in fit.segments.iter().zip(&exact) {
+            for d in 0..2 {
+                approx::assert_relative_eq!(a.u0[d], b.u0[d], epsilon = 1e-7);
+                approx::assert_relative_eq!(a.v0[d], b.v0[d], epsilon = 1e-5);
+            }
+        }
+        assert_eq!(fit.segment_costs.len(), 10);
+    }
+
+    /// At a converged fit of k3 and the start states (as in the loop),
+    /// the predicted gain of a spring stiffness is large when that spring
+    /// is wrong and negligible when it is right.
+    #[test]
+    fn predicted_gain_tells_a_wrong_spring_from_a_right_one() {
+        let t = truth();
+        let gain = |model: &Model| {
+            let mut p = problem(&t, model);
+            p.parameters = vec![Parameter::relative(model, Target::CubicK3(0)).unwrap()];
+            let settings = FitSettings {
+                max_iterations: 40,
+                ..Default::default()
+            };
+            let f = fit(&p, &[0.0], &scale(model), &settings).unwrap();
+            p.segments = f.segments;
+            p.parameters
+                .push(Parameter::relative(model, Target::SpringStiffness(1)).unwrap());
+            predicted_gain(&p, &[f.x[0], 0.0], &scale(model), 1).unwrap()
+        };
+        let mut soft = t.clone();
+        soft.springs[1].stiffness *= 0.85;
+        let (g, dx, sims) = gain(&soft);
+        assert!(g > 0.5, "a 15 % softer spring: gain {g}");
+        assert!((dx[1] - 0.15 / 0.85).abs() < 0.03, "step {dx:?}");
+        assert_eq!(sims, 10);
+        let mut cubic = t.clone();
+        cubic.cubics[0].k3 *= 0.8;
+        let (g, _, _) = gain(&cubic);
+        assert!(g < 0.05, "a right spring: gain {g}");
+    }
+}
