@@ -869,7 +869,15 @@ pub fn diagnose(
     let t = Instant::now();
     let (after, pred_after) = cmp.errors(&current, sim1);
     sims += error_simulations(&after, cmp);
-    let effects = report_effects(&current, &added, cmp, sim1, settings, &mut sims);
+    let effects = report_effects(
+        &current,
+        &added,
+        cmp,
+        sim1,
+        current_segments.as_ref(),
+        settings,
+        &mut sims,
+    );
     timings.insert("errors_after".into(), t.elapsed().as_secs_f64());
     let t = Instant::now();
     let validation = match validation {
@@ -1337,13 +1345,17 @@ fn polish(
     }
 }
 
-/// Effect reports with fitted values and standard errors (from the
-/// Jacobian of the multiple-shooting residual at the fitted values).
+/// Effect reports with fitted values and standard errors: from the joint
+/// Jacobian of the fit's multiple-shooting residual in the parameters and
+/// start states when the fit's segments are given (the states as nuisance
+/// parameters), else from the parameter Jacobian with the reconstructed
+/// start states.
 fn report_effects(
     model: &Model,
     added: &[(AddedEffect, RankedEffect, Score)],
     cmp: &Comparison,
     sim: SimSettings,
+    fitted: Option<&(Vec<Segment>, SimSettings)>,
     settings: &DiagnoseSettings,
     sims: &mut usize,
 ) -> Vec<EffectReport> {
@@ -1359,18 +1371,45 @@ fn report_effects(
                 }
             }
         }
-        let mut problem = cmp.problem(model, spread(&cmp.segments, settings.fit_segments), sim);
-        problem.parameters = params;
-        let fs_ = FitSettings {
-            max_iterations: 1,
-            ..settings.fit
-        };
-        if let Ok(r) = crate::update::fit(&problem, &fs_) {
-            *sims += r.simulations;
-            if let Some(id) = &r.identifiability {
-                for (k, pid) in id.parameters.iter().enumerate() {
+        // with the fit's segments and start states: the start states are
+        // nuisance parameters of the same fit ([`joint::std_errors`])
+        let joint = fitted.and_then(|(segs, fsim)| {
+            let mut problem = cmp.problem(model, segs.clone(), *fsim);
+            problem.parameters = params.clone();
+            let sm = crate::linear::SampledModel::from_model(
+                &model.linear_part(),
+                cmp.fs,
+                fsim.substeps,
+            )
+            .ok()?;
+            *sims += segs.len();
+            let x = vec![0.0; problem.parameters.len()];
+            joint::std_errors(&problem, &x, &sm.state_scale(), settings.fit.noise_level)
+        });
+        match joint {
+            Some(sd) => {
+                for (k, v) in sd.into_iter().enumerate() {
                     if let Some(&o) = owner.get(k) {
-                        ses.insert(o, pid.std_value);
+                        ses.insert(o, v);
+                    }
+                }
+            }
+            None => {
+                let segs = spread(&cmp.segments, settings.fit_segments);
+                let mut problem = cmp.problem(model, segs, sim);
+                problem.parameters = params;
+                let fs_ = FitSettings {
+                    max_iterations: 1,
+                    ..settings.fit
+                };
+                if let Ok(r) = crate::update::fit(&problem, &fs_) {
+                    *sims += r.simulations;
+                    if let Some(id) = &r.identifiability {
+                        for (k, pid) in id.parameters.iter().enumerate() {
+                            if let Some(&o) = owner.get(k) {
+                                ses.insert(o, pid.std_value);
+                            }
+                        }
                     }
                 }
             }
