@@ -32,8 +32,9 @@ pub struct Args {
     /// from the stiffest element).
     #[arg(long, default_value_t = 10)]
     substeps: usize,
-    /// Jacobian of the effect fits: forward sensitivities of the integrator
-    /// or centered finite differences.
+    /// Jacobian of the effect fits' race of starts: forward sensitivities
+    /// of the integrator or centered finite differences (the joint fit of
+    /// parameters and start states always uses the sensitivities).
     #[arg(long, value_enum, default_value = "sens")]
     jacobian: tacit::update::JacobianMethod,
     /// Use the truth stored in a simulated record as the states (checks the
