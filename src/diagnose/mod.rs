@@ -1127,6 +1127,15 @@ fn fit_effects(
     if let Some(last) = all.last() {
         if last.candidate.kind == crate::trace::EffectKind::Contact {
             let ci = trial.contacts.len() - 1;
+            // the gap may lie anywhere below the largest reconstructed
+            // relative displacement (beyond it the contact never closes),
+            // not only within 3× the traced value: a traced gap from a
+            // few sensors can be a third of the truth
+            let dmax = (0..states.ncols())
+                .map(|k| last.candidate.delta(states, k))
+                .fold(0.0, f64::max);
+            let pg = &mut problem.parameters[np - 2];
+            pg.upper = pg.upper.max(1.2 * dmax);
             let (best, evals) =
                 scan_contact(trial, ci, &last.candidate, states, cmp, &segments, settings);
             sims += evals * segments.len();
