@@ -708,7 +708,25 @@ pub fn diagnose(
                 .cloned()
         };
         let screened = !tr.selected.is_empty();
-        let Some(best) = tr.selected.first().cloned().or_else(companion) else {
+        // below the screen, after a first effect: the companion, then the
+        // best remaining candidate that lowers the BIC (the screen's
+        // regression on the linear model's states can underrate a second
+        // effect), each screened by the gain the joint linearization at
+        // the current fit predicts for it
+        let mut pool: Vec<RankedEffect> = vec![];
+        match tr.selected.first() {
+            Some(s) => pool.push(s.clone()),
+            None => {
+                pool.extend(companion());
+                if !added.is_empty() {
+                    let next = tr.ranking.iter().find(|e| {
+                        e.bic_change < 0.0 && !pool.iter().any(|p| p.candidate == e.candidate)
+                    });
+                    pool.extend(next.cloned());
+                }
+            }
+        }
+        if pool.is_empty() {
             rounds.push(Round {
                 proposed: None,
                 kept: false,
@@ -717,12 +735,51 @@ pub fn diagnose(
                 simulations: 0,
             });
             break;
+        }
+        let mut chosen = None;
+        let mut screened_out = vec![];
+        let mut screen_sims = 0;
+        for best in pool {
+            let mut trial = current.clone();
+            let eff = effects::add(&mut trial, &best);
+            let mut all: Vec<AddedEffect> = added.iter().map(|a| a.0.clone()).collect();
+            all.push(eff.clone());
+            if !screened {
+                if let Some((segs, sim)) = current_segments.as_ref() {
+                    let t = Instant::now();
+                    let (g, n) = companion_gain(&trial, &all, cmp, segs, *sim, rec.fs);
+                    screen_sims += n;
+                    *timings.entry("fit".into()).or_insert(0.0) += t.elapsed().as_secs_f64();
+                    if g.is_some_and(|g| g < COMPANION_SCREEN) {
+                        screened_out.push(format!(
+                            "{} {:.1} %",
+                            best.label,
+                            100.0 * g.unwrap_or(f64::NAN)
+                        ));
+                        continue;
+                    }
+                }
+            }
+            chosen = Some((best, trial, eff, all));
+            break;
+        }
+        sims += screen_sims;
+        let Some((best, trial, eff, all)) = chosen else {
+            rounds.push(Round {
+                proposed: None,
+                kept: false,
+                note: format!(
+                    "not fitted: at the current fit, with the segment start states free, the candidates below the screen are predicted to remove {} of the fit cost (screen {:.0} %; below the screen: {})",
+                    screened_out.join(", "),
+                    100.0 * COMPANION_SCREEN,
+                    tr.stop_reason
+                ),
+                fit: None,
+                simulations: screen_sims,
+            });
+            break;
         };
         progress(&format!("fit {}", best.label));
-        let mut trial = current.clone();
-        let eff = effects::add(&mut trial, &best);
-        let mut all: Vec<AddedEffect> = added.iter().map(|a| a.0.clone()).collect();
-        all.push(eff.clone());
         // the effect's fit of the states along the hidden trajectories
         let correction = (!best.hidden.is_empty()).then(|| {
             let mut d = DMatrix::zeros(prep.recon.states.nrows(), prep.recon.states.ncols());
@@ -731,34 +788,6 @@ pub fn diagnose(
             }
             d
         });
-        // a companion is first screened by the gain the joint
-        // linearization at the current fit predicts for it (fitted from
-        // the fitted start states and the predicted step instead of the
-        // race, bumper + softer spring 5 ended worse: 15.5 % against
-        // 9.5 %, the contact's fitted states hold the basin it was in)
-        if !screened {
-            if let Some((segs, sim)) = current_segments.as_ref() {
-                let t = Instant::now();
-                let (g, n) = companion_gain(&trial, &all, cmp, segs, *sim, rec.fs);
-                sims += n;
-                *timings.entry("fit".into()).or_insert(0.0) += t.elapsed().as_secs_f64();
-                if g.is_some_and(|g| g < COMPANION_SCREEN) {
-                    rounds.push(Round {
-                        proposed: Some(best.label.clone()),
-                        kept: false,
-                        note: format!(
-                            "not fitted: at the current fit, with the segment start states free, it is predicted to remove {:.1} % of the fit cost (screen {:.0} %; below the screen: {}; a linear change along the located direction)",
-                            100.0 * g.unwrap_or(f64::NAN),
-                            100.0 * COMPANION_SCREEN,
-                            tr.stop_reason
-                        ),
-                        fit: None,
-                        simulations: n,
-                    });
-                    break;
-                }
-            }
-        }
         let t = Instant::now();
         let EffectFit {
             model: fitted,
@@ -816,9 +845,19 @@ pub fn diagnose(
         let why = if screened {
             String::new()
         } else {
+            let pre = if screened_out.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; predicted below {:.0} %: {}",
+                    100.0 * COMPANION_SCREEN,
+                    screened_out.join(", ")
+                )
+            };
             format!(
-                " (below the screen: {}; fitted as a linear change along the located direction)",
-                tr.stop_reason
+                " (below the screen: {}{pre}; fitted because the joint linearization predicts it removes at least {:.0} % of the fit cost)",
+                tr.stop_reason,
+                100.0 * COMPANION_SCREEN
             )
         };
         rounds.push(Round {
