@@ -1030,12 +1030,15 @@ fn scan_contact(
     (best, evals)
 }
 
-/// A companion linear change predicted to remove less than this fraction
-/// of the fit cost is not fitted.
+/// A candidate below the screen (a companion linear change, or the best
+/// remaining one) predicted to remove less than this fraction of the fit
+/// cost is not fitted.
 const COMPANION_SCREEN: f64 = 0.2;
 
-/// The fraction of the fit cost a companion (the last parameter of the
-/// effects `all` on `trial`) is predicted to remove at the current fit
+/// The fraction of the fit cost a candidate below the screen (the last
+/// effect of `all` on `trial`, taken at no change: a spring at its declared
+/// stiffness, a nonlinear element at zero strength with its traced gap) is
+/// predicted to remove at the current fit
 /// ([`joint::predicted_gain`] on the fit segments `segs`, with the fit's
 /// sub-steps), and the simulations spent; None when it cannot be
 /// computed.
@@ -1064,7 +1067,7 @@ fn companion_gain(
     else {
         return (None, 0);
     };
-    // linearized where the companion is no change at all (the traced
+    // linearized where the candidate is no change at all (the traced
     // value is only the screen's estimate)
     let mut x = problem.x_start();
     let zero = match last.candidate.kind {
@@ -1072,7 +1075,11 @@ fn companion_gain(
         _ => last.nominal,
     };
     for (xi, p) in x.iter_mut().zip(&problem.parameters).rev().take(extra) {
-        *xi = p.to_x(zero);
+        // a contact is switched off by its stiffness; its gap stays where
+        // the trace put it
+        if !matches!(p.target, crate::update::Target::ContactGap(_)) {
+            *xi = p.to_x(zero);
+        }
     }
     match joint::predicted_gain(&problem, &x, &sm.state_scale(), extra) {
         Some((g, _, n)) => (Some(g), n),
