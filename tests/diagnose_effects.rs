@@ -259,3 +259,35 @@ fn contact_4_3_and_friction_at_8() {
     within(param(&d, "friction", "level"), 1.0, 0.1);
     assert_improved(&d);
 }
+
+/// Two contacts, one traced to switch on at zero gap (its fit starts from
+/// a small positive gap instead of failing): 5→6 at 0.381 mm and 2→1 at
+/// 0.3 mm.
+#[test]
+fn two_contacts() {
+    let mut truth = lanl();
+    truth.contacts = vec![
+        Contact {
+            dofs: vec![5, 6],
+            gap: 0.381e-3,
+            stiffness: 2e6,
+        },
+        Contact {
+            dofs: vec![2, 1],
+            gap: 0.3e-3,
+            stiffness: 1e6,
+        },
+    ];
+    let d = run(&truth, &[1, 2, 3, 4, 5, 6, 7, 8], 71);
+    assert_eq!(d.effects.len(), 2, "{}", d.verdict);
+    for (dofs, gap, k) in [(vec![5, 6], 0.381e-3, 2e6), (vec![2, 1], 0.3e-3, 1e6)] {
+        let e = d
+            .effects
+            .iter()
+            .find(|e| e.kind == "contact" && e.dofs == dofs)
+            .unwrap_or_else(|| panic!("no contact {dofs:?} in {}", d.verdict));
+        within(e.parameters["gap"], gap, 0.1);
+        within(e.parameters["stiffness"], k, 0.1);
+    }
+    assert_improved(&d);
+}

@@ -1103,6 +1103,44 @@ fn outliers(costs: &[f64], tried: &[bool]) -> Vec<usize> {
 /// Iterations each start of a multistart fit gets before the best goes on.
 const RACE_ITERATIONS: usize = 6;
 
+/// A traced value of zero cannot be scaled relatively (a contact traced
+/// to switch on at zero gap, or with zero stiffness; a friction level or
+/// a spring of zero): such a value starts the fit at a small positive one
+/// instead — a gap of 5 % of the largest reconstructed relative
+/// displacement, 10× the stiffest spring at the pair, 0.1 % of the largest
+/// applied force, 0.1 % of the stiffest spring.
+fn floor_start(model: &mut Model, e: &AddedEffect, states: &DMatrix<f64>, force: &DMatrix<f64>) {
+    use crate::update::Target;
+    let stiffest = |m: &Model, dofs: &[usize]| {
+        m.springs
+            .iter()
+            .filter(|s| dofs.iter().any(|d| s.dofs.contains(&(d + 1))))
+            .map(|s| s.stiffness)
+            .fold(0.0, f64::max)
+            .max(1.0)
+    };
+    for &t in &e.targets {
+        let v = t.get(model).unwrap_or(0.0);
+        if v != 0.0 && v.is_finite() {
+            continue;
+        }
+        let dofs = &e.candidate.dofs;
+        let floor = match t {
+            Target::ContactGap(_) => {
+                let dmax = (0..states.ncols())
+                    .map(|k| e.candidate.delta(states, k))
+                    .fold(0.0, f64::max);
+                (0.05 * dmax).max(1e-9)
+            }
+            Target::ContactStiffness(_) => 10.0 * stiffest(model, dofs),
+            Target::FrictionLevel(_) => (1e-3 * force.amax()).max(1e-9),
+            Target::SpringStiffness(_) => 1e-3 * stiffest(model, dofs),
+            _ => continue,
+        };
+        t.set(model, floor);
+    }
+}
+
 /// The fit of the added effects.
 struct EffectFit {
     /// The model with the fitted values.
@@ -1127,6 +1165,11 @@ fn fit_effects(
     fs: f64,
     settings: &DiagnoseSettings,
 ) -> Result<EffectFit> {
+    let mut floored = trial.clone();
+    for e in all {
+        floor_start(&mut floored, e, states, &cmp.force);
+    }
+    let trial = &floored;
     let mut params = vec![];
     for e in all {
         params.extend(effects::parameters(trial, e)?);
