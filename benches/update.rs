@@ -4,11 +4,10 @@
 //! - one Table 4 column end to end (`PCD, FM, D`: the full-order column;
 //!   the reduced columns fall back to finite differences, so both settings
 //!   run the same code there), noise-free, from the nominal model;
-//! - the multiple-shooting contact fit of `examples/update_contact_shooting`:
-//!   gap and stiffness of the 5→6 bumper of lanl8dof, 4096 samples, 1 %
-//!   noise, accelerations at DOFs 1, 5, 6, 80 segments of 0.1 s from the
-//!   true states, 40 sub-steps, started 30 % off (gap +30 %, stiffness
-//!   −30 %).
+//! - the multiple-shooting contact fit of [`update::contact_case`] (gap
+//!   and stiffness of the 5→6 bumper of lanl8dof, 4096 samples, 1 % noise,
+//!   accelerations at DOFs 1, 5, 6, 80 segments of 0.1 s from the true
+//!   states, 40 sub-steps), started 30 % off (gap +30 %, stiffness −30 %).
 //!
 //! Before timing, each fit is run once and its result, iterations and
 //! simulations are printed.
@@ -17,53 +16,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
-use tacit::integrate::SimSettings;
-use tacit::model::Model;
-use tacit::record::Quantity;
-use tacit::simulate::{simulate_record, RecordSpec};
-use tacit::update::{
-    self, shooting, table4, FitResult, FitSettings, JacobianMethod, Parameter, Problem, Target,
-};
-
-fn contact_problem() -> Problem {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/lanl8dof-contact.toml");
-    let truth = Model::from_file(&path).unwrap();
-    let spec = RecordSpec {
-        samples: 4096,
-        sensors: vec![1, 5, 6],
-        kinds: vec![Quantity::Accel],
-        noise: 0.01,
-        seed: 7,
-        settings: SimSettings {
-            substeps: 40,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    let (rec, _) = simulate_record(&truth, &spec).unwrap();
-    let params = vec![
-        Parameter::relative(&truth, Target::ContactGap(0))
-            .unwrap()
-            .with_relative_start(0.3),
-        Parameter::relative(&truth, Target::ContactStiffness(0))
-            .unwrap()
-            .with_relative_start(-0.3),
-    ];
-    let n = truth.ndof();
-    let mut p = Problem::from_record(
-        &truth,
-        &rec,
-        &[Quantity::Accel],
-        None,
-        params,
-        vec![0.0; n],
-        vec![0.0; n],
-    )
-    .unwrap();
-    p.sim.substeps = 40;
-    p.segments = shooting::from_truth(&rec, 51).unwrap();
-    p
-}
+use tacit::update::{self, contact_case, table4, FitResult, FitSettings, JacobianMethod};
 
 fn describe(label: &str, r: &FitResult) {
     let pct: Vec<String> = r
@@ -109,7 +62,7 @@ fn bench(c: &mut Criterion) {
         });
     }
     g.finish();
-    let contact = contact_problem();
+    let contact = contact_case::case([0.3, -0.3]).unwrap().shooting;
     let mut g = c.benchmark_group("contact_shooting");
     g.sample_size(10)
         .warm_up_time(std::time::Duration::from_millis(1))

@@ -10,53 +10,18 @@
 //!
 //! Run: `cargo run --release --example update_contact_shooting`
 
-use std::path::Path;
-use tacit::integrate::SimSettings;
-use tacit::model::Model;
-use tacit::record::Quantity;
-use tacit::simulate::{simulate_record, RecordSpec};
-use tacit::update::{self, shooting, FitSettings, Parameter, Problem, Target};
+use tacit::update::{self, contact_case, FitSettings};
 
 fn main() -> tacit::Result<()> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/lanl8dof-contact.toml");
-    let truth = Model::from_file(&path)?;
-    let substeps = 40;
-    let spec = RecordSpec {
-        samples: 4096,
-        sensors: vec![1, 5, 6],
-        kinds: vec![Quantity::Accel],
-        noise: 0.01,
-        seed: 7,
-        settings: SimSettings {
-            substeps,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    let (rec, sim) = simulate_record(&truth, &spec)?;
+    let case = contact_case::case([0.3, -0.3])?;
+    let (rec, sim) = (&case.record, &case.simulation);
     let active = sim.fint.column_iter().filter(|c| c.amax() > 0.0).count();
     println!(
         "record: {} samples, contact active in {:.1} % of them",
         rec.len(),
         100.0 * active as f64 / rec.len() as f64
     );
-    let params = vec![
-        Parameter::relative(&truth, Target::ContactGap(0))?.with_relative_start(0.3),
-        Parameter::relative(&truth, Target::ContactStiffness(0))?.with_relative_start(-0.3),
-    ];
-    let n = truth.ndof();
-    let mut problem = Problem::from_record(
-        &truth,
-        &rec,
-        &[Quantity::Accel],
-        None,
-        params,
-        vec![0.0; n],
-        vec![0.0; n],
-    )?;
-    problem.sim.substeps = substeps;
-    let whole = problem.clone();
-    problem.segments = shooting::from_truth(&rec, 51)?;
+    let (problem, whole) = (case.shooting, case.whole);
     for (label, p) in [
         ("multiple shooting, 0.1 s segments", &problem),
         ("whole record, open loop", &whole),

@@ -287,7 +287,7 @@ fn reduced_problems_fall_back_to_finite_differences_and_say_so() {
 
 #[test]
 fn contact_jacobian_follows_the_computed_trajectory_at_the_default_newton_tolerance() {
-    // the bumper fit of examples/update_contact_shooting (80 segments of
+    // the bumper fit of update::contact_case (80 segments of
     // 0.1 s, 40 sub-steps, default Newton tolerance 1e-10) at a point where
     // Levenberg-Marquardt once stalled: a few sub-steps end with an iterate
     // accepted within the tolerance across the contact's switch from the
@@ -295,38 +295,7 @@ fn contact_jacobian_follows_the_computed_trajectory_at_the_default_newton_tolera
     // side's (the tangent at the accepted point) made the gap column differ
     // by 3 % from the differences of the computed cost.
     use tacit::integrate::{Integrator, Seeds};
-    use tacit::simulate::{simulate_record, RecordSpec};
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/lanl8dof-contact.toml");
-    let truth = Model::from_file(&path).unwrap();
-    let spec = RecordSpec {
-        samples: 4096,
-        sensors: vec![1, 5, 6],
-        kinds: vec![Quantity::Accel],
-        noise: 0.01,
-        seed: 7,
-        settings: SimSettings {
-            substeps: 40,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    let (rec, _) = simulate_record(&truth, &spec).unwrap();
-    let params = vec![
-        Parameter::relative(&truth, Target::ContactGap(0)).unwrap(),
-        Parameter::relative(&truth, Target::ContactStiffness(0)).unwrap(),
-    ];
-    let mut p = Problem::from_record(
-        &truth,
-        &rec,
-        &[Quantity::Accel],
-        None,
-        params,
-        vec![0.0; 8],
-        vec![0.0; 8],
-    )
-    .unwrap();
-    p.sim.substeps = 40;
-    p.segments = update::shooting::from_truth(&rec, 51).unwrap();
+    let p = update::contact_case::case([0.0, 0.0]).unwrap().shooting;
     let x = [0.018958583497239268, 0.009842814501277523];
     // sub-steps across the switch, over all segments
     let model = p.model_at(&x);

@@ -8,7 +8,7 @@ use crate::integrate::SimSettings;
 use crate::model::Model;
 use crate::update::problem::{Metric, Observation, Problem};
 use crate::update::shooting::Segment;
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DMatrixView, DVector};
 use serde::Serialize;
 
 /// Errors of one channel.
@@ -37,6 +37,28 @@ pub struct ErrorSet {
     /// The start-state refinement of the multiple-shooting error (None
     /// when off or when the segments could not be simulated).
     pub starts: Option<super::starts::StartFit>,
+}
+
+/// Weighted residual `w_c (y_c − ŷ_c)` of one segment from its predicted
+/// channels `y` (observation × sample of the segment), rows sample-major
+/// (`k p + c`); `None` when a prediction is not finite.
+pub fn segment_residual(
+    observations: &[Observation],
+    seg: &Segment,
+    y: DMatrixView<'_, f64>,
+) -> Option<DVector<f64>> {
+    let p = observations.len();
+    let mut r = DVector::zeros(seg.len * p);
+    for k in 0..seg.len {
+        for (c, o) in observations.iter().enumerate() {
+            let v = y[(c, k)];
+            if !v.is_finite() {
+                return None;
+            }
+            r[k * p + c] = o.weight * (o.data[seg.start + k] - v);
+        }
+    }
+    Some(r)
 }
 
 /// Multiple-shooting predictions (p × N), the segments with the start

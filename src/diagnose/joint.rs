@@ -10,7 +10,7 @@
 //! turn, creeps along the valley where the two trade (a contact's gap
 //! against where the segment starts); so both are stepped at once, with
 //! Levenberg–Marquardt on the whole vector. One simulation of every segment
-//! with forward sensitivities ([`Integrator::run_sensitivities`], `2n`
+//! with forward sensitivities ([`sensitivity::simulate_seeded`], `2n`
 //! state seeds and one seed per parameter) gives `r_i`, `J_s,i = ∂r_i/∂s_i`
 //! and `J_p,i = ∂r_i/∂x`. The normal equations are block-arrow shaped: the
 //! states of a segment couple only to themselves and to `x`. With Marquardt
@@ -32,12 +32,10 @@
 //! `f_tol` (at least 1e-4), when λ exceeds 1e6 (stalled: the cost
 //! is rough at the sub-step scale), or at the iteration limit.
 
-use crate::integrate::{Integrator, Seeds};
-use crate::record::Quantity;
+use super::errors::segment_residual;
 use crate::update::optimize::FitSettings;
-use crate::update::{Problem, Segment};
+use crate::update::{forward, sensitivity, Problem, Segment};
 use nalgebra::{DMatrix, DVector};
-use rayon::prelude::*;
 
 /// How a joint fit ended.
 #[derive(Debug, Clone)]
@@ -66,97 +64,58 @@ struct Lin {
     jp: DMatrix<f64>,
 }
 
-/// Weighted residual of every segment at `x` with `segs`; `None` when a
-/// simulation fails.
-fn residuals(problem: &Problem, x: &[f64], segs: &[Segment]) -> Option<Vec<DVector<f64>>> {
-    let model = problem.model_at(x);
-    let integ = Integrator::new(&model, problem.fs, problem.sim).ok()?;
-    let out: Vec<Option<DVector<f64>>> = segs
-        .par_iter()
-        .map(|s| {
-            let run = integ.run(problem.force.columns(s.start, s.len), &s.u0, &s.v0);
-            if !run.completed() {
-                return None;
-            }
-            let p = problem.observations.len();
-            let mut r = DVector::zeros(s.len * p);
-            for (c, o) in problem.observations.iter().enumerate() {
-                let src = match o.quantity {
-                    Quantity::Disp => &run.u,
-                    Quantity::Vel => &run.v,
-                    _ => &run.a,
-                };
-                for k in 0..s.len {
-                    r[k * p + c] = o.weight * (o.data[s.start + k] - src[(o.dof - 1, k)]);
-                }
-            }
-            r.iter().all(|v| v.is_finite()).then_some(r)
-        })
-        .collect();
-    out.into_iter().collect()
+/// The state scale of `problem`'s model (displacements × ω, velocities
+/// as they are; [`crate::linear::SampledModel::state_scale`]).
+fn state_scale(problem: &Problem) -> Option<DVector<f64>> {
+    let lin = problem.model.linear_part();
+    crate::linear::SampledModel::from_model(&lin, problem.fs, problem.sim.substeps)
+        .ok()
+        .map(|sm| sm.state_scale())
 }
 
-/// Residuals and Jacobians of every segment at `x` (`None` when a
-/// simulation or its derivatives fail).
-fn linearize(
-    problem: &Problem,
-    x: &[f64],
-    segs: &[Segment],
-    scale: &DVector<f64>,
-) -> Option<Vec<Lin>> {
-    let model = problem.model_at(x);
-    let n = model.ndof();
-    let integ = Integrator::new(&model, problem.fs, problem.sim).ok()?;
-    let params = crate::update::sensitivity::param_seeds(&model, &problem.parameters).ok()?;
-    let np = params.len();
-    let seeds = Seeds {
-        state: DMatrix::identity(2 * n, 2 * n),
-        params,
-    };
-    let out: Vec<Option<Lin>> = segs
-        .par_iter()
-        .map(|s| {
-            let force = problem.force.columns(s.start, s.len);
-            let (run, d) = integ.run_sensitivities(force, &s.u0, &s.v0, &seeds).ok()?;
-            if !run.completed() || d.singular_tangent.is_some() {
-                return None;
-            }
-            let p = problem.observations.len();
+/// Weighted residual of every segment of `problem` at `x`
+/// ([`forward::simulate`]); `None` when a simulation fails.
+fn residuals(problem: &Problem, x: &[f64]) -> Option<Vec<DVector<f64>>> {
+    let resp = forward::simulate(problem, x).0.ok()?;
+    problem
+        .segments
+        .iter()
+        .zip(&resp)
+        .map(|(s, y)| segment_residual(&problem.observations, s, y.as_view()))
+        .collect()
+}
+
+/// Residuals and Jacobians of every segment of `problem` at `x`, from one
+/// simulation per segment with the start-state and parameter seeds
+/// ([`sensitivity::simulate_seeded`]); `None` when a simulation or its
+/// derivatives fail.
+fn linearize(problem: &Problem, x: &[f64], scale: &DVector<f64>) -> Option<Vec<Lin>> {
+    let nx = scale.len();
+    let np = problem.parameters.len();
+    let runs = sensitivity::simulate_seeded(problem, x, true).0.ok()?;
+    let p = problem.observations.len();
+    problem
+        .segments
+        .iter()
+        .zip(runs)
+        .map(|(s, d)| {
+            let r = segment_residual(&problem.observations, s, d.y.as_view())?;
             let m = s.len * p;
-            let mut r = DVector::zeros(m);
-            let mut js = DMatrix::zeros(m, 2 * n);
-            let mut jp = DMatrix::zeros(m, np);
-            for (c, o) in problem.observations.iter().enumerate() {
-                let q = o.dof - 1;
-                let pick = |u: &DMatrix<f64>, v: &DMatrix<f64>, a: &DMatrix<f64>, k: usize| match o
-                    .quantity
-                {
-                    Quantity::Disp => u[(q, k)],
-                    Quantity::Vel => v[(q, k)],
-                    _ => a[(q, k)],
-                };
-                for k in 0..s.len {
-                    let row = k * p + c;
-                    r[row] = o.weight * (o.data[s.start + k] - pick(&run.u, &run.v, &run.a, k));
-                    // ∂r/∂θ = −w ∂ŷ/∂θ
-                    for j in 0..2 * n {
-                        js[(row, j)] = -o.weight * pick(&d.du[j], &d.dv[j], &d.da[j], k) * scale[j];
-                    }
-                    for j in 0..np {
-                        let t = 2 * n + j;
-                        jp[(row, j)] = -o.weight * pick(&d.du[t], &d.dv[t], &d.da[t], k);
-                    }
-                }
-            }
-            let finite = r
-                .iter()
-                .chain(js.iter())
-                .chain(jp.iter())
-                .all(|v| v.is_finite());
+            // ∂r/∂θ = −w ∂ŷ/∂θ
+            let column = |j: usize, f: f64| {
+                DVector::from_fn(m, |row, _| {
+                    let (k, c) = (row / p, row % p);
+                    -problem.observations[c].weight * d.dy[j][(c, k)] * f
+                })
+            };
+            let js =
+                DMatrix::from_columns(&(0..nx).map(|j| column(j, scale[j])).collect::<Vec<_>>());
+            let jp =
+                DMatrix::from_columns(&(0..np).map(|j| column(nx + j, 1.0)).collect::<Vec<_>>());
+            let finite = js.iter().chain(jp.iter()).all(|v| v.is_finite());
             finite.then_some(Lin { r, js, jp })
         })
-        .collect();
-    out.into_iter().collect()
+        .collect()
 }
 
 /// `JᵀJ` with Marquardt damping `λ D`, `D` its diagonal floored at 1e-10
@@ -180,7 +139,8 @@ struct Eliminated {
 }
 
 /// The damped step `(δx, δs_i)` at `λ` (states scaled), or `None` when a
-/// block cannot be factored.
+/// block cannot be factored. With no parameter (`J_p` of no column) it is
+/// the states' step alone.
 fn step(lins: &[Lin], lambda: f64) -> Option<(DVector<f64>, Vec<DVector<f64>>)> {
     let np = lins.first()?.jp.ncols();
     let mut s = DMatrix::<f64>::zeros(np, np);
@@ -199,42 +159,43 @@ fn step(lins: &[Lin], lambda: f64) -> Option<(DVector<f64>, Vec<DVector<f64>>)> 
         h += gp - b.tr_mul(&z);
         elim.push(Eliminated { x, z });
     }
-    let smax = s.diagonal().max().max(f64::MIN_POSITIVE);
-    for j in 0..np {
-        let d = s[(j, j)].max(1e-12 * smax);
-        s[(j, j)] += lambda * d + 1e-14 * smax;
-    }
-    let dx = s.cholesky()?.solve(&h);
+    let dx = if np == 0 {
+        DVector::zeros(0)
+    } else {
+        let smax = s.diagonal().max().max(f64::MIN_POSITIVE);
+        for j in 0..np {
+            let d = s[(j, j)].max(1e-12 * smax);
+            s[(j, j)] += lambda * d + 1e-14 * smax;
+        }
+        s.cholesky()?.solve(&h)
+    };
     let ds = elim.iter().map(|e| &e.z - &e.x * &dx).collect();
     Some((dx, ds))
 }
 
 /// Fit `problem`'s parameters (from `x0`) and its segments' start states
 /// together (module docs). Full-order GLS problems only.
-pub fn fit(
-    problem: &Problem,
-    x0: &[f64],
-    scale: &DVector<f64>,
-    settings: &FitSettings,
-) -> Option<JointFit> {
+pub fn fit(problem: &Problem, x0: &[f64], settings: &FitSettings) -> Option<JointFit> {
     if problem.reduction.is_some() || problem.parameters.len() != x0.len() {
         return None;
     }
+    let scale = state_scale(problem)?;
     let n = problem.model.ndof();
     let (lo, hi) = problem.x_bounds();
     let nseg = problem.segments.len();
-    let cost_of = |r: &[DVector<f64>]| r.iter().map(|v| v.norm_squared()).sum::<f64>();
+    let costs_of = |r: Vec<DVector<f64>>| r.iter().map(|v| v.norm_squared()).collect::<Vec<_>>();
+    let mut cur = problem.clone();
     let mut x = x0.to_vec();
-    let mut segs = problem.segments.clone();
     let mut sims = nseg;
-    let mut cost = cost_of(&residuals(problem, &x, &segs)?);
+    let mut segment_costs = costs_of(residuals(&cur, &x)?);
+    let mut cost: f64 = segment_costs.iter().sum();
     let cost0 = cost;
     let mut lambda = settings.lm_lambda.max(1e-6);
     let mut iterations = 0;
     let mut termination = "iteration limit".to_string();
     'outer: while iterations < settings.max_iterations {
         sims += nseg;
-        let Some(lins) = linearize(problem, &x, &segs, scale) else {
+        let Some(lins) = linearize(&cur, &x, &scale) else {
             termination = "a simulation or its derivatives failed at the current point".into();
             break;
         };
@@ -251,7 +212,8 @@ pub fn fit(
             let xt: Vec<f64> = (0..x.len())
                 .map(|j| (x[j] + dx[j]).clamp(lo[j], hi[j]))
                 .collect();
-            let st: Vec<Segment> = segs
+            let st: Vec<Segment> = cur
+                .segments
                 .iter()
                 .zip(&ds)
                 .map(|(s, d)| Segment {
@@ -262,13 +224,15 @@ pub fn fit(
                 })
                 .collect();
             sims += nseg;
-            let ct = residuals(problem, &xt, &st).map(|r| cost_of(&r));
+            let old = std::mem::replace(&mut cur.segments, st);
+            let ct = residuals(&cur, &xt).map(costs_of);
             match ct {
-                Some(c) if c < cost => {
-                    let gain = 1.0 - c / cost;
+                Some(c) if c.iter().sum::<f64>() < cost => {
+                    let total: f64 = c.iter().sum();
+                    let gain = 1.0 - total / cost;
                     x = xt;
-                    segs = st;
-                    cost = c;
+                    segment_costs = c;
+                    cost = total;
                     iterations += 1;
                     lambda = (lambda / 3.0).max(1e-9);
                     // a small gain under heavy damping is a short step,
@@ -279,19 +243,17 @@ pub fn fit(
                     }
                     continue 'outer;
                 }
-                _ => lambda *= 4.0,
+                _ => {
+                    cur.segments = old;
+                    lambda *= 4.0;
+                }
             }
         }
     }
-    sims += nseg;
-    let segment_costs = residuals(problem, &x, &segs)?
-        .iter()
-        .map(|r| r.norm_squared())
-        .collect();
     Some(JointFit {
         segment_costs,
         x,
-        segments: segs,
+        segments: cur.segments,
         cost: (cost0, cost),
         iterations,
         simulations: sims,
@@ -304,18 +266,18 @@ pub fn fit(
 /// Gauss–Newton predicted cost `Σ‖r_i + J_s δs_i + J_p δx‖²` (lightly
 /// damped) with all parameters, against the same with the last `extra`
 /// held, as a fraction of the cost now. Also returns the predicted step
-/// of the parameters. One simulation with sensitivities per segment.
+/// of the parameters and the simulations run (one with sensitivities per
+/// segment).
 pub fn predicted_gain(
     problem: &Problem,
     x: &[f64],
-    scale: &DVector<f64>,
     extra: usize,
 ) -> Option<(f64, Vec<f64>, usize)> {
     let np = problem.parameters.len();
     if problem.reduction.is_some() || np != x.len() || extra == 0 || extra > np {
         return None;
     }
-    let lins = linearize(problem, x, &problem.segments, scale)?;
+    let lins = linearize(problem, x, &state_scale(problem)?)?;
     let sims = lins.len();
     let cost: f64 = lins.iter().map(|l| l.r.norm_squared()).sum();
     let predicted = |lins: &[Lin]| -> Option<(f64, DVector<f64>)> {
@@ -335,15 +297,7 @@ pub fn predicted_gain(
             ..l
         })
         .collect();
-    let without = if np > extra {
-        predicted(&held)?.0
-    } else {
-        let (_, ds) = step_states(&held)?;
-        held.iter()
-            .zip(&ds)
-            .map(|(l, d)| (&l.r + &l.js * d).norm_squared())
-            .sum()
-    };
+    let without = predicted(&held)?.0;
     let gain = if cost > 0.0 {
         ((without - with) / cost).max(0.0)
     } else {
@@ -352,47 +306,25 @@ pub fn predicted_gain(
     Some((gain, dx.iter().copied().collect(), sims))
 }
 
-/// States-only steps (no parameter), lightly damped.
-fn step_states(lins: &[Lin]) -> Option<((), Vec<DVector<f64>>)> {
-    let ds = lins
-        .iter()
-        .map(|l| {
-            damped_gram(&l.js, 1e-3)
-                .cholesky()
-                .map(|c| c.solve(&-l.js.tr_mul(&l.r)))
-        })
-        .collect::<Option<Vec<_>>>()?;
-    Some(((), ds))
-}
-
 /// Standard errors of the parameters (in their units) at `x`, with the
 /// segments' start states as nuisance parameters: white noise of `level`
 /// times each channel's RMS gives a residual row the deviation
-/// `σ = level w_c rms(y_c)`; the rows are whitened and the parameters'
-/// covariance is the inverse of the Schur complement
-/// `Σ J_pᵀJ_p − B_iᵀ A_i⁻¹ B_i` (the marginal of the joint covariance).
-/// `None` when a simulation fails or the complement is singular. One
-/// simulation with sensitivities per segment.
-pub fn std_errors(
-    problem: &Problem,
-    x: &[f64],
-    scale: &DVector<f64>,
-    level: f64,
-) -> Option<Vec<f64>> {
+/// [`Observation::noise_std`](crate::update::Observation::noise_std); the
+/// rows are whitened and the parameters' covariance is the inverse of the
+/// Schur complement `Σ J_pᵀJ_p − B_iᵀ A_i⁺ B_i` (the marginal of the joint
+/// covariance). `None` when a simulation fails or the complement is
+/// singular. One simulation with sensitivities per segment.
+pub fn std_errors(problem: &Problem, x: &[f64], level: f64) -> Option<Vec<f64>> {
     let sigma: Vec<f64> = problem
         .observations
         .iter()
-        .map(|o| {
-            let n = o.data.len().max(1) as f64;
-            let rms = (o.data.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
-            level * o.weight * rms
-        })
+        .map(|o| o.noise_std(level))
         .collect();
     if sigma.iter().any(|&s| !(s > 0.0)) {
         return None;
     }
     let p = sigma.len();
-    let mut lins = linearize(problem, x, &problem.segments, scale)?;
+    let mut lins = linearize(problem, x, &state_scale(problem)?)?;
     for l in &mut lins {
         for r in 0..l.r.len() {
             let w = 1.0 / sigma[r % p];
@@ -429,8 +361,9 @@ pub fn std_errors(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::integrate::SimSettings;
+    use crate::integrate::{Integrator, SimSettings};
     use crate::model::Model;
+    use crate::record::Quantity;
     use crate::update::{Metric, Observation, Parameter, Target};
 
     /// Two masses, a spring to ground, a spring between them and a cubic
@@ -497,12 +430,6 @@ mod tests {
         }
     }
 
-    fn scale(model: &Model) -> DVector<f64> {
-        crate::linear::SampledModel::from_model(&model.linear_part(), 200.0, 10)
-            .unwrap()
-            .state_scale()
-    }
-
     /// k3 started 40 % low and every start state off by 10 % of its size:
     /// the joint fit recovers both (noise-free record).
     #[test]
@@ -522,7 +449,7 @@ mod tests {
             max_iterations: 40,
             ..Default::default()
         };
-        let fit = fit(&p, &[0.0], &scale(&t), &settings).unwrap();
+        let fit = fit(&p, &[0.0], &settings).unwrap();
         let k3 = p.model_at(&fit.x).cubics[0].k3;
         approx::assert_relative_eq!(k3, 4.0e8, max_relative = 1e-4);
         assert!(fit.cost.1 < 1e-8 * fit.cost.0, "{:?}", fit.cost);
@@ -548,11 +475,11 @@ mod tests {
                 max_iterations: 40,
                 ..Default::default()
             };
-            let f = fit(&p, &[0.0], &scale(model), &settings).unwrap();
+            let f = fit(&p, &[0.0], &settings).unwrap();
             p.segments = f.segments;
             p.parameters
                 .push(Parameter::relative(model, Target::SpringStiffness(1)).unwrap());
-            predicted_gain(&p, &[f.x[0], 0.0], &scale(model), 1).unwrap()
+            predicted_gain(&p, &[f.x[0], 0.0], 1).unwrap()
         };
         let mut soft = t.clone();
         soft.springs[1].stiffness *= 0.85;
@@ -597,10 +524,10 @@ mod tests {
                 o.data.iter_mut().for_each(|v| *v += 0.01 * rms * gauss());
             }
             p.parameters = vec![Parameter::relative(&t, Target::CubicK3(0)).unwrap()];
-            let f = fit(&p, &[0.0], &scale(&t), &settings).unwrap();
+            let f = fit(&p, &[0.0], &settings).unwrap();
             fitted.push(p.model_at(&f.x).cubics[0].k3);
             p.segments = f.segments;
-            predicted = std_errors(&p, &f.x, &scale(&t), 0.01).unwrap()[0];
+            predicted = std_errors(&p, &f.x, 0.01).unwrap()[0];
         }
         let mean = fitted.iter().sum::<f64>() / 12.0;
         let sd = (fitted.iter().map(|k| (k - mean).powi(2)).sum::<f64>() / 11.0).sqrt();

@@ -37,7 +37,7 @@ use crate::update::problem::Observation;
 use crate::update::shooting::{self, Segment};
 use effects::AddedEffect;
 pub use errors::{ChannelError, Comparison, ErrorSet};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -747,7 +747,7 @@ pub fn diagnose(
             if !screened {
                 if let Some((segs, sim)) = current_segments.as_ref() {
                     let t = Instant::now();
-                    let (g, n) = companion_gain(&trial, &all, cmp, segs, *sim, rec.fs);
+                    let (g, n) = companion_gain(&trial, &all, cmp, segs, *sim);
                     screen_sims += n;
                     *timings.entry("fit".into()).or_insert(0.0) += t.elapsed().as_secs_f64();
                     if g.is_some_and(|g| g < COMPANION_SCREEN) {
@@ -1048,30 +1048,28 @@ fn companion_gain(
     cmp: &Comparison,
     segs: &[Segment],
     sim: SimSettings,
-    fs: f64,
 ) -> (Option<f64>, usize) {
     let mut params = vec![];
+    let mut extra = 0;
     for e in all {
         match effects::parameters(trial, e) {
-            Ok(p) => params.extend(p),
+            Ok(p) => {
+                extra = p.len();
+                params.extend(p);
+            }
             Err(_) => return (None, 0),
         }
     }
     let Some(last) = all.last() else {
         return (None, 0);
     };
-    let extra = effects::parameters(trial, last).map_or(0, |p| p.len());
     let mut problem = cmp.problem(trial, segs.to_vec(), sim);
     problem.parameters = params;
-    let Ok(sm) = crate::linear::SampledModel::from_model(&trial.linear_part(), fs, sim.substeps)
-    else {
-        return (None, 0);
-    };
     // linearized where the candidate is no change at all (the traced
     // value is only the screen's estimate)
     let mut x = problem.x_start();
     let zero = match last.candidate.kind {
-        crate::trace::EffectKind::GroundSpring => 0.0,
+        EffectKind::GroundSpring => 0.0,
         _ => last.nominal,
     };
     for (xi, p) in x.iter_mut().zip(&problem.parameters).rev().take(extra) {
@@ -1081,23 +1079,10 @@ fn companion_gain(
             *xi = p.to_x(zero);
         }
     }
-    match joint::predicted_gain(&problem, &x, &sm.state_scale(), extra) {
+    match joint::predicted_gain(&problem, &x, extra) {
         Some((g, _, n)) => (Some(g), n),
         None => (None, 0),
     }
-}
-
-/// Segments whose cost exceeds [`starts::OUTLIER`] times the median, not
-/// tried yet.
-fn outliers(costs: &[f64], tried: &[bool]) -> Vec<usize> {
-    let mut sorted: Vec<f64> = costs.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let Some(&median) = sorted.get(sorted.len() / 2) else {
-        return vec![];
-    };
-    (0..costs.len())
-        .filter(|&i| !tried[i] && costs[i] > starts::OUTLIER * median)
-        .collect()
 }
 
 /// Iterations each start of a multistart fit gets before the best goes on.
@@ -1200,7 +1185,7 @@ fn fit_effects(
     // traced value comes from linear-model states), so two more starts
     // bracket it
     if let Some(last) = all.last() {
-        if last.candidate.kind == crate::trace::EffectKind::Cubic {
+        if last.candidate.kind == EffectKind::Cubic {
             let p = &problem.parameters[np - 1];
             let k3 = trial.cubics[trial.cubics.len() - 1].k3;
             for f in [0.6, 1.6] {
@@ -1214,7 +1199,7 @@ fn fit_effects(
     }
     // a contact: starts from a scan of gap and stiffness (CONTEXT fact 6)
     if let Some(last) = all.last() {
-        if last.candidate.kind == crate::trace::EffectKind::Contact {
+        if last.candidate.kind == EffectKind::Contact {
             let ci = trial.contacts.len() - 1;
             // the gap may lie anywhere below the largest reconstructed
             // relative displacement (beyond it the contact never closes),
@@ -1251,19 +1236,8 @@ fn fit_effects(
         max_iterations: settings.fit.max_iterations.min(RACE_ITERATIONS),
         ..settings.fit
     };
-    let (best, results) = crate::update::fit_multistart(&problem, &race, &starts)?;
+    let (_, results) = crate::update::fit_multistart(&problem, &race, &starts)?;
     sims += results.iter().map(|r| r.simulations).sum::<usize>();
-    let Some(first) = best else {
-        return Ok(EffectFit {
-            model: trial.clone(),
-            note: "every start failed; traced values kept".into(),
-            simulations: sims,
-            fitted: None,
-        });
-    };
-    let scale = crate::linear::SampledModel::from_model(&trial.linear_part(), fs, sub)
-        .map(|sm| sm.state_scale())
-        .ok();
     // the race's starts, best first
     let mut order: Vec<usize> = (0..results.len())
         .filter(|&i| results[i].cost().is_finite())
@@ -1282,15 +1256,7 @@ fn fit_effects(
         }
         let r = &results[i];
         let beat = kept.as_ref().map(|k| k.cost);
-        let mut p = polish(
-            cmp,
-            &problem,
-            &r.x,
-            r.cost(),
-            scale.as_ref(),
-            settings,
-            beat,
-        );
+        let mut p = polish(cmp, &problem, &r.x, r.cost(), settings, beat);
         sims += p.simulations;
         p.note = format!(
             "start {} of {} carried on after a {}-iteration race ({:?}; {} sub-steps){}",
@@ -1305,11 +1271,11 @@ fn fit_effects(
             kept = Some(p);
         }
     }
+    // (no start with a finite cost: none was carried on)
     let Some(k) = kept else {
-        let r = &results[first];
         return Ok(EffectFit {
-            model: r.model.clone(),
-            note: format!("{:?}", r.termination),
+            model: trial.clone(),
+            note: "every start failed; traced values kept".into(),
             simulations: sims,
             fitted: None,
         });
@@ -1330,12 +1296,15 @@ const POLISH_STARTS: usize = 2;
 const NOISE_MARGIN: f64 = 10.0;
 
 /// The cost white noise of `level` times each channel's RMS would leave
-/// on `segments` (weights as in the fit: `1/‖y_c‖`).
+/// on `segments` ([`Observation::noise_std`] per residual row).
 fn noise_cost(cmp: &Comparison, segments: &[Segment], level: f64) -> f64 {
-    let ns = cmp.force.ncols().max(1) as f64;
     let covered: usize = segments.iter().map(|s| s.len).sum();
-    let p = cmp.observations.iter().filter(|o| o.weight > 0.0).count() as f64;
-    p * level * level * covered as f64 / ns
+    let per_sample: f64 = cmp
+        .observations
+        .iter()
+        .map(|o| o.noise_std(level).powi(2))
+        .sum();
+    per_sample * covered as f64
 }
 
 /// A race result carried on.
@@ -1361,7 +1330,6 @@ fn polish(
     base: &crate::update::Problem,
     x0: &[f64],
     cost0: f64,
-    scale: Option<&DVector<f64>>,
     settings: &DiagnoseSettings,
     beat: Option<f64>,
 ) -> Polished {
@@ -1373,10 +1341,7 @@ fn polish(
     let mut rounds = 0;
     let mut tried = vec![false; problem.segments.len()];
     let mut run_ins = 0;
-    while let Some(scale) = scale.filter(|_| cmp.start_iterations > 0) {
-        if rounds >= settings.start_alternations {
-            break;
-        }
+    while cmp.start_iterations > 0 && rounds < settings.start_alternations {
         rounds += 1;
         let (segs, _, sf) = starts::refine(
             cmp,
@@ -1387,7 +1352,7 @@ fn polish(
         );
         sims += sf.simulations;
         problem.segments = segs;
-        let Some(j) = joint::fit(&problem, &x, scale, &settings.fit) else {
+        let Some(j) = joint::fit(&problem, &x, &settings.fit) else {
             break;
         };
         sims += j.simulations;
@@ -1398,13 +1363,14 @@ fn polish(
         cost = j.cost.1;
         // a segment far above the others is likely started in a wrong
         // basin: run it in from the segment before it
-        let picks = outliers(&j.segment_costs, &tried)
+        let picks = starts::outliers(&j.segment_costs, &tried)
             .into_iter()
             .filter_map(|i| {
                 tried[i] = true;
                 let start = problem.segments[i].start;
                 let k = cmp.segments.iter().position(|s| s.start == start)?;
-                Some((i, cmp.segments.get(k.checked_sub(1)?)?.clone()))
+                let before = cmp.segments.get(k.checked_sub(1)?)?.clone();
+                Some((i, before, j.segment_costs[i]))
             })
             .collect::<Vec<_>>();
         let (changed, n) = starts::run_in(
@@ -1474,15 +1440,9 @@ fn report_effects(
         let joint = fitted.and_then(|(segs, fsim)| {
             let mut problem = cmp.problem(model, segs.clone(), *fsim);
             problem.parameters = params.clone();
-            let sm = crate::linear::SampledModel::from_model(
-                &model.linear_part(),
-                cmp.fs,
-                fsim.substeps,
-            )
-            .ok()?;
             *sims += segs.len();
             let x = vec![0.0; problem.parameters.len()];
-            joint::std_errors(&problem, &x, &sm.state_scale(), settings.fit.noise_level)
+            joint::std_errors(&problem, &x, settings.fit.noise_level)
         });
         match joint {
             Some(sd) => {
@@ -1522,9 +1482,7 @@ fn report_effects(
             for (pi, (name, _)) in vals.iter().enumerate() {
                 let se = ses.get(&(ei, pi)).copied().filter(|x| x.is_finite());
                 let se = match e.candidate.kind {
-                    crate::trace::EffectKind::Stiffness if e.nominal != 0.0 => {
-                        se.map(|s| s / e.nominal)
-                    }
+                    EffectKind::Stiffness if e.nominal != 0.0 => se.map(|s| s / e.nominal),
                     _ => se,
                 };
                 std_errors.insert(name.clone(), se);

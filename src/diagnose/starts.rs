@@ -24,7 +24,7 @@
 //! value. Every model — the declared one before, the fitted one after — is
 //! scored the same way.
 
-use super::errors::Comparison;
+use super::errors::{segment_residual, Comparison};
 use crate::integrate::{Integrator, Seeds, SimSettings};
 use crate::linear::SampledModel;
 use crate::model::Model;
@@ -110,17 +110,7 @@ impl Jacobians {
 /// Weighted residual of a segment (rows sample-major: `k p + c`) and its
 /// squared norm; `None` when the prediction is not finite.
 fn residual(cmp: &Comparison, seg: &Segment, y: &DMatrix<f64>) -> Option<(DVector<f64>, f64)> {
-    let p = cmp.observations.len();
-    let mut r = DVector::zeros(seg.len * p);
-    for k in 0..seg.len {
-        for (c, o) in cmp.observations.iter().enumerate() {
-            let v = y[(c, seg.start + k)];
-            if !v.is_finite() {
-                return None;
-            }
-            r[k * p + c] = o.weight * (o.data[seg.start + k] - v);
-        }
-    }
+    let r = segment_residual(&cmp.observations, seg, y.columns(seg.start, seg.len))?;
     let s = r.norm_squared();
     Some((r, s))
 }
@@ -234,19 +224,7 @@ fn continuity(
     *count += idx.len();
     let trials: Vec<Option<Segment>> = idx
         .par_iter()
-        .map(|&i| {
-            let p = &segs[i - 1];
-            let run = integ.run(cmp.force.columns(p.start, p.len + 1), &p.u0, &p.v0);
-            if !run.completed() || run.len() != p.len + 1 {
-                return None;
-            }
-            Some(Segment {
-                start: segs[i].start,
-                len: segs[i].len,
-                u0: (0..n).map(|q| run.u[(q, p.len)]).collect(),
-                v0: (0..n).map(|q| run.v[(q, p.len)]).collect(),
-            })
-        })
+        .map(|&i| carried(&integ, cmp, &segs[i - 1], &segs[i], n))
         .collect();
     let ok: Vec<(usize, Segment)> = idx
         .into_iter()
@@ -268,6 +246,31 @@ fn continuity(
         }
     }
     changed
+}
+
+/// Segment `s` started from where its predecessor `p` ends (`p`
+/// simulated one sample past its end); `None` when `p` does not end where
+/// `s` starts or its simulation fails.
+fn carried(
+    integ: &Integrator,
+    cmp: &Comparison,
+    p: &Segment,
+    s: &Segment,
+    n: usize,
+) -> Option<Segment> {
+    if p.start + p.len != s.start {
+        return None;
+    }
+    let run = integ.run(cmp.force.columns(p.start, p.len + 1), &p.u0, &p.v0);
+    if !run.completed() || run.len() != p.len + 1 {
+        return None;
+    }
+    Some(Segment {
+        start: s.start,
+        len: s.len,
+        u0: (0..n).map(|q| run.u[(q, p.len)]).collect(),
+        v0: (0..n).map(|q| run.v[(q, p.len)]).collect(),
+    })
 }
 
 /// Refine the start states of `segments` for `model` (module docs).
@@ -294,37 +297,26 @@ pub fn refine(
             .iter()
             .map(|r| r.as_ref().map_or(f64::INFINITY, |r| r.1))
             .collect();
-        let mut sorted = costs.clone();
-        sorted.sort_by(f64::total_cmp);
-        let median = sorted[sorted.len() / 2];
-        let picks: Vec<usize> = (1..segs.len())
-            .filter(|&i| {
-                !tried[i]
-                    && costs[i] > OUTLIER * median
-                    && segs[i - 1].start + segs[i - 1].len == segs[i].start
+        let picks: Vec<Pick> = outliers(&costs, &tried)
+            .into_iter()
+            .filter(|&i| i > 0 && segs[i - 1].start + segs[i - 1].len == segs[i].start)
+            .map(|i| {
+                tried[i] = true;
+                (i, segs[i - 1].clone(), costs[i])
             })
             .collect();
         if picks.is_empty() {
             break;
         }
-        let preds: Vec<(usize, Segment)> = picks
-            .iter()
-            .map(|&i| {
-                tried[i] = true;
-                (i, segs[i - 1].clone())
-            })
-            .collect();
-        let (changed, n) = run_in_refined(cmp, model, sim, &mut segs, &preds, iterations);
+        let (changed, yt, n) = run_in_refined(cmp, model, sim, &mut segs, &picks, iterations);
         fit.simulations += n;
         fit.continued += changed.len();
         if changed.is_empty() {
             break;
         }
-        let moved: Vec<Segment> = changed.iter().map(|&i| segs[i].clone()).collect();
-        let yt = predict_each(cmp, model, &moved, sim, &mut fit.simulations);
-        for (&i, s) in changed.iter().zip(&moved) {
-            copy_segment(&mut y, &yt, s);
-            res[i] = residual(cmp, s, &y);
+        for &i in &changed {
+            copy_segment(&mut y, &yt, &segs[i]);
+            res[i] = residual(cmp, &segs[i], &y);
         }
     }
     fit.cost.1 = res.iter().flatten().map(|r| r.1).sum();
@@ -334,6 +326,23 @@ pub fn refine(
 /// A segment whose cost exceeds this multiple of the median is taken to
 /// be started in a wrong basin.
 pub const OUTLIER: f64 = 8.0;
+
+/// Segments whose cost exceeds [`OUTLIER`] times the median, not tried
+/// yet.
+pub fn outliers(costs: &[f64], tried: &[bool]) -> Vec<usize> {
+    let mut sorted: Vec<f64> = costs.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let Some(&median) = sorted.get(sorted.len() / 2) else {
+        return vec![];
+    };
+    (0..costs.len())
+        .filter(|&i| !tried[i] && costs[i] > OUTLIER * median)
+        .collect()
+}
+
+/// A segment to run in: its index, the segment before it, and its cost
+/// now.
+pub type Pick = (usize, Segment, f64);
 
 /// Run-in passes over such segments in [`refine`].
 const RUN_IN_PASSES: usize = 2;
@@ -454,84 +463,66 @@ fn refine_local(
     (segs, y, fit)
 }
 
-/// Run-in starts for chosen segments, given as `(index in segs, the
-/// segment just before it)` with the predecessor's reconstructed start
-/// state: the predecessors are refined for `model` ([`refine`]) and
-/// simulated one sample past their end; the state there, refined in turn,
-/// replaces the segment's start when it predicts the segment better (a
-/// start state stuck in a wrong basin — the wrong side of an impact — that
-/// the local refinement cannot leave; CONTEXT fact 6). Returns the indices
-/// changed and the simulations run.
+/// Run-in starts for chosen segments, given as [`Pick`]s with the
+/// predecessor's reconstructed start state: the predecessors are refined
+/// for `model` ([`refine`]) and simulated one sample past their end; the
+/// state there, refined in turn, replaces the segment's start when it
+/// predicts the segment better than its cost now (a start state stuck in
+/// a wrong basin — the wrong side of an impact — that the local refinement
+/// cannot leave; CONTEXT fact 6). Returns the indices changed and the
+/// simulations run.
 pub fn run_in(
     cmp: &Comparison,
     model: &Model,
     sim: SimSettings,
     segs: &mut [Segment],
-    picks: &[(usize, Segment)],
+    picks: &[Pick],
     iterations: usize,
 ) -> (Vec<usize>, usize) {
-    let mut sims = 0;
     let preds: Vec<Segment> = picks.iter().map(|p| p.1.clone()).collect();
     let (preds, _, f) = refine_local(cmp, model, sim, &preds, iterations, false);
-    sims += f.simulations;
-    let picks: Vec<(usize, Segment)> = picks.iter().map(|p| p.0).zip(preds).collect();
-    let (changed, n) = run_in_refined(cmp, model, sim, segs, &picks, iterations);
-    (changed, sims + n)
+    let picks: Vec<Pick> = picks
+        .iter()
+        .zip(preds)
+        .map(|(p, pred)| (p.0, pred, p.2))
+        .collect();
+    let (changed, _, n) = run_in_refined(cmp, model, sim, segs, &picks, iterations);
+    (changed, f.simulations + n)
 }
 
-/// [`run_in`] from predecessors already refined.
+/// [`run_in`] from predecessors already refined; also returns the
+/// predictions of the segments changed (p × N).
 fn run_in_refined(
     cmp: &Comparison,
     model: &Model,
     sim: SimSettings,
     segs: &mut [Segment],
-    picks: &[(usize, Segment)],
+    picks: &[Pick],
     iterations: usize,
-) -> (Vec<usize>, usize) {
+) -> (Vec<usize>, DMatrix<f64>, usize) {
+    let empty = || DMatrix::zeros(0, 0);
     let Ok(integ) = Integrator::new(model, cmp.fs, sim) else {
-        return (vec![], 0);
+        return (vec![], empty(), 0);
     };
     let n = model.ndof();
     let mut sims = picks.len();
-    let cands: Vec<Option<(usize, Segment)>> = picks
+    let cands: Vec<Option<(usize, Segment, f64)>> = picks
         .par_iter()
-        .map(|(i, p)| {
-            let i = *i;
-            let s = &segs[i];
-            if p.start + p.len != s.start {
-                return None;
-            }
-            let run = integ.run(cmp.force.columns(p.start, p.len + 1), &p.u0, &p.v0);
-            if !run.completed() || run.len() != p.len + 1 {
-                return None;
-            }
-            Some((
-                i,
-                Segment {
-                    start: s.start,
-                    len: s.len,
-                    u0: (0..n).map(|q| run.u[(q, p.len)]).collect(),
-                    v0: (0..n).map(|q| run.v[(q, p.len)]).collect(),
-                },
-            ))
-        })
+        .map(|(i, p, cost)| Some((*i, carried(&integ, cmp, p, &segs[*i], n)?, *cost)))
         .collect();
-    let cands: Vec<(usize, Segment)> = cands.into_iter().flatten().collect();
+    let cands: Vec<(usize, Segment, f64)> = cands.into_iter().flatten().collect();
     if cands.is_empty() {
-        return (vec![], sims);
+        return (vec![], empty(), sims);
     }
-    let old: Vec<Segment> = cands.iter().map(|c| segs[c.0].clone()).collect();
-    let y_old = predict_each(cmp, model, &old, sim, &mut sims);
     let trial: Vec<Segment> = cands.iter().map(|c| c.1.clone()).collect();
     let (trial, y_new, f) = refine_local(cmp, model, sim, &trial, iterations, false);
     sims += f.simulations;
     let mut changed = vec![];
-    for ((i, _), (o, t)) in cands.iter().zip(old.iter().zip(&trial)) {
-        let before = residual(cmp, o, &y_old).map_or(f64::INFINITY, |r| r.1);
-        if residual(cmp, t, &y_new).is_some_and(|r| r.1 < before) {
+    for ((i, _, before), t) in cands.iter().zip(&trial) {
+        if residual(cmp, t, &y_new).is_some_and(|r| r.1 < *before) {
             segs[*i] = t.clone();
             changed.push(*i);
         }
     }
-    (changed, sims)
+    (changed, y_new, sims)
 }

@@ -38,6 +38,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod contact_case;
 pub mod cost;
 pub mod figures;
 pub mod forward;
@@ -349,7 +350,7 @@ fn identify(problem: &Problem, x: &[f64], s: &FitSettings) -> (Option<Identifiab
     let rms: Vec<f64> = gls
         .observations
         .iter()
-        .map(|o| s.noise_level * o.weight * crate::signal::rms_of(&o.data))
+        .map(|o| o.noise_std(s.noise_level))
         .collect();
     let mut sig = Vec::with_capacity(r0.len());
     for seg in &gls.segments {

@@ -33,6 +33,12 @@ impl Observation {
     pub fn name(&self) -> String {
         format!("{}_{}", self.quantity.prefix(), self.dof)
     }
+
+    /// Standard deviation of this channel's weighted residual rows under
+    /// white noise of `level` times the channel's RMS: `level w rms(y)`.
+    pub fn noise_std(&self, level: f64) -> f64 {
+        level * self.weight * crate::signal::rms_of(&self.data)
+    }
 }
 
 /// The correlation metric.

@@ -49,7 +49,8 @@ pub fn unsupported(problem: &Problem) -> Option<String> {
 pub struct SegmentDerivatives {
     /// Channels, as [`forward::simulate`] gives them.
     pub y: SegmentResponse,
-    /// `∂y/∂x_j`, one matrix per parameter.
+    /// `∂y/∂x_j`, one matrix per parameter (after the start-state
+    /// directions when [`simulate_seeded`] was asked for them).
     pub dy: Vec<DMatrix<f64>>,
 }
 
@@ -61,6 +62,17 @@ pub fn simulate(
     problem: &Problem,
     x: &[f64],
 ) -> (std::result::Result<Vec<SegmentDerivatives>, Failure>, usize) {
+    simulate_seeded(problem, x, false)
+}
+
+/// [`simulate`], and with `states` also the derivatives with respect to
+/// each segment's start state: `dy` then holds the `2n` state directions
+/// first (`u_0`, then `v_0`), then the parameters.
+pub fn simulate_seeded(
+    problem: &Problem,
+    x: &[f64],
+    states: bool,
+) -> (std::result::Result<Vec<SegmentDerivatives>, Failure>, usize) {
     let fail = |segment, reason: String| Failure { segment, reason };
     if let Some(why) = unsupported(problem) {
         return (Err(fail(None, why)), 0);
@@ -70,8 +82,13 @@ pub fn simulate(
         Ok(c) => c,
         Err(f) => return (Err(f), 0),
     };
+    let n = model.ndof();
     let seeds = match param_seeds(&model, &problem.parameters) {
-        Ok(p) => Seeds::params(model.ndof(), p),
+        Ok(params) if states => Seeds {
+            state: DMatrix::identity(2 * n, 2 * n),
+            params,
+        },
+        Ok(p) => Seeds::params(n, p),
         Err(e) => return (Err(fail(None, e)), 0),
     };
     // in parallel, collected in order (as forward::simulate)
@@ -95,7 +112,7 @@ pub fn simulate(
             }
             let pos = &compiled.pos;
             let y = forward::extract_channels(problem, (&sim.u, &sim.v, &sim.a), pos);
-            let dy = (0..seeds.params.len())
+            let dy = (0..seeds.len())
                 .map(|j| {
                     forward::extract_channels(problem, (&sens.du[j], &sens.dv[j], &sens.da[j]), pos)
                 })
