@@ -794,6 +794,7 @@ pub fn diagnose(
             note,
             simulations: fit_sims,
             fitted: fit_segs,
+            stages,
         } = fit_effects(
             &trial,
             &all,
@@ -805,6 +806,9 @@ pub fn diagnose(
         )?;
         sims += fit_sims;
         *timings.entry("fit".into()).or_insert(0.0) += t.elapsed().as_secs_f64();
+        for (name, secs) in stages {
+            *timings.entry(name.into()).or_insert(0.0) += secs;
+        }
         let sim = resolved(&fitted, rec.fs, settings, &prep.recon.states);
         let sub = sim.substeps;
         let pred = cmp.shoot(&fitted, sim);
@@ -1137,6 +1141,8 @@ struct EffectFit {
     /// The fit segments with their fitted start states, and the
     /// simulation settings of the fit (None when no start was carried on).
     fitted: Option<(Vec<Segment>, SimSettings)>,
+    /// Seconds spent in the contact scan, the race and the polish.
+    stages: [(&'static str, f64); 3],
 }
 
 /// Fit the parameters of all added effects jointly.
@@ -1180,6 +1186,7 @@ fn fit_effects(
     let np = problem.parameters.len();
     let mut starts = vec![vec![0.0; np]];
     let mut sims = 0;
+    let mut stages = [("fit_scan", 0.0), ("fit_race", 0.0), ("fit_polish", 0.0)];
     let mut stiffest = trial.clone();
     // a cubic spring: the segment error has local minima in k3 (the
     // traced value comes from linear-model states), so two more starts
@@ -1210,9 +1217,11 @@ fn fit_effects(
                 .fold(0.0, f64::max);
             let pg = &mut problem.parameters[np - 2];
             pg.upper = pg.upper.max(1.2 * dmax);
+            let t = Instant::now();
             let (best, evals) =
                 scan_contact(trial, ci, &last.candidate, states, cmp, &segments, settings);
             sims += evals * segments.len();
+            stages[0].1 += t.elapsed().as_secs_f64();
             let (pg, pk) = (&problem.parameters[np - 2], &problem.parameters[np - 1]);
             for (g, kc) in best {
                 let mut s = vec![0.0; np];
@@ -1236,8 +1245,11 @@ fn fit_effects(
         max_iterations: settings.fit.max_iterations.min(RACE_ITERATIONS),
         ..settings.fit
     };
+    let t = Instant::now();
     let (_, results) = crate::update::fit_multistart(&problem, &race, &starts)?;
     sims += results.iter().map(|r| r.simulations).sum::<usize>();
+    stages[1].1 += t.elapsed().as_secs_f64();
+    let t = Instant::now();
     // the race's starts, best first
     let mut order: Vec<usize> = (0..results.len())
         .filter(|&i| results[i].cost().is_finite())
@@ -1278,13 +1290,16 @@ fn fit_effects(
             note: "every start failed; traced values kept".into(),
             simulations: sims,
             fitted: None,
+            stages,
         });
     };
+    stages[2].1 += t.elapsed().as_secs_f64();
     Ok(EffectFit {
         model: k.model,
         note: k.note,
         simulations: sims,
         fitted: Some((k.segments, problem.sim)),
+        stages,
     })
 }
 

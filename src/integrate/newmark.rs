@@ -13,7 +13,10 @@
 //! residual is `r(u) = J_0 u − b_n + (1+α) f_int(u, a_1 u + w_n)` with the
 //! constant matrix `J_0 = a_0 M + (1+α)(a_1 C + K)`, `a_1 = γ/(βh)`.
 //! Newton's matrix adds the element tangents; a backtracking line search
-//! guards the non-smooth contact law.
+//! guards the non-smooth contact law. A sub-step that follows one where no
+//! element was active starts from the linear step's solution `J_0⁻¹ b`
+//! rather than the predictor: while the elements stay inactive that is the
+//! answer, and one residual evaluation confirms it.
 
 use crate::error::{Result, TacitError};
 use crate::model::elements::{self, Element};
@@ -153,6 +156,14 @@ pub struct Integrator {
     j0_chol: Option<Vec<f64>>,
     /// M's diagonal when M is diagonal (lumped masses): `M z` in n products.
     m_diag: Option<Vec<f64>>,
+    /// Powers of the sub-step map of a derivative when no element is
+    /// active (built on first use by the sensitivities; see
+    /// `sensitivity::linear_powers`).
+    linear_powers: std::sync::OnceLock<Option<Vec<f64>>>,
+    /// Batch the sub-steps without an active element in the
+    /// sensitivities (off only to test the batching against the plain
+    /// recursion).
+    batch_linear: bool,
 }
 
 impl Integrator {
@@ -210,6 +221,8 @@ impl Integrator {
             beta,
             j0,
             j0_chol,
+            linear_powers: std::sync::OnceLock::new(),
+            batch_linear: true,
         })
     }
 
@@ -326,7 +339,11 @@ impl Integrator {
     /// false when M is not positive definite.
     fn initial_acceleration(&self, force: DMatrixView<'_, f64>, ws: &mut Work) -> bool {
         let n = self.n;
-        elements::internal_force(&self.elements, &ws.u, &ws.v, &mut ws.fnl);
+        // the force, and the slopes the first sub-step starts from
+        ws.fnl.fill(0.0);
+        for (e, s) in self.elements.iter().zip(ws.slopes.iter_mut()) {
+            *s = e.force_and_slope(&ws.u, &ws.v, &mut ws.fnl);
+        }
         for i in 0..n {
             ws.rhs[i] = force[(i, 0)] - ws.fnl[i];
         }
@@ -445,8 +462,20 @@ impl Integrator {
     }
 
     /// Newton iterations on ws.un; Ok(iterations) or Err((iterations, residual)).
-    /// With `REC`, `ws.iterated` says whether a Newton step was taken and
-    /// `ws.dir_slopes` holds the slopes of the last step's matrix.
+    /// `ws.iterated` says whether a Newton step was taken and
+    /// `ws.dir_slopes` holds the slopes of the last step's matrix (used by
+    /// the sensitivities, `REC`).
+    ///
+    /// A point whose residual is within the tolerance is accepted unless a
+    /// contact lies on the other side of its switch than the matrix that
+    /// produced the point (a penetration below `tol · scale / k_c`): then
+    /// up to [`SIDE_STEPS`] more steps are taken from there, with the
+    /// matrix of the side the point is on, so the accepted point solves
+    /// the law of its own side and the computed trajectory stays a
+    /// continuous function of the start and the parameters (accepting
+    /// across the switch makes it jump where a perturbation moves the
+    /// penetration out of the tolerance band; differences of the cost then
+    /// disagree with the derivatives by percents).
     fn newton<const N: usize, const REC: bool>(
         &self,
         ws: &mut Work,
@@ -461,26 +490,54 @@ impl Integrator {
                 return Ok(1);
             }
         }
-        let (mut rn, mut scale) = self.residual::<N>(ws, a1);
         let mut it = 0;
-        if REC {
-            ws.iterated = false;
+        ws.iterated = false;
+        // no element was active at the last accepted point: start from the
+        // linear step's solution J0⁻¹ b (one Newton step from anywhere with
+        // the open matrix), which is the answer while they stay inactive
+        if let (Some(l), false) = (&self.j0_chol, ws.slopes.iter().any(|&s| s != 0.0)) {
+            ws.un.copy_from_slice(&ws.b);
+            chol_solve::<N>(l, n, &mut ws.un);
+            it = 1;
+            ws.dir_slopes.fill(0.0);
+            ws.iterated = true;
         }
-        while !(rn <= tol * scale || rn == 0.0) {
+        let (mut rn, mut scale) = self.residual::<N>(ws, a1);
+        let mut side_steps = 0;
+        loop {
+            let converged = rn <= tol * scale || rn == 0.0;
+            if converged {
+                if side_steps >= SIDE_STEPS || !(ws.iterated && self.across_switch(ws)) {
+                    break;
+                }
+                side_steps += 1;
+            }
             if it >= self.settings.max_newton || !rn.is_finite() {
+                if converged {
+                    break;
+                }
                 return Err((it, rn));
             }
             it += 1;
-            if REC {
-                ws.dir_slopes.copy_from_slice(&ws.slopes);
-                ws.iterated = true;
-            }
+            ws.dir_slopes.copy_from_slice(&ws.slopes);
+            ws.iterated = true;
             if !self.newton_direction::<N>(ws, a1) {
                 return Err((it, rn));
             }
             (rn, scale) = self.line_search::<N>(ws, a1, rn);
         }
         Ok(it.max(1))
+    }
+
+    /// True when a contact's side at ws.un (its slope in ws.slopes) differs
+    /// from the side of the last Newton matrix (ws.dir_slopes).
+    fn across_switch(&self, ws: &Work) -> bool {
+        self.elements
+            .iter()
+            .zip(ws.slopes.iter().zip(&ws.dir_slopes))
+            .any(|(e, (&s, &d))| {
+                matches!(e, elements::Element::Contact { .. }) && (s != 0.0) != (d != 0.0)
+            })
     }
 
     /// Newton step ws.du = J⁻¹ r with J = J0 plus the slopes of the last
@@ -584,6 +641,11 @@ impl Outputs {
         }
     }
 }
+
+/// Newton steps taken at most, after the residual is within the
+/// tolerance, to bring the accepted point to its own side of a contact's
+/// switch ([`Integrator::newton`]).
+const SIDE_STEPS: usize = 2;
 
 /// Scratch vectors of one run.
 struct Work {

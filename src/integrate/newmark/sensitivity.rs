@@ -200,6 +200,11 @@ struct SensWork {
     dz: Vec<f64>,
     dw: Vec<f64>,
     rhs: Vec<f64>,
+    /// Sub-steps each seed has yet to be advanced over (batched).
+    pending: Vec<usize>,
+    /// Scratch of the batched advance (3n).
+    x3: Vec<f64>,
+    y3: Vec<f64>,
     /// `q` per parameter seed at the current state.
     q: Vec<f64>,
     /// `δM a + (1+α) q` per parameter seed.
@@ -339,6 +344,7 @@ impl Integrator {
         let mut ws = Work::new(n, self.elements.len());
         let mut sw = SensWork::new(self, state.ncols() + prep.len(), prep.len());
         let mut dout = SensOutputs::new(n, ns, sw.s);
+        let powers = self.linear_powers();
         ws.u.copy_from_slice(&u0[..n]);
         ws.v.copy_from_slice(&v0[..n]);
         let mut status = SimStatus::Completed;
@@ -391,7 +397,9 @@ impl Integrator {
                     };
                     break 'samples;
                 }
-                if !self.sensitivity_step::<N>(&ws, &mut sw, prep) && sw.singular_at.is_none() {
+                if !self.sensitivity_step::<N>(&ws, &mut sw, prep, powers)
+                    && sw.singular_at.is_none()
+                {
                     sw.singular_at = Some(time());
                 }
                 if self.alpha != 0.0 {
@@ -400,6 +408,7 @@ impl Integrator {
             }
             elements::internal_force(&self.elements, &ws.u, &ws.v, &mut ws.fnl);
             out.store(&ws, k);
+            flush_all(powers, n, &mut sw);
             dout.store(&sw, k);
             done = k + 1;
         }
@@ -546,12 +555,11 @@ impl Integrator {
         ws: &Work,
         sw: &mut SensWork,
         prep: &[Prepared],
+        powers: Option<&[f64]>,
     ) -> bool {
         let n = dim::<N>(self.n);
         let (h, alpha, gamma, beta) = (self.h, self.alpha, self.gamma, self.beta);
-        let (a0, a1) = (1.0 / (beta * h * h), gamma / (beta * h));
-        let (a2, a3) = (1.0 / (beta * h), 0.5 / beta - 1.0);
-        let c1 = 1.0 + alpha;
+        let a1 = gamma / (beta * h);
         let differs = self.newton_side(ws, sw);
         sw.side_steps += usize::from(differs);
         let ok = self.factor_tangent::<N>(&sw.eff, a1, &mut sw.tangent);
@@ -564,54 +572,43 @@ impl Integrator {
             self.parameter_q::<N>(ws, prep, &actual, &mut sw.q_act);
         }
         let ns0 = sw.s - prep.len();
+        // no element active (α = 0): a seed without a parameter term this
+        // sub-step only counts it, and is advanced by the power of the
+        // constant sub-step map when it is next needed
+        let batch = powers.is_some() && sw.eff.iter().all(|&e| e == 0.0);
         for j in 0..sw.s {
             let r = j * n..(j + 1) * n;
-            let (du, dv, da) = (
-                &mut sw.du[r.clone()],
-                &mut sw.dv[r.clone()],
-                &mut sw.da[r.clone()],
+            let pr = (j >= ns0).then(|| (j - ns0) * n..(j - ns0 + 1) * n);
+            if batch && pr.clone().is_none_or(|p| sw.p[p].iter().all(|&x| x == 0.0)) {
+                sw.pending[j] += 1;
+                continue;
+            }
+            if let Some(pw) = powers {
+                flush_seed(pw, n, j, sw);
+            }
+            let pj = pr.map(|p| &sw.p[p]);
+            let dg = (alpha != 0.0).then(|| &sw.dg[r.clone()]);
+            let solved = self.seed_step::<N>(
+                &sw.eff,
+                (
+                    &mut sw.du[r.clone()],
+                    &mut sw.dv[r.clone()],
+                    &mut sw.da[r.clone()],
+                ),
+                dg,
+                pj,
+                (&mut sw.dz, &mut sw.dw, &mut sw.rhs),
+                sw.c_zero,
+                |b| self.solve_tangent::<N>(&sw.tangent, b),
             );
-            let (dz, dw, rhs) = (&mut sw.dz[..n], &mut sw.dw[..n], &mut sw.rhs[..n]);
-            for i in 0..n {
-                dz[i] = -a0 * du[i] - a2 * dv[i] - a3 * da[i];
-                dw[i] = dv[i] + h * (1.0 - gamma) * da[i] + h * gamma * dz[i];
-            }
-            // rhs = −M δz − (1+α)(C + F_v) δw + α δg_n − p
-            match &self.m_diag {
-                Some(m) => (0..n).for_each(|i| rhs[i] = -m[i] * dz[i]),
-                None => {
-                    rhs.fill(0.0);
-                    mat_vec_axpy::<N>(self.m.as_slice(), n, dz, -1.0, rhs);
+            if !solved {
+                for v in [&mut sw.du, &mut sw.dv, &mut sw.da] {
+                    v[r.clone()].fill(f64::NAN);
                 }
-            }
-            if !sw.c_zero {
-                mat_vec_axpy::<N>(self.c.as_slice(), n, dw, -c1, rhs);
-            }
-            for (e, &sl) in self.elements.iter().zip(&sw.eff) {
-                e.add_slope_product(sl, (0.0, dw), (-c1, dw), rhs);
             }
             if alpha != 0.0 {
-                for (x, g) in rhs.iter_mut().zip(&sw.dg[r.clone()]) {
-                    *x += alpha * g;
-                }
-            }
-            if j >= ns0 {
-                let jp = j - ns0;
-                for (x, p) in rhs.iter_mut().zip(&sw.p[jp * n..(jp + 1) * n]) {
-                    *x -= p;
-                }
-            }
-            if !self.solve_tangent::<N>(&sw.tangent, rhs) {
-                rhs.fill(f64::NAN);
-            }
-            for i in 0..n {
-                du[i] = rhs[i];
-                da[i] = a0 * rhs[i] + dz[i];
-                dv[i] = a1 * rhs[i] + dw[i];
-            }
-            if alpha != 0.0 {
-                let dg = &mut sw.dg[r];
-                self.g_derivative::<N>(&ws.slopes, du, dv, dg);
+                let dg = &mut sw.dg[r.clone()];
+                self.g_derivative::<N>(&ws.slopes, &sw.du[r.clone()], &sw.dv[r], dg);
                 if j >= ns0 {
                     let jp = j - ns0;
                     let q = if hht_differs { &sw.q_act } else { &sw.q };
@@ -622,6 +619,120 @@ impl Integrator {
             }
         }
         ok
+    }
+
+    /// Advance one seed's derivative `x = (δu, δv, δa)` over the sub-step:
+    /// `δz`, `δw`, the right-hand side `−M δz − (1+α)(C + F_v) δw + α δg_n
+    /// − p` with the element slopes `eff`, `δg_n` (HHT) and the parameter
+    /// term `p` (None for a state seed), the tangent solve `solve`. False
+    /// when the solve failed.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn seed_step<const N: usize>(
+        &self,
+        eff: &[f64],
+        (du, dv, da): (&mut [f64], &mut [f64], &mut [f64]),
+        dg: Option<&[f64]>,
+        p: Option<&[f64]>,
+        (dz, dw, rhs): (&mut [f64], &mut [f64], &mut [f64]),
+        c_zero: bool,
+        solve: impl Fn(&mut [f64]) -> bool,
+    ) -> bool {
+        let n = dim::<N>(self.n);
+        let (h, alpha, gamma, beta) = (self.h, self.alpha, self.gamma, self.beta);
+        let (a0, a1) = (1.0 / (beta * h * h), gamma / (beta * h));
+        let (a2, a3) = (1.0 / (beta * h), 0.5 / beta - 1.0);
+        let c1 = 1.0 + alpha;
+        let (du, dv, da) = (&mut du[..n], &mut dv[..n], &mut da[..n]);
+        let (dz, dw, rhs) = (&mut dz[..n], &mut dw[..n], &mut rhs[..n]);
+        for i in 0..n {
+            dz[i] = -a0 * du[i] - a2 * dv[i] - a3 * da[i];
+            dw[i] = dv[i] + h * (1.0 - gamma) * da[i] + h * gamma * dz[i];
+        }
+        match &self.m_diag {
+            Some(m) => (0..n).for_each(|i| rhs[i] = -m[i] * dz[i]),
+            None => {
+                rhs.fill(0.0);
+                mat_vec_axpy::<N>(self.m.as_slice(), n, dz, -1.0, rhs);
+            }
+        }
+        if !c_zero {
+            mat_vec_axpy::<N>(self.c.as_slice(), n, dw, -c1, rhs);
+        }
+        for (e, &sl) in self.elements.iter().zip(eff) {
+            e.add_slope_product(sl, (0.0, dw), (-c1, dw), rhs);
+        }
+        if let Some(dg) = dg {
+            for (x, g) in rhs.iter_mut().zip(dg) {
+                *x += alpha * g;
+            }
+        }
+        if let Some(p) = p {
+            for (x, p) in rhs.iter_mut().zip(p) {
+                *x -= p;
+            }
+        }
+        let ok = solve(rhs);
+        for i in 0..n {
+            du[i] = rhs[i];
+            da[i] = a0 * rhs[i] + dz[i];
+            dv[i] = a1 * rhs[i] + dw[i];
+        }
+        ok
+    }
+
+    /// The powers `L, L², …, L^S` (S sub-steps per sample; each `3n × 3n`,
+    /// column-major, one after the other) of the sub-step map `L` of a
+    /// derivative `(δu, δv, δa)` without a parameter term when no element
+    /// is active: the map of [`Integrator::seed_step`] with zero slopes and
+    /// the tangent `J_0`, which does not change from sub-step to sub-step.
+    /// Built once per integrator, on first use; None with HHT (`δg` is
+    /// carried too), without a Cholesky factor of `J_0`, or when batching
+    /// is off.
+    fn linear_powers(&self) -> Option<&[f64]> {
+        self.linear_powers
+            .get_or_init(|| {
+                let l = self.j0_chol.as_ref()?;
+                if self.alpha != 0.0 || !self.batch_linear {
+                    return None;
+                }
+                let n = self.n;
+                let m3 = 3 * n;
+                let zeros = vec![0.0; self.elements.len()];
+                let c_zero = self.c.iter().all(|&x| x == 0.0);
+                let (mut dz, mut dw, mut rhs) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+                let mut one = vec![0.0; m3 * m3];
+                for (c, col) in one.chunks_exact_mut(m3).enumerate() {
+                    col[c] = 1.0;
+                    let (du, rest) = col.split_at_mut(n);
+                    let (dv, da) = rest.split_at_mut(n);
+                    self.seed_step::<0>(
+                        &zeros,
+                        (du, dv, da),
+                        None,
+                        None,
+                        (&mut dz, &mut dw, &mut rhs),
+                        c_zero,
+                        |b| {
+                            chol_solve::<0>(l, n, b);
+                            true
+                        },
+                    );
+                }
+                let s = self.settings.substeps;
+                let mut out = Vec::with_capacity(s * m3 * m3);
+                out.extend_from_slice(&one);
+                for k in 1..s {
+                    let prev = out[(k - 1) * m3 * m3..k * m3 * m3].to_vec();
+                    let mut next = vec![0.0; m3 * m3];
+                    for (pc, nc) in prev.chunks_exact(m3).zip(next.chunks_exact_mut(m3)) {
+                        mat_vec_axpy::<0>(&one, m3, pc, 1.0, nc);
+                    }
+                    out.extend_from_slice(&next);
+                }
+                Some(out)
+            })
+            .as_deref()
     }
 
     /// Factor `J_T = J_0 + (1+α)(F_u + a_1 F_v)` for `slopes`, unless the
@@ -694,6 +805,38 @@ impl Integrator {
     }
 }
 
+/// Advance seed `j` over its pending sub-steps (`powers` from
+/// [`Integrator::linear_powers`]).
+fn flush_seed(powers: &[f64], n: usize, j: usize, sw: &mut SensWork) {
+    let c = sw.pending[j];
+    if c == 0 {
+        return;
+    }
+    sw.pending[j] = 0;
+    let m3 = 3 * n;
+    let pw = &powers[(c - 1) * m3 * m3..c * m3 * m3];
+    let r = j * n..(j + 1) * n;
+    let x = &mut sw.x3;
+    x[..n].copy_from_slice(&sw.du[r.clone()]);
+    x[n..2 * n].copy_from_slice(&sw.dv[r.clone()]);
+    x[2 * n..].copy_from_slice(&sw.da[r.clone()]);
+    let y = &mut sw.y3;
+    y.fill(0.0);
+    mat_vec_axpy::<0>(pw, m3, x, 1.0, y);
+    sw.du[r.clone()].copy_from_slice(&y[..n]);
+    sw.dv[r.clone()].copy_from_slice(&y[n..2 * n]);
+    sw.da[r].copy_from_slice(&y[2 * n..]);
+}
+
+/// Every seed advanced over its pending sub-steps.
+fn flush_all(powers: Option<&[f64]>, n: usize, sw: &mut SensWork) {
+    if let Some(pw) = powers {
+        for j in 0..sw.s {
+            flush_seed(pw, n, j, sw);
+        }
+    }
+}
+
 impl SensWork {
     fn new(integ: &Integrator, s: usize, np: usize) -> SensWork {
         let n = integ.n;
@@ -713,6 +856,9 @@ impl SensWork {
             dz: z(n),
             dw: z(n),
             rhs: z(n),
+            pending: vec![0; s],
+            x3: z(3 * n),
+            y3: z(3 * n),
             q: z(n * np),
             p: z(n * np),
             q_act: z(n * np),
