@@ -160,10 +160,29 @@ pub struct Integrator {
     /// active (built on first use by the sensitivities; see
     /// `sensitivity::linear_powers`).
     linear_powers: std::sync::OnceLock<Option<Vec<f64>>>,
-    /// Batch the sub-steps without an active element in the
-    /// sensitivities (off only to test the batching against the plain
-    /// recursion).
+    /// The affine map of a whole sample without an active element (built
+    /// on first use; see [`SampleMap`]).
+    sample_map: std::sync::OnceLock<Option<SampleMap>>,
+    /// Batch the sub-steps without an active element (off only to test
+    /// the batching against the plain recursion).
     batch_linear: bool,
+}
+
+/// The state after a whole sample as an affine function of the state at
+/// its start and the force at its two ends, when no element is active in
+/// any of its sub-steps (α = 0, every element a contact): each sub-step is
+/// then `u_{n+1} = J_0⁻¹ b_n`, linear in the inputs. A sample is taken in
+/// one product when every contact's relative displacement, evaluated by
+/// the same map after each sub-step, stays at or below its gap; otherwise
+/// it is sub-stepped as usual.
+#[derive(Debug, Clone)]
+struct SampleMap {
+    /// `(u, v, a)` after the sample: `3n × 5n`, column-major, from the
+    /// inputs `(u, v, a, f_prev, f_next)`.
+    full: Vec<f64>,
+    /// Per contact: `(i, j, gap)` and its relative displacement after each
+    /// sub-step (`S` rows of `5n` coefficients).
+    contacts: Vec<((usize, Option<usize>, f64), Vec<f64>)>,
 }
 
 impl Integrator {
@@ -222,6 +241,7 @@ impl Integrator {
             j0,
             j0_chol,
             linear_powers: std::sync::OnceLock::new(),
+            sample_map: std::sync::OnceLock::new(),
             batch_linear: true,
         })
     }
@@ -270,6 +290,7 @@ impl Integrator {
         let ns = force.ncols();
         let mut out = Outputs::new(n, ns);
         let mut ws = Work::new(n, self.elements.len());
+        let map = self.sample_map();
         ws.u.copy_from_slice(&u0[..n]);
         ws.v.copy_from_slice(&v0[..n]);
         let mut status = SimStatus::Completed;
@@ -296,7 +317,19 @@ impl Integrator {
                 ws.f_prev[i] = force[(i, k - 1)];
                 ws.f_next[i] = force[(i, k)];
             }
-            for sub in 0..self.settings.substeps {
+            let batched = map.is_some_and(|m| self.batch_sample(m, &mut ws));
+            if batched {
+                steps += self.settings.substeps;
+                iters += self.settings.substeps;
+                if ws.u.iter().chain(&ws.v).any(|x| !x.is_finite()) {
+                    status = SimStatus::NonFinite {
+                        time: k as f64 / self.fs(),
+                        sample: k - 1,
+                    };
+                    break 'samples;
+                }
+            }
+            for sub in (0..self.settings.substeps).filter(|_| !batched) {
                 let time = || (k - 1) as f64 / self.fs() + (sub + 1) as f64 * self.h;
                 match self.advance::<N, false>(&mut ws, sub) {
                     Ok(it) => iters += it,
@@ -382,6 +415,114 @@ impl Integrator {
             u[i] = un;
         }
         Ok(it)
+    }
+
+    /// The sample map, if this integrator has one ([`SampleMap`]).
+    fn sample_map(&self) -> Option<&SampleMap> {
+        self.sample_map
+            .get_or_init(|| {
+                let l = self.j0_chol.as_ref()?;
+                if self.alpha != 0.0 || !self.batch_linear {
+                    return None;
+                }
+                let mut contacts = vec![];
+                for e in &self.elements {
+                    match *e {
+                        Element::Contact { i, j, gap, .. } => contacts.push((i, j, gap)),
+                        _ => return None,
+                    }
+                }
+                let (n, s) = (self.n, self.settings.substeps);
+                let (m3, m5) = (3 * n, 5 * n);
+                let (h, gamma, beta) = (self.h, self.gamma, self.beta);
+                let (a0, a1) = (1.0 / (beta * h * h), gamma / (beta * h));
+                let mut full = vec![0.0; m3 * m5];
+                let mut deltas = vec![vec![0.0; s * m5]; contacts.len()];
+                let mut ws = Work::new(n, self.elements.len());
+                for col in 0..m5 {
+                    for v in [
+                        &mut ws.u,
+                        &mut ws.v,
+                        &mut ws.a,
+                        &mut ws.f_prev,
+                        &mut ws.f_next,
+                    ] {
+                        v.fill(0.0);
+                    }
+                    let unit = match col / n {
+                        0 => &mut ws.u,
+                        1 => &mut ws.v,
+                        2 => &mut ws.a,
+                        3 => &mut ws.f_prev,
+                        _ => &mut ws.f_next,
+                    };
+                    unit[col % n] = 1.0;
+                    for sub in 0..s {
+                        // the sub-step of Integrator::advance with every
+                        // element inactive: Newton's answer J0⁻¹ b
+                        self.step_setup::<0>(&mut ws, sub);
+                        ws.un.copy_from_slice(&ws.b);
+                        chol_solve::<0>(l, n, &mut ws.un);
+                        for i in 0..n {
+                            let un = ws.un[i];
+                            ws.a[i] = a0 * un + ws.z[i];
+                            ws.v[i] = a1 * un + ws.w[i];
+                            ws.u[i] = un;
+                        }
+                        for (&(i, j, _), d) in contacts.iter().zip(deltas.iter_mut()) {
+                            d[sub * m5 + col] = ws.u[i] - j.map_or(0.0, |j| ws.u[j]);
+                        }
+                    }
+                    let out = &mut full[col * m3..(col + 1) * m3];
+                    out[..n].copy_from_slice(&ws.u);
+                    out[n..2 * n].copy_from_slice(&ws.v);
+                    out[2 * n..].copy_from_slice(&ws.a);
+                }
+                Some(SampleMap {
+                    full,
+                    contacts: contacts.into_iter().zip(deltas).collect(),
+                })
+            })
+            .as_ref()
+    }
+
+    /// Take the whole sample (forces in `ws.f_prev`, `ws.f_next`) by the
+    /// sample map when no element is active at its start nor after any of
+    /// its sub-steps; false (`ws` untouched) otherwise.
+    fn batch_sample(&self, map: &SampleMap, ws: &mut Work) -> bool {
+        if ws.slopes.iter().any(|&s| s != 0.0) {
+            return false;
+        }
+        let n = self.n;
+        let m5 = 5 * n;
+        let x = &mut ws.x5;
+        for (q, v) in [&ws.u, &ws.v, &ws.a, &ws.f_prev, &ws.f_next]
+            .iter()
+            .enumerate()
+        {
+            x[q * n..(q + 1) * n].copy_from_slice(&v[..n]);
+        }
+        for ((_, _, gap), rows) in &map.contacts {
+            for row in rows.chunks_exact(m5) {
+                let d: f64 = row.iter().zip(x.iter()).map(|(r, x)| r * x).sum();
+                if !(d <= *gap) {
+                    return false;
+                }
+            }
+        }
+        let y = &mut ws.y3;
+        y.fill(0.0);
+        for (col, &xc) in map.full.chunks_exact(3 * n).zip(x.iter()) {
+            for (yi, &c) in y.iter_mut().zip(col) {
+                *yi += c * xc;
+            }
+        }
+        ws.u.copy_from_slice(&y[..n]);
+        ws.v.copy_from_slice(&y[n..2 * n]);
+        ws.a.copy_from_slice(&y[2 * n..]);
+        ws.dir_slopes.fill(0.0);
+        ws.iterated = true;
+        true
     }
 
     /// The sub-step's affine parts `ws.z, w`, right-hand side `ws.b` and
@@ -675,6 +816,9 @@ struct Work {
     /// taken in the current sub-step (recorded for the sensitivities only).
     dir_slopes: Vec<f64>,
     iterated: bool,
+    /// Scratch of a batched sample: its inputs (5n) and the new state (3n).
+    x5: Vec<f64>,
+    y3: Vec<f64>,
 }
 
 impl Work {
@@ -703,6 +847,8 @@ impl Work {
             slopes: vec![0.0; n_elements],
             dir_slopes: vec![0.0; n_elements],
             iterated: false,
+            x5: vec![0.0; 5 * n],
+            y3: vec![0.0; 3 * n],
         }
     }
 }

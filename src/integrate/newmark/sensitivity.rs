@@ -345,6 +345,11 @@ impl Integrator {
         let mut sw = SensWork::new(self, state.ncols() + prep.len(), prep.len());
         let mut dout = SensOutputs::new(n, ns, sw.s);
         let powers = self.linear_powers();
+        // a parameter that moves M, C or K has a term in every sub-step
+        let map = self.sample_map().filter(|_| powers.is_some()).filter(|_| {
+            prep.iter()
+                .all(|p| p.dm.is_none() && p.dc.is_none() && p.dk.is_none())
+        });
         ws.u.copy_from_slice(&u0[..n]);
         ws.v.copy_from_slice(&v0[..n]);
         let mut status = SimStatus::Completed;
@@ -374,7 +379,23 @@ impl Integrator {
                 ws.f_prev[i] = force[(i, k - 1)];
                 ws.f_next[i] = force[(i, k)];
             }
-            for sub in 0..self.settings.substeps {
+            // the whole sample by its map ([`SampleMap`]): every seed is
+            // then without a parameter term and waits for the powers
+            let batched = map.is_some_and(|m| self.batch_sample(m, &mut ws));
+            if batched {
+                let s = self.settings.substeps;
+                steps += s;
+                iters += s;
+                sw.pending.iter_mut().for_each(|p| *p += s);
+                if ws.u.iter().chain(&ws.v).any(|x| !x.is_finite()) {
+                    status = SimStatus::NonFinite {
+                        time: k as f64 / self.fs(),
+                        sample: k - 1,
+                    };
+                    break 'samples;
+                }
+            }
+            for sub in (0..self.settings.substeps).filter(|_| !batched) {
                 let time = || (k - 1) as f64 / self.fs() + (sub + 1) as f64 * self.h;
                 match self.advance::<N, true>(&mut ws, sub) {
                     Ok(it) => iters += it,

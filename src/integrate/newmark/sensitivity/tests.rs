@@ -143,9 +143,22 @@ impl Case {
         let (sim, sens) = integ
             .run_sensitivities(self.force.as_view(), &self.u0, &self.v0, &seeds)
             .unwrap();
-        // the simulation is run()'s, bit for bit
+        // the simulation is run()'s, bit for bit, unless a parameter moves
+        // M, C or K: its derivative needs every sub-step's state, so whole
+        // samples are not taken in one product as run() takes them
+        // (SampleMap), and the two agree up to rounding
         let plain = integ.run(self.force.as_view(), &self.u0, &self.v0);
-        assert_eq!((&sim.u, &sim.v, &sim.a), (&plain.u, &plain.v, &plain.a));
+        let matrices = seeds
+            .params
+            .iter()
+            .any(|p| p.dm.is_some() || p.dc.is_some() || p.dk.is_some());
+        if matrices {
+            for (x, y) in [(&sim.u, &plain.u), (&sim.v, &plain.v), (&sim.a, &plain.a)] {
+                assert!(rel_diff(x, y) < 1e-11, "{:e}", rel_diff(x, y));
+            }
+        } else {
+            assert_eq!((&sim.u, &sim.v, &sim.a), (&plain.u, &plain.v, &plain.a));
+        }
         assert_eq!(sim.newton_iterations, plain.newton_iterations);
         assert_eq!(sens.du.len(), seeds.len());
         // central differences of run() along `shifted`, extrapolated
