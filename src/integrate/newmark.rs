@@ -180,9 +180,16 @@ struct SampleMap {
     /// `(u, v, a)` after the sample: `3n × 5n`, column-major, from the
     /// inputs `(u, v, a, f_prev, f_next)`.
     full: Vec<f64>,
-    /// Per contact: `(i, j, gap)` and its relative displacement after each
-    /// sub-step (`S` rows of `5n` coefficients).
-    contacts: Vec<((usize, Option<usize>, f64), Vec<f64>)>,
+    /// Per contact: its gap and relative displacement after each sub-step.
+    contacts: Vec<ContactRows>,
+}
+
+/// A contact's gap and its relative displacement after each sub-step of
+/// a sample as `S` rows of `5n` coefficients of the sample's inputs.
+#[derive(Debug, Clone)]
+struct ContactRows {
+    gap: f64,
+    rows: Vec<f64>,
 }
 
 impl Integrator {
@@ -478,10 +485,12 @@ impl Integrator {
                     out[n..2 * n].copy_from_slice(&ws.v);
                     out[2 * n..].copy_from_slice(&ws.a);
                 }
-                Some(SampleMap {
-                    full,
-                    contacts: contacts.into_iter().zip(deltas).collect(),
-                })
+                let contacts = contacts
+                    .into_iter()
+                    .zip(deltas)
+                    .map(|((_, _, gap), rows)| ContactRows { gap, rows })
+                    .collect();
+                Some(SampleMap { full, contacts })
             })
             .as_ref()
     }
@@ -502,10 +511,10 @@ impl Integrator {
         {
             x[q * n..(q + 1) * n].copy_from_slice(&v[..n]);
         }
-        for ((_, _, gap), rows) in &map.contacts {
-            for row in rows.chunks_exact(m5) {
+        for c in &map.contacts {
+            for row in c.rows.chunks_exact(m5) {
                 let d: f64 = row.iter().zip(x.iter()).map(|(r, x)| r * x).sum();
-                if !(d <= *gap) {
+                if !(d <= c.gap) {
                     return false;
                 }
             }
