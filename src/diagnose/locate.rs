@@ -29,6 +29,7 @@ use crate::linear::SampledModel;
 use crate::model::Model;
 use crate::record::Quantity;
 use nalgebra::DMatrix;
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// A direction of the unknown force: a spring-joined pair (`[i, j]`, force
@@ -185,12 +186,17 @@ pub fn locate(
     // direction only fits noise
     let max = max.min(channels.len() / 2).max(1);
     while chosen.len() < max && (chosen.is_empty() || current > NOISE_STOP) {
-        let mut scored = vec![];
-        for d in pool.iter().filter(|d| !chosen.contains(d)) {
-            let mut sel = chosen.clone();
-            sel.push(d.clone());
-            scored.push((d.clone(), fit(&sel)?));
-        }
+        // the trial directions are independent: in parallel, collected in
+        // pool order
+        let mut scored = pool
+            .par_iter()
+            .filter(|d| !chosen.contains(d))
+            .map(|d| {
+                let mut sel = chosen.clone();
+                sel.push(d.clone());
+                Ok((d.clone(), fit(&sel)?))
+            })
+            .collect::<Result<Vec<_>>>()?;
         scored.sort_by(|a, b| a.1.total_cmp(&b.1));
         let Some((best, wb)) = scored.first().cloned() else {
             break;

@@ -249,6 +249,19 @@ pub fn prepare(
     sensors: Option<&[usize]>,
     settings: &DiagnoseSettings,
 ) -> Result<Prepared> {
+    prepare_located(model, rec, sensors, settings, None)
+}
+
+/// [`prepare`] with the force directions already located (on another
+/// record of the same structure: a validation record), or searched when
+/// `located` is None.
+pub fn prepare_located(
+    model: &Model,
+    rec: &Record,
+    sensors: Option<&[usize]>,
+    settings: &DiagnoseSettings,
+    located_before: Option<&locate::Located>,
+) -> Result<Prepared> {
     let n = model.ndof();
     rec.validate(Some(n))?;
     if let Some(s) = sensors {
@@ -294,7 +307,9 @@ pub fn prepare(
     let mut located = None;
     let mut recon = if settings.states == StatesSource::Lifted {
         let t = Instant::now();
-        let loc = if settings.locate_ratio > 0.0 && settings.locate_max > 0 {
+        let loc = if let Some(l) = located_before {
+            Some(l.clone())
+        } else if settings.locate_ratio > 0.0 && settings.locate_max > 0 {
             Some(locate::locate(
                 model,
                 &sampled,
@@ -620,7 +635,15 @@ pub fn diagnose(
     let mut timings = BTreeMap::new();
     progress("identify");
     let prep = prepare(declared, rec, sensors, settings)?;
+    // the validation record is identified with the force directions
+    // located on the record (the same structure; no second search)
+    let vprep = validation
+        .map(|v| prepare_located(declared, v, sensors, settings, prep.located.as_ref()))
+        .transpose()?;
     timings.insert("identify".into(), prep.recon.elapsed_s);
+    if let Some(v) = &vprep {
+        timings.insert("identify_validation".into(), v.recon.elapsed_s);
+    }
     let cmp = &prep.comparison;
     let sim0 = resolved(declared, rec.fs, settings, &prep.recon.states);
     let base_sub = sim0.substeps;
@@ -924,16 +947,14 @@ pub fn diagnose(
     );
     timings.insert("errors_after".into(), t.elapsed().as_secs_f64());
     let t = Instant::now();
-    let validation = match validation {
+    let validation = match vprep.as_ref() {
         Some(v) => {
             progress("validation");
             Some(validate(
                 declared,
                 &current,
                 v,
-                sensors,
                 &prep,
-                settings,
                 (sim0, sim1),
                 &mut sims,
             )?)
@@ -1537,25 +1558,21 @@ fn report_effects(
 }
 
 /// Errors on a validation record, and the non-parametric prediction.
-#[allow(clippy::too_many_arguments)]
 fn validate(
     declared: &Model,
     fitted: &Model,
-    v: &Record,
-    sensors: Option<&[usize]>,
+    prep: &Prepared,
     first: &Prepared,
-    settings: &DiagnoseSettings,
     sims: (SimSettings, SimSettings),
     count: &mut usize,
 ) -> Result<Validation> {
-    let prep = prepare(declared, v, sensors, settings)?;
     let cmp = &prep.comparison;
     let (before, _) = cmp.errors(declared, sims.0);
     let (after, _) = cmp.errors(fitted, sims.1);
     *count += error_simulations(&before, cmp) + error_simulations(&after, cmp);
     // the linear model driven by the first record's identified force
     let n = declared.ndof();
-    let ns = v.len();
+    let ns = cmp.force.ncols();
     let f1 = &first.recon.force;
     let mut force = cmp.force.clone();
     for k in 0..ns.min(f1.ncols()) {

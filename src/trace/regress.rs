@@ -5,6 +5,7 @@ use super::candidates::{library, Candidate, EffectKind};
 use crate::linear::SampledModel;
 use crate::model::Model;
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// Settings of the trace step.
@@ -414,12 +415,19 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
             hires: &hires,
             hidden: &hidden_hires,
         };
-        let mut scored: Vec<Scored> = lib
-            .iter()
+        // candidates are independent: in parallel, collected in library
+        // order (the same ranking whatever the thread count)
+        let results: Vec<(Option<Scored>, usize)> = lib
+            .par_iter()
             .filter(|c| !selected.iter().any(|s| same_effect(&s.candidate, c)))
             .filter(|c| !input.exclude.iter().any(|s| same_effect(s, c)))
-            .filter_map(|c| score(c, &ctx, &sel, &r, &mut sims))
+            .map(|c| {
+                let mut n = 0;
+                (score(c, &ctx, &sel, &r, &mut n), n)
+            })
             .collect();
+        sims += results.iter().map(|x| x.1).sum::<usize>();
+        let mut scored: Vec<Scored> = results.into_iter().filter_map(|x| x.0).collect();
         scored.sort_by(|a, b| a.effect.bic_change.total_cmp(&b.effect.bic_change));
         let pays =
             |e: &RankedEffect| e.bic_change < 0.0 && e.residual_explained >= settings.min_gain;
@@ -667,25 +675,35 @@ fn scan_gap(
     }
     let (bi, mut c_best, mut e_best) = best?;
     let (mut a, mut b) = (gaps[bi.saturating_sub(1)], gaps[(bi + 1).min(ng - 1)]);
+    // golden section: the interior point kept from one bracket to the
+    // next is evaluated once; the best point seen is kept
     const PHI: f64 = 0.618_033_988_75;
+    let mut probe = |x: f64, sims: &mut usize| -> f64 {
+        match at(x, sims) {
+            Some((c, e)) => {
+                let v = e.rss;
+                if v < e_best.rss {
+                    c_best = c;
+                    e_best = e;
+                }
+                v
+            }
+            None => f64::INFINITY,
+        }
+    };
+    let (mut x1, mut x2) = (b - PHI * (b - a), a + PHI * (b - a));
+    let (mut v1, mut v2) = (probe(x1, sims), probe(x2, sims));
     for _ in 0..10 {
-        let (x1, x2) = (b - PHI * (b - a), a + PHI * (b - a));
-        let f1 = at(x1, sims);
-        let f2 = at(x2, sims);
-        let v1 = f1.as_ref().map_or(f64::INFINITY, |f| f.1.rss);
-        let v2 = f2.as_ref().map_or(f64::INFINITY, |f| f.1.rss);
-        let winner = if v1 < v2 {
+        if v1 < v2 {
             b = x2;
-            f1
+            (x2, v2) = (x1, v1);
+            x1 = b - PHI * (b - a);
+            v1 = probe(x1, sims);
         } else {
             a = x1;
-            f2
-        };
-        if let Some((c, e)) = winner {
-            if e.rss < e_best.rss {
-                c_best = c;
-                e_best = e;
-            }
+            (x1, v1) = (x2, v2);
+            x2 = a + PHI * (b - a);
+            v2 = probe(x2, sims);
         }
     }
     let g = c_best.gap.unwrap_or(0.0);
