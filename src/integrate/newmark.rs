@@ -160,6 +160,8 @@ pub struct Integrator {
     /// active (built on first use by the sensitivities; see
     /// `sensitivity::linear_powers`).
     linear_powers: std::sync::OnceLock<Option<Vec<f64>>>,
+    /// Indices of the contacts among the elements.
+    contacts: Vec<usize>,
     /// The affine map of a whole sample without an active element (built
     /// on first use; see [`SampleMap`]).
     sample_map: std::sync::OnceLock<Option<SampleMap>>,
@@ -233,6 +235,9 @@ impl Integrator {
             .enumerate()
             .all(|(i, &x)| i % n == i / n || x == 0.0);
         let m_diag = is_diag.then(|| m.diagonal().as_slice().to_vec());
+        let contacts = (0..elements.len())
+            .filter(|&e| matches!(elements[e], Element::Contact { .. }))
+            .collect();
         Ok(Integrator {
             n,
             m_diag,
@@ -248,6 +253,7 @@ impl Integrator {
             j0,
             j0_chol,
             linear_powers: std::sync::OnceLock::new(),
+            contacts,
             sample_map: std::sync::OnceLock::new(),
             batch_linear: true,
         })
@@ -681,13 +687,11 @@ impl Integrator {
 
     /// True when a contact's side at ws.un (its slope in ws.slopes) differs
     /// from the side of the last Newton matrix (ws.dir_slopes).
+    #[inline(always)]
     fn across_switch(&self, ws: &Work) -> bool {
-        self.elements
+        self.contacts
             .iter()
-            .zip(ws.slopes.iter().zip(&ws.dir_slopes))
-            .any(|(e, (&s, &d))| {
-                matches!(e, elements::Element::Contact { .. }) && (s != 0.0) != (d != 0.0)
-            })
+            .any(|&e| (ws.slopes[e] != 0.0) != (ws.dir_slopes[e] != 0.0))
     }
 
     /// Newton step ws.du = J⁻¹ r with J = J0 plus the slopes of the last
