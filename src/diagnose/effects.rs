@@ -149,6 +149,23 @@ pub fn parameters(model: &Model, e: &AddedEffect) -> Result<Vec<Parameter>> {
         .collect()
 }
 
+/// `model` with the effect `e` switched off (its other parameters and the
+/// other effects as they are): a stiffness or damping change back to its
+/// nominal value, a ground spring, friction level, cubic coefficient or
+/// contact stiffness to zero (a contact's gap stays).
+pub fn without(model: &Model, e: &AddedEffect) -> Model {
+    let mut m = model.clone();
+    for t in &e.targets {
+        let off = match (e.candidate.kind, t) {
+            (_, Target::ContactGap(_)) => continue,
+            (EffectKind::Stiffness | EffectKind::Damping, _) => e.nominal,
+            _ => 0.0,
+        };
+        t.set(&mut m, off);
+    }
+    m
+}
+
 /// Report values `(name, value)` of an effect's parameters from a fitted
 /// model (SI; a stiffness or damping change as a relative change of the
 /// nominal; friction at several DOFs as the mean level).

@@ -844,25 +844,20 @@ pub fn diagnose(
         } else {
             settings.companion_improvement
         };
-        // a companion fitted to a negligible change (below 2 % of the
-        // spring, or a ground spring below 2 % of the stiffest spring at
-        // its DOF) only refitted the other effects: not an effect
-        let negligible = !screened && {
-            let v = effects::values(&fitted, &eff).first().map_or(0.0, |p| p.1);
-            match eff.candidate.kind {
-                EffectKind::Stiffness => v.abs() < 0.02,
-                EffectKind::GroundSpring => {
-                    let d = eff.candidate.dofs[0] + 1;
-                    let kmax = declared
-                        .springs
-                        .iter()
-                        .filter(|s| s.dofs.contains(&d))
-                        .map(|s| s.stiffness)
-                        .fold(0.0, f64::max);
-                    v.abs() < 0.02 * kmax
-                }
-                _ => false,
-            }
+        // a candidate below the screen may only have let the effects found
+        // be refitted: with it switched off in the fitted model (the
+        // others as fitted), it must itself remove the same share of the
+        // squared error
+        let mut without_err = None;
+        if !screened {
+            let off = effects::without(&fitted, &eff);
+            let p0 = cmp.shoot(&off, sim);
+            sims += shot_simulations(p0.as_ref().ok().and_then(|p| p.2.as_ref()), cmp);
+            without_err = p0.ok().map(|y| cmp.total_error(&y.0));
+        }
+        let negligible = match (without_err, new_err) {
+            (Some(w), Some(b)) => b * b >= w * w * (1.0 - need),
+            _ => false,
         };
         let pays = !negligible
             && match (current_err, new_err) {
@@ -898,7 +893,12 @@ pub fn diagnose(
                     new_err.unwrap_or(f64::NAN)
                 )
             } else if negligible {
-                format!("withdrawn: the fitted change is below 2 %{why}")
+                format!(
+                    "withdrawn: switched off in the fitted model, the error is {:.4} against {:.4} with it: it does not itself remove {:.0} % of the squared error{why}",
+                    without_err.unwrap_or(f64::NAN),
+                    new_err.unwrap_or(f64::NAN),
+                    100.0 * need
+                )
             } else {
                 format!(
                     "withdrawn: the fitted effect does not remove {:.0} % of the squared multiple-shooting error ({:.4} → {:.4}){why}",

@@ -125,6 +125,20 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
             let _ = writeln!(s, "\n*{name}: {}*", e.status);
         }
     }
+    // how the start states of the scored segments were found
+    let starts: Vec<String> = [("before", &d.before), ("after", &d.after)]
+        .iter()
+        .filter_map(|(name, e)| {
+            let f = e.starts.as_ref()?;
+            Some(format!(
+                "{name}: {} Gauss–Newton iterations, {} segments continued from the one before, {} from a growing horizon, segment cost {:.3e} → {:.3e}",
+                f.iterations, f.continued, f.grown, f.cost.0, f.cost.1
+            ))
+        })
+        .collect();
+    if !starts.is_empty() {
+        let _ = writeln!(s, "\nStart states ({}).", starts.join("; "));
+    }
     let _ = writeln!(s, "\nPer channel (relative_error before → after):\n");
     for (b, a) in d.before.per_channel.iter().zip(&d.after.per_channel) {
         let _ = writeln!(
