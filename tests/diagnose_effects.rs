@@ -294,9 +294,9 @@ fn two_contacts() {
 /// A contact and a spring to ground together: 6→7 at 0.3 mm and 1500 N/m
 /// from mass 8 to ground. The spring makes the absolute position, which
 /// the declared free-free model's reconstruction leaves to its prior,
-/// drive a force: a model with it is scored from the states reconstructed
-/// with its own linear part (from the declared model's the exact model
-/// scored 73 %).
+/// drive a force: a model with it is fitted and scored from the states
+/// reconstructed with its own linear part (from the declared model's the
+/// exact model scored 73 %).
 #[test]
 fn contact_6_7_and_ground_spring_at_8() {
     let mut truth = lanl();
@@ -326,5 +326,7 @@ fn contact_6_7_and_ground_spring_at_8() {
         d.verdict
     );
     within(param(&d, "contact", "gap"), 0.3e-3, 0.1);
+    within(param(&d, "contact", "stiffness"), 2e6, 0.1);
+    within(param(&d, "ground_spring", "stiffness"), 1500.0, 0.1);
     assert_improved(&d);
 }

@@ -819,15 +819,40 @@ pub fn diagnose(
             simulations: fit_sims,
             fitted: fit_segs,
             stages,
-        } = fit_effects(
-            &trial,
-            &all,
-            cmp,
-            &prep.recon.states,
-            correction.as_ref(),
-            rec.fs,
-            settings,
-        )?;
+        } = {
+            // a trial with a spring to ground is fitted from states
+            // reconstructed with its own linear part (as it is scored),
+            // not from the declared reconstruction corrected along the
+            // hidden trajectories
+            let own = rescore_prep(
+                declared,
+                &trial,
+                rec,
+                sensors,
+                settings,
+                prep.located.as_ref(),
+            );
+            match &own {
+                Some(o) => fit_effects(
+                    &trial,
+                    &all,
+                    &o.comparison,
+                    &o.recon.states,
+                    None,
+                    rec.fs,
+                    settings,
+                )?,
+                None => fit_effects(
+                    &trial,
+                    &all,
+                    cmp,
+                    &prep.recon.states,
+                    correction.as_ref(),
+                    rec.fs,
+                    settings,
+                )?,
+            }
+        };
         sims += fit_sims;
         *timings.entry("fit".into()).or_insert(0.0) += t.elapsed().as_secs_f64();
         for (name, secs) in stages {
