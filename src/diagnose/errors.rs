@@ -139,9 +139,20 @@ impl Comparison {
     /// Both errors of `model`, and its segment predictions (p × N; None
     /// when a segment simulation failed).
     pub fn errors(&self, model: &Model, sim: SimSettings) -> (ErrorSet, Option<DMatrix<f64>>) {
+        self.errors_of(model, sim, self.shoot(model, sim))
+    }
+
+    /// [`Comparison::errors`] with the multiple shooting of `model` at
+    /// `sim` already done (`shot`, from [`Comparison::shoot`]).
+    pub fn errors_of(
+        &self,
+        model: &Model,
+        sim: SimSettings,
+        shot: std::result::Result<Shot, String>,
+    ) -> (ErrorSet, Option<DMatrix<f64>>) {
         let mut status = vec![];
         let mut starts = None;
-        let seg = match self.shoot(model, sim) {
+        let seg = match shot {
             Ok((y, _, fit)) => {
                 starts = fit;
                 Some(y)

@@ -657,6 +657,13 @@ pub fn diagnose(
     let mut current = declared.clone();
     let mut current_err = before.relative_error;
     let mut current_sub = base_sub;
+    // the current model's own reconstruction (a spring to ground;
+    // [`rescore_prep`]) and its multiple shooting, once an effect is kept
+    let mut current_shot: Option<(Option<Prepared>, std::result::Result<errors::Shot, String>)> =
+        None;
+    let own_prep = |m: &Model, r: &Record| {
+        rescore_prep(declared, m, r, sensors, settings, prep.located.as_ref())
+    };
     let mut current_segments: Option<(Vec<Segment>, SimSettings)> = None;
     let mut baseline = if declared.is_nonlinear() {
         pred_before.clone()
@@ -824,15 +831,7 @@ pub fn diagnose(
             // reconstructed with its own linear part (as it is scored),
             // not from the declared reconstruction corrected along the
             // hidden trajectories
-            let own = rescore_prep(
-                declared,
-                &trial,
-                rec,
-                sensors,
-                settings,
-                prep.located.as_ref(),
-            );
-            match &own {
+            match &own_prep(&trial, rec) {
                 Some(o) => fit_effects(
                     &trial,
                     &all,
@@ -860,19 +859,10 @@ pub fn diagnose(
         }
         let sim = resolved(&fitted, rec.fs, settings, &prep.recon.states);
         let sub = sim.substeps;
-        let own = rescore_prep(
-            declared,
-            &fitted,
-            rec,
-            sensors,
-            settings,
-            prep.located.as_ref(),
-        );
-        let pred = own
-            .as_ref()
-            .map_or(cmp, |p| &p.comparison)
-            .shoot(&fitted, sim);
-        sims += shot_simulations(pred.as_ref().ok().and_then(|p| p.2.as_ref()), cmp);
+        let own = own_prep(&fitted, rec);
+        let own_cmp = own.as_ref().map_or(cmp, |p| &p.comparison);
+        let pred = own_cmp.shoot(&fitted, sim);
+        sims += shot_simulations(pred.as_ref().ok().and_then(|p| p.2.as_ref()), own_cmp);
         let new_err = pred.as_ref().ok().map(|y| cmp.total_error(&y.0));
         // a change the screen did not propose must explain more
         let need = if screened {
@@ -887,19 +877,10 @@ pub fn diagnose(
         let mut without_err = None;
         if !screened {
             let off = effects::without(&fitted, &eff);
-            let off_prep = rescore_prep(
-                declared,
-                &off,
-                rec,
-                sensors,
-                settings,
-                prep.located.as_ref(),
-            );
-            let p0 = off_prep
-                .as_ref()
-                .map_or(cmp, |p| &p.comparison)
-                .shoot(&off, sim);
-            sims += shot_simulations(p0.as_ref().ok().and_then(|p| p.2.as_ref()), cmp);
+            let off_prep = own_prep(&off, rec);
+            let off_cmp = off_prep.as_ref().map_or(cmp, |p| &p.comparison);
+            let p0 = off_cmp.shoot(&off, sim);
+            sims += shot_simulations(p0.as_ref().ok().and_then(|p| p.2.as_ref()), off_cmp);
             without_err = p0.ok().map(|y| cmp.total_error(&y.0));
         }
         let negligible = match (without_err, new_err) {
@@ -972,7 +953,8 @@ pub fn diagnose(
         current = fitted;
         current_err = new_err;
         current_sub = sub;
-        baseline = pred.ok().map(|p| p.0);
+        baseline = pred.as_ref().ok().map(|p| p.0.clone());
+        current_shot = Some((own, pred));
     }
     timings.insert("trace_and_fit".into(), t_loop.elapsed().as_secs_f64());
     progress("errors after");
@@ -981,19 +963,18 @@ pub fn diagnose(
         ..Default::default()
     };
     let t = Instant::now();
-    let own = rescore_prep(
-        declared,
-        &current,
-        rec,
-        sensors,
-        settings,
-        prep.located.as_ref(),
-    );
-    let (after, pred_after) = own
-        .as_ref()
-        .map_or(cmp, |p| &p.comparison)
-        .errors(&current, sim1);
-    sims += error_simulations(&after, cmp);
+    // the last kept round shot the final model at these settings already;
+    // with no effect kept, the final model is the declared one, scored
+    // before
+    let (after, pred_after) = match current_shot.take() {
+        Some((own, shot)) => {
+            let own_cmp = own.as_ref().map_or(cmp, |p| &p.comparison);
+            let (after, pred) = own_cmp.errors_of(&current, sim1, shot);
+            sims += 1; // the open-loop run
+            (after, pred)
+        }
+        None => (before.clone(), pred_before.clone()),
+    };
     let effects = report_effects(
         &current,
         &added,
@@ -1008,16 +989,7 @@ pub fn diagnose(
     let validation = match vprep.as_ref() {
         Some(v) => {
             progress("validation");
-            let own = validation.and_then(|r| {
-                rescore_prep(
-                    declared,
-                    &current,
-                    r,
-                    sensors,
-                    settings,
-                    prep.located.as_ref(),
-                )
-            });
+            let own = validation.and_then(|r| own_prep(&current, r));
             Some(validate(
                 declared,
                 &current,
@@ -1654,7 +1626,6 @@ fn report_effects(
 }
 
 /// Errors on a validation record, and the non-parametric prediction.
-#[allow(clippy::too_many_arguments)]
 fn validate(
     declared: &Model,
     fitted: &Model,

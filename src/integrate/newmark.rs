@@ -162,6 +162,8 @@ pub struct Integrator {
     linear_powers: std::sync::OnceLock<Option<Vec<f64>>>,
     /// Indices of the contacts among the elements.
     contacts: Vec<usize>,
+    /// C = 0 (undamped): the sensitivities skip its products.
+    c_zero: bool,
     /// The affine map of a whole sample without an active element (built
     /// on first use; see [`SampleMap`]).
     sample_map: std::sync::OnceLock<Option<SampleMap>>,
@@ -238,6 +240,7 @@ impl Integrator {
         let contacts = (0..elements.len())
             .filter(|&e| matches!(elements[e], Element::Contact { .. }))
             .collect();
+        let c_zero = c.iter().all(|&x| x == 0.0);
         Ok(Integrator {
             n,
             m_diag,
@@ -254,6 +257,7 @@ impl Integrator {
             j0_chol,
             linear_powers: std::sync::OnceLock::new(),
             contacts,
+            c_zero,
             sample_map: std::sync::OnceLock::new(),
             batch_linear: true,
         })
@@ -330,21 +334,18 @@ impl Integrator {
                 ws.f_prev[i] = force[(i, k - 1)];
                 ws.f_next[i] = force[(i, k)];
             }
-            let batched = map.is_some_and(|m| self.batch_sample(m, &mut ws));
-            if batched {
+            let whole = self.whole_sample(map, &mut ws, k);
+            if whole.is_some() {
                 steps += self.settings.substeps;
                 iters += self.settings.substeps;
-                if ws.u.iter().chain(&ws.v).any(|x| !x.is_finite()) {
-                    status = SimStatus::NonFinite {
-                        time: k as f64 / self.fs(),
-                        sample: k - 1,
-                    };
-                    break 'samples;
-                }
             }
-            for sub in (0..self.settings.substeps).filter(|_| !batched) {
+            if let Some(Err(s)) = whole {
+                status = s;
+                break 'samples;
+            }
+            for sub in (0..self.settings.substeps).filter(|_| whole.is_none()) {
                 let time = || (k - 1) as f64 / self.fs() + (sub + 1) as f64 * self.h;
-                match self.advance::<N, false>(&mut ws, sub) {
+                match self.advance::<N>(&mut ws, sub) {
                     Ok(it) => iters += it,
                     Err((iterations, residual)) => {
                         iters += iterations;
@@ -358,7 +359,7 @@ impl Integrator {
                     }
                 }
                 steps += 1;
-                if ws.u.iter().chain(&ws.v).any(|x| !x.is_finite()) {
+                if !ws.finite() {
                     status = SimStatus::NonFinite {
                         time: time(),
                         sample: k - 1,
@@ -408,18 +409,25 @@ impl Integrator {
     /// One sub-step (number `sub` within the sample) from `ws.u, v, a`, the
     /// force interpolated between `ws.f_prev` and `ws.f_next`; the state is
     /// advanced in place. Ok(Newton iterations) or Err((iterations, residual)).
-    /// `REC`: record the slopes of the last Newton matrix (for the
-    /// sensitivities; compiled out of [`Integrator::run`]).
-    fn advance<const N: usize, const REC: bool>(
+    fn advance<const N: usize>(
         &self,
         ws: &mut Work,
         sub: usize,
     ) -> std::result::Result<usize, (usize, f64)> {
+        let a1 = self.gamma / (self.beta * self.h);
+        self.step_setup::<N>(ws, sub);
+        let it = self.newton::<N>(ws, a1)?;
+        self.accept::<N>(ws);
+        Ok(it)
+    }
+
+    /// The state from the sub-step's solution `ws.un` and its affine parts:
+    /// `a = a_0 u + z`, `v = a_1 u + w`.
+    #[inline(always)]
+    fn accept<const N: usize>(&self, ws: &mut Work) {
         let n = dim::<N>(self.n);
         let (h, gamma, beta) = (self.h, self.gamma, self.beta);
         let (a0, a1) = (1.0 / (beta * h * h), gamma / (beta * h));
-        self.step_setup::<N>(ws, sub);
-        let it = self.newton::<N, REC>(ws, a1)?;
         let (u, v, a) = (&mut ws.u[..n], &mut ws.v[..n], &mut ws.a[..n]);
         for i in 0..n {
             let un = ws.un[i];
@@ -427,7 +435,29 @@ impl Integrator {
             v[i] = a1 * un + ws.w[i];
             u[i] = un;
         }
-        Ok(it)
+    }
+
+    /// Sample `k` (forces in `ws.f_prev`, `ws.f_next`) taken whole by the
+    /// sample map when it applies ([`Integrator::batch_sample`]): Some(Ok)
+    /// when taken, Some(Err(status)) when the state became non-finite, None
+    /// when it is to be sub-stepped.
+    fn whole_sample(
+        &self,
+        map: Option<&SampleMap>,
+        ws: &mut Work,
+        k: usize,
+    ) -> Option<std::result::Result<(), SimStatus>> {
+        if !map.is_some_and(|m| self.batch_sample(m, ws)) {
+            return None;
+        }
+        Some(if ws.finite() {
+            Ok(())
+        } else {
+            Err(SimStatus::NonFinite {
+                time: k as f64 / self.fs(),
+                sample: k - 1,
+            })
+        })
     }
 
     /// The sample map, if this integrator has one ([`SampleMap`]).
@@ -447,8 +477,6 @@ impl Integrator {
                 }
                 let (n, s) = (self.n, self.settings.substeps);
                 let (m3, m5) = (3 * n, 5 * n);
-                let (h, gamma, beta) = (self.h, self.gamma, self.beta);
-                let (a0, a1) = (1.0 / (beta * h * h), gamma / (beta * h));
                 let mut full = vec![0.0; m3 * m5];
                 let mut deltas = vec![vec![0.0; s * m5]; contacts.len()];
                 let mut ws = Work::new(n, self.elements.len());
@@ -476,12 +504,7 @@ impl Integrator {
                         self.step_setup::<0>(&mut ws, sub);
                         ws.un.copy_from_slice(&ws.b);
                         chol_solve::<0>(l, n, &mut ws.un);
-                        for i in 0..n {
-                            let un = ws.un[i];
-                            ws.a[i] = a0 * un + ws.z[i];
-                            ws.v[i] = a1 * un + ws.w[i];
-                            ws.u[i] = un;
-                        }
+                        self.accept::<0>(&mut ws);
                         for (&(i, j, _), d) in contacts.iter().zip(deltas.iter_mut()) {
                             d[sub * m5 + col] = ws.u[i] - j.map_or(0.0, |j| ws.u[j]);
                         }
@@ -619,8 +642,8 @@ impl Integrator {
 
     /// Newton iterations on ws.un; Ok(iterations) or Err((iterations, residual)).
     /// `ws.iterated` says whether a Newton step was taken and
-    /// `ws.dir_slopes` holds the slopes of the last step's matrix (used by
-    /// the sensitivities, `REC`).
+    /// `ws.dir_slopes` holds the slopes of the last step's matrix (for the
+    /// side check below and the sensitivities).
     ///
     /// A point whose residual is within the tolerance is accepted unless a
     /// contact lies on the other side of its switch than the matrix that
@@ -632,7 +655,7 @@ impl Integrator {
     /// across the switch makes it jump where a perturbation moves the
     /// penetration out of the tolerance band; differences of the cost then
     /// disagree with the derivatives by percents).
-    fn newton<const N: usize, const REC: bool>(
+    fn newton<const N: usize>(
         &self,
         ws: &mut Work,
         a1: f64,
@@ -826,7 +849,7 @@ struct Work {
     jac_slopes: Vec<f64>,
     slopes: Vec<f64>,
     /// Slopes of the last Newton step's matrix and whether a step was
-    /// taken in the current sub-step (recorded for the sensitivities only).
+    /// taken in the current sub-step (the side check, the sensitivities).
     dir_slopes: Vec<f64>,
     iterated: bool,
     /// Scratch of a batched sample: its inputs (5n) and the new state (3n).
@@ -835,6 +858,11 @@ struct Work {
 }
 
 impl Work {
+    /// True while the state is finite.
+    fn finite(&self) -> bool {
+        self.u.iter().chain(&self.v).all(|x| x.is_finite())
+    }
+
     fn new(n: usize, n_elements: usize) -> Work {
         let z = || vec![0.0; n];
         Work {

@@ -218,8 +218,6 @@ struct SensWork {
     closed: Vec<Option<bool>>,
     /// Sub-steps where a contact's side differed from the accepted point.
     side_steps: usize,
-    /// C = 0 (undamped): its products are skipped.
-    c_zero: bool,
     tangent: TangentFactor,
     singular_at: Option<f64>,
 }
@@ -381,23 +379,20 @@ impl Integrator {
             }
             // the whole sample by its map ([`SampleMap`]): every seed is
             // then without a parameter term and waits for the powers
-            let batched = map.is_some_and(|m| self.batch_sample(m, &mut ws));
-            if batched {
+            let whole = self.whole_sample(map, &mut ws, k);
+            if whole.is_some() {
                 let s = self.settings.substeps;
                 steps += s;
                 iters += s;
                 sw.pending.iter_mut().for_each(|p| *p += s);
-                if ws.u.iter().chain(&ws.v).any(|x| !x.is_finite()) {
-                    status = SimStatus::NonFinite {
-                        time: k as f64 / self.fs(),
-                        sample: k - 1,
-                    };
-                    break 'samples;
-                }
             }
-            for sub in (0..self.settings.substeps).filter(|_| !batched) {
+            if let Some(Err(s)) = whole {
+                status = s;
+                break 'samples;
+            }
+            for sub in (0..self.settings.substeps).filter(|_| whole.is_none()) {
                 let time = || (k - 1) as f64 / self.fs() + (sub + 1) as f64 * self.h;
-                match self.advance::<N, true>(&mut ws, sub) {
+                match self.advance::<N>(&mut ws, sub) {
                     Ok(it) => iters += it,
                     Err((iterations, residual)) => {
                         iters += iterations;
@@ -411,7 +406,7 @@ impl Integrator {
                     }
                 }
                 steps += 1;
-                if ws.u.iter().chain(&ws.v).any(|x| !x.is_finite()) {
+                if !ws.finite() {
                     status = SimStatus::NonFinite {
                         time: time(),
                         sample: k - 1,
@@ -619,7 +614,6 @@ impl Integrator {
                 dg,
                 pj,
                 (&mut sw.dz, &mut sw.dw, &mut sw.rhs),
-                sw.c_zero,
                 |b| self.solve_tangent::<N>(&sw.tangent, b),
             );
             if !solved {
@@ -656,7 +650,6 @@ impl Integrator {
         dg: Option<&[f64]>,
         p: Option<&[f64]>,
         (dz, dw, rhs): (&mut [f64], &mut [f64], &mut [f64]),
-        c_zero: bool,
         solve: impl Fn(&mut [f64]) -> bool,
     ) -> bool {
         let n = dim::<N>(self.n);
@@ -677,7 +670,7 @@ impl Integrator {
                 mat_vec_axpy::<N>(self.m.as_slice(), n, dz, -1.0, rhs);
             }
         }
-        if !c_zero {
+        if !self.c_zero {
             mat_vec_axpy::<N>(self.c.as_slice(), n, dw, -c1, rhs);
         }
         for (e, &sl) in self.elements.iter().zip(eff) {
@@ -720,7 +713,6 @@ impl Integrator {
                 let n = self.n;
                 let m3 = 3 * n;
                 let zeros = vec![0.0; self.elements.len()];
-                let c_zero = self.c.iter().all(|&x| x == 0.0);
                 let (mut dz, mut dw, mut rhs) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
                 let mut one = vec![0.0; m3 * m3];
                 for (c, col) in one.chunks_exact_mut(m3).enumerate() {
@@ -733,7 +725,6 @@ impl Integrator {
                         None,
                         None,
                         (&mut dz, &mut dw, &mut rhs),
-                        c_zero,
                         |b| {
                             chol_solve::<0>(l, n, b);
                             true
@@ -886,7 +877,6 @@ impl SensWork {
             eff: z(integ.elements.len()),
             closed: vec![None; integ.elements.len()],
             side_steps: 0,
-            c_zero: integ.c.iter().all(|&x| x == 0.0),
             slopes0: z(integ.elements.len()),
             tangent: TangentFactor {
                 factor: Factor::Stale,
