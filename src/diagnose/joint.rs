@@ -173,6 +173,13 @@ fn step(lins: &[Lin], lambda: f64) -> Option<(DVector<f64>, Vec<DVector<f64>>)> 
     Some((dx, ds))
 }
 
+/// Accepted steps each lowering the cost by less than [`STALL_GAIN`] (a
+/// fraction of it) after which [`fit`] stops.
+pub const STALL_STEPS: usize = 3;
+
+/// See [`STALL_STEPS`].
+pub const STALL_GAIN: f64 = 1e-3;
+
 /// Fit `problem`'s parameters (from `x0`) and its segments' start states
 /// together (module docs). Full-order GLS problems only.
 pub fn fit(problem: &Problem, x0: &[f64], settings: &FitSettings) -> Option<JointFit> {
@@ -193,6 +200,7 @@ pub fn fit(problem: &Problem, x0: &[f64], settings: &FitSettings) -> Option<Join
     let mut lambda = settings.lm_lambda.max(1e-6);
     let mut iterations = 0;
     let mut termination = "iteration limit".to_string();
+    let mut slow = 0;
     'outer: while iterations < settings.max_iterations {
         sims += nseg;
         let Some(lins) = linearize(&cur, &x, &scale) else {
@@ -239,6 +247,17 @@ pub fn fit(problem: &Problem, x0: &[f64], settings: &FitSettings) -> Option<Join
                     // not a minimum
                     if gain < settings.f_tol.max(1e-4) && lambda <= 1e-2 {
                         termination = "converged (cost)".into();
+                        break 'outer;
+                    }
+                    // but a run of them is the cost's roughness (contact
+                    // switches within the segments) holding the steps
+                    // short: what is left there is below the noise
+                    slow = if gain < STALL_GAIN { slow + 1 } else { 0 };
+                    if slow >= STALL_STEPS {
+                        termination = format!(
+                            "stalled: {STALL_STEPS} accepted steps in a row each lowered the cost by less than {:.1} %",
+                            100.0 * STALL_GAIN
+                        );
                         break 'outer;
                     }
                     continue 'outer;

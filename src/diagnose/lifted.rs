@@ -257,6 +257,11 @@ struct Scaled {
     z: DMatrix<f64>,
     /// `[H_x; A]` ((p + nx) × nx).
     y: DMatrix<f64>,
+    /// `Zᵀ`.
+    zt: DMatrix<f64>,
+    /// The Riccati step solves `Q_uu` itself (nu × nu) when it is smaller
+    /// than the `p + nx` system of the push-through form.
+    direct: bool,
     /// `r_k` (p × N).
     target: DMatrix<f64>,
     /// `c_k` (nx × (N−1)).
@@ -405,6 +410,8 @@ impl Scaled {
             g,
             hx,
             hu,
+            zt: z.transpose(),
+            direct: nu < p + nx,
             z,
             y,
             target,
@@ -466,26 +473,39 @@ fn symmetrize(p: &mut DMatrix<f64>) {
 /// One Riccati step from `P' = pn`: the gains and `P`. `None` when `Q_uu`
 /// is not positive definite.
 fn riccati_step(sp: &Scaled, pn: &DMatrix<f64>, k: usize) -> Option<(Gain, DMatrix<f64>)> {
-    // Q_uu = Λ + Zᵀ S Z with Z = [H_u; G], S = diag(I, P'), Y = [H_x; A]:
-    // Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹, M = Z Λ⁻¹ Zᵀ, so every solve is of
-    // size p + 2n instead of nR.
+    // Q_uu = Λ + Zᵀ S Z with Z = [H_u; G], S = diag(I, P'), Y = [H_x; A];
+    // K = Q_uu⁻¹ Zᵀ
     let (p, nu) = (sp.hx.nrows(), sp.nu);
     let q = sp.z.nrows();
-    let mut zl = sp.z.clone();
-    for i in 0..nu {
-        let lam = sp.lambda[i] * sp.lam_k.as_ref().map_or(1.0, |m| m[(i % m.nrows(), k)]);
-        zl.column_mut(i).scale_mut(1.0 / lam);
-    }
-    let m = &zl * sp.z.transpose();
-    let mut ism = m.clone();
-    let low = pn * m.rows(p, q - p);
-    ism.rows_mut(p, q - p).copy_from(&low);
-    for i in 0..q {
-        ism[(i, i)] += 1.0;
-    }
-    // K = Λ⁻¹ Zᵀ (I + S M)⁻¹ = ((I + S M)^{-T} Λ⁻¹ Z)ᵀ
-    let kt = ism.transpose().lu().solve(&zl)?;
-    let kmat = kt.transpose();
+    let lam = |i: usize| sp.lambda[i] * sp.lam_k.as_ref().map_or(1.0, |m| m[(i % m.nrows(), k)]);
+    let kmat = if sp.direct {
+        // Zᵀ S = [H_uᵀ, Gᵀ P']
+        let mut zts = sp.zt.clone();
+        let gp = sp.zt.columns(p, q - p) * pn;
+        zts.columns_mut(p, q - p).copy_from(&gp);
+        let mut quu = &zts * &sp.z;
+        symmetrize(&mut quu);
+        for i in 0..nu {
+            quu[(i, i)] += lam(i);
+        }
+        quu.cholesky()?.solve(&sp.zt)
+    } else {
+        // push-through: Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹, M = Z Λ⁻¹ Zᵀ, so
+        // the solve is of size p + 2n instead of nR
+        let mut zl = sp.z.clone();
+        for i in 0..nu {
+            zl.column_mut(i).scale_mut(1.0 / lam(i));
+        }
+        let m = &zl * &sp.zt;
+        let mut ism = m.clone();
+        let low = pn * m.rows(p, q - p);
+        ism.rows_mut(p, q - p).copy_from(&low);
+        for i in 0..q {
+            ism[(i, i)] += 1.0;
+        }
+        // K = ((I + S M)^{-T} Λ⁻¹ Z)ᵀ
+        ism.transpose().lu().solve(&zl)?.transpose()
+    };
     let mut sy = sp.y.clone();
     let pa = pn * &sp.a;
     sy.rows_mut(p, q - p).copy_from(&pa);
@@ -848,8 +868,12 @@ mod tests {
         let res = reconstruct(&sm, &known, &measured, &channels, &s).unwrap();
         assert!(res.status.starts_with("solved"), "{}", res.status);
         let varying = DMatrix::from_fn(n, len, |i, k| 0.3 + ((i * 7 + k * 3) % 5) as f64);
-        for weights in [None, Some(varying)] {
-            // the sweep, with optional time-varying weights
+        for (weights, direct) in [None, Some(varying)]
+            .into_iter()
+            .flat_map(|w| [(w.clone(), false), (w, true)])
+        {
+            // the sweep, with optional time-varying weights, both forms
+            // of the Riccati step
             let mut sp = Scaled::new(
                 &sm,
                 &lm,
@@ -861,6 +885,7 @@ mod tests {
             )
             .unwrap();
             sp.lam_k = weights.clone();
+            sp.direct = direct;
             let bw = backward(&sp).unwrap();
             let (mut xs, mut us) = forward(&sp, &bw).unwrap();
             for i in 0..2 * n {

@@ -252,16 +252,22 @@ pub fn prepare(
     prepare_located(model, rec, sensors, settings, None)
 }
 
-/// [`prepare`] with the force directions already located (on another
-/// record of the same structure: a validation record), or searched when
-/// `located` is None.
-pub fn prepare_located(
+/// The channels, input and sampled linear part of a record, checked.
+struct Setup<'a> {
+    outs: Vec<&'a crate::record::Channel>,
+    segment: usize,
+    channels: Vec<(Quantity, usize)>,
+    force: DMatrix<f64>,
+    measured: DMatrix<f64>,
+    sampled: SampledModel,
+}
+
+fn setup<'a>(
     model: &Model,
-    rec: &Record,
+    rec: &'a Record,
     sensors: Option<&[usize]>,
     settings: &DiagnoseSettings,
-    located_before: Option<&locate::Located>,
-) -> Result<Prepared> {
+) -> Result<Setup<'a>> {
     let n = model.ndof();
     rec.validate(Some(n))?;
     if let Some(s) = sensors {
@@ -304,24 +310,89 @@ pub fn prepare_located(
     let force = crate::signal::force_matrix(rec, n);
     let measured = DMatrix::from_fn(outs.len(), rec.len(), |c, k| outs[c].data[k]);
     let sampled = SampledModel::from_model(&model.linear_part(), rec.fs, settings.substeps)?;
+    Ok(Setup {
+        outs,
+        segment,
+        channels,
+        force,
+        measured,
+        sampled,
+    })
+}
+
+/// The force directions of `rec` (the greedy search of
+/// [`locate::locate`]), when `settings` reconstruct with the lifted
+/// smoother and search; None otherwise. [`prepare_located`] with the
+/// result reconstructs as [`prepare`] does.
+pub fn locate_record(
+    model: &Model,
+    rec: &Record,
+    sensors: Option<&[usize]>,
+    settings: &DiagnoseSettings,
+) -> Result<Option<locate::Located>> {
+    if settings.states != StatesSource::Lifted {
+        return Ok(None);
+    }
+    let s = setup(model, rec, sensors, settings)?;
+    search(
+        model,
+        &s.sampled,
+        &s.force,
+        &s.measured,
+        &s.channels,
+        settings,
+    )
+}
+
+fn search(
+    model: &Model,
+    sampled: &SampledModel,
+    force: &DMatrix<f64>,
+    measured: &DMatrix<f64>,
+    channels: &[(Quantity, usize)],
+    settings: &DiagnoseSettings,
+) -> Result<Option<locate::Located>> {
+    if settings.locate_ratio > 0.0 && settings.locate_max > 0 {
+        Ok(Some(locate::locate(
+            model,
+            sampled,
+            force,
+            measured,
+            channels,
+            &settings.lifted,
+            settings.locate_ratio,
+            settings.locate_max,
+        )?))
+    } else {
+        Ok(None)
+    }
+}
+
+/// [`prepare`] with the force directions already located (on another
+/// record of the same structure: a validation record), or searched when
+/// `located` is None.
+pub fn prepare_located(
+    model: &Model,
+    rec: &Record,
+    sensors: Option<&[usize]>,
+    settings: &DiagnoseSettings,
+    located_before: Option<&locate::Located>,
+) -> Result<Prepared> {
+    let Setup {
+        outs,
+        segment,
+        channels,
+        force,
+        measured,
+        sampled,
+    } = setup(model, rec, sensors, settings)?;
+    let n = model.ndof();
     let mut located = None;
     let mut recon = if settings.states == StatesSource::Lifted {
         let t = Instant::now();
-        let loc = if let Some(l) = located_before {
-            Some(l.clone())
-        } else if settings.locate_ratio > 0.0 && settings.locate_max > 0 {
-            Some(locate::locate(
-                model,
-                &sampled,
-                &force,
-                &measured,
-                &channels,
-                &settings.lifted,
-                settings.locate_ratio,
-                settings.locate_max,
-            )?)
-        } else {
-            None
+        let loc = match located_before {
+            Some(l) => Some(l.clone()),
+            None => search(model, &sampled, &force, &measured, &channels, settings)?,
         };
         let e = match &loc {
             Some(l) if !l.directions.is_empty() => l.matrix(n),
@@ -634,13 +705,23 @@ pub fn diagnose(
     let t_all = Instant::now();
     let mut timings = BTreeMap::new();
     progress("identify");
-    let prep = prepare(declared, rec, sensors, settings)?;
+    let t = Instant::now();
+    let found = locate_record(declared, rec, sensors, settings)?;
+    let t_locate = t.elapsed().as_secs_f64();
     // the validation record is identified with the force directions
-    // located on the record (the same structure; no second search)
-    let vprep = validation
-        .map(|v| prepare_located(declared, v, sensors, settings, prep.located.as_ref()))
-        .transpose()?;
-    timings.insert("identify".into(), prep.recon.elapsed_s);
+    // located on the record (the same structure; no second search), both
+    // smoothers at once (each one a sequential sweep)
+    let (prep, vprep) = rayon::join(
+        || prepare_located(declared, rec, sensors, settings, found.as_ref()),
+        || {
+            validation
+                .map(|v| prepare_located(declared, v, sensors, settings, found.as_ref()))
+                .transpose()
+        },
+    );
+    let (prep, vprep) = (prep?, vprep?);
+    timings.insert("locate".into(), t_locate);
+    timings.insert("identify".into(), t_locate + prep.recon.elapsed_s);
     if let Some(v) = &vprep {
         timings.insert("identify_validation".into(), v.recon.elapsed_s);
     }
@@ -1485,6 +1566,10 @@ fn polish(
         x = j.x;
         problem.segments = j.segments;
         let gain = 1.0 - j.cost.1 / cost;
+        // what the joint fit itself gained: once it finds nothing to add
+        // to the refined start states, another refinement from its end
+        // does not either (measured on the main job: 1e-4 of the cost)
+        let joint_gain = 1.0 - j.cost.1 / j.cost.0;
         cost = j.cost.1;
         // a segment far above the others is likely started in a wrong
         // basin: run it in from the segment before it
@@ -1508,7 +1593,7 @@ fn polish(
         );
         sims += n;
         run_ins += changed.len();
-        if !(gain > 0.01) && changed.is_empty() {
+        if (!(gain > 0.01) || !(joint_gain > joint::STALL_GAIN)) && changed.is_empty() {
             break;
         }
         // a second start that stays well above the first is given up

@@ -215,7 +215,7 @@ fn sens_steps(
 /// Continuity starts: every segment that directly follows another is tried
 /// from the state where the previous one ends (its simulation carried one
 /// sample further); the trial is kept when it lowers the segment's error.
-/// Returns the number of segments changed.
+/// Returns the segments changed.
 fn continuity(
     cmp: &Comparison,
     model: &Model,
@@ -224,9 +224,9 @@ fn continuity(
     y: &mut DMatrix<f64>,
     res: &mut [Option<(DVector<f64>, f64)>],
     count: &mut usize,
-) -> usize {
+) -> Vec<usize> {
     let Ok(integ) = Integrator::new(model, cmp.fs, sim) else {
-        return 0;
+        return vec![];
     };
     let n = model.ndof();
     let ns = cmp.force.ncols();
@@ -246,7 +246,7 @@ fn continuity(
         .collect();
     let trial_segs: Vec<Segment> = ok.iter().map(|(_, t)| t.clone()).collect();
     let yt = predict_each(cmp, model, &trial_segs, sim, count);
-    let mut changed = 0;
+    let mut changed = vec![];
     for (i, t) in &ok {
         let old = res[*i].as_ref().map_or(f64::INFINITY, |r| r.1);
         if let Some(r) = residual(cmp, t, &yt) {
@@ -254,7 +254,7 @@ fn continuity(
                 copy_segment(y, &yt, t);
                 segs[*i] = t.clone();
                 res[*i] = Some(r);
-                changed += 1;
+                changed.push(*i);
             }
         }
     }
@@ -285,6 +285,10 @@ fn carried(
         v0: (0..n).map(|q| run.v[(q, p.len)]).collect(),
     })
 }
+
+/// A segment whose Gauss–Newton step lowered its cost by less than this
+/// fraction takes no further step.
+const SETTLED: f64 = 1e-3;
 
 /// Refine the start states of `segments` for `model` (module docs).
 /// Returns the refined segments, their predictions (p × N, NaN outside the
@@ -510,6 +514,10 @@ fn refine_local(
     let mut stalled = 0;
     let mut done = 0;
     let mut continued = 0;
+    // segments still worth a step: one whose last step failed would take
+    // the same step again, and one whose last step gained less than
+    // [`SETTLED`] of its cost has settled
+    let mut active = vec![true; segs.len()];
     for it in 0..iterations {
         done += 1;
         // from the second iteration of a nonlinear model: a segment may
@@ -517,18 +525,44 @@ fn refine_local(
         // when that predicts it better (a refinement stuck in a local
         // minimum; CONTEXT fact 6)
         if continue_from && exact.is_none() && it == 1 {
-            continued = continuity(cmp, model, sim, &mut segs, &mut y, &mut res, &mut sims);
+            let changed = continuity(cmp, model, sim, &mut segs, &mut y, &mut res, &mut sims);
+            continued = changed.len();
+            for i in changed {
+                active[i] = true;
+            }
+        }
+        let idx: Vec<usize> = (0..segs.len()).filter(|&i| active[i]).collect();
+        if idx.is_empty() {
+            done -= 1;
+            break;
         }
         // steps
-        let steps: Vec<Option<DVector<f64>>> = match exact.as_mut() {
-            Some(jac) => segs
-                .iter()
-                .zip(&res)
-                .map(|(s, r)| Some(jac.pinv(s.len)? * &r.as_ref()?.0))
-                .collect(),
-            None => sens_steps(cmp, model, sim, &segs, &res, &scale, &mut sims),
-        };
-        let mut pending: Vec<usize> = (0..segs.len()).filter(|&i| steps[i].is_some()).collect();
+        let mut steps: Vec<Option<DVector<f64>>> = vec![None; segs.len()];
+        match exact.as_mut() {
+            Some(jac) => {
+                for &i in &idx {
+                    let r = res[i].as_ref().map(|r| &r.0);
+                    steps[i] = r.and_then(|r| Some(jac.pinv(segs[i].len)? * r));
+                }
+            }
+            None => {
+                let sub: Vec<Segment> = idx.iter().map(|&i| segs[i].clone()).collect();
+                let sub_res: Vec<_> = idx.iter().map(|&i| res[i].clone()).collect();
+                let got = sens_steps(cmp, model, sim, &sub, &sub_res, &scale, &mut sims);
+                for (&i, d) in idx.iter().zip(got) {
+                    steps[i] = d;
+                }
+            }
+        }
+        let before: Vec<f64> = res
+            .iter()
+            .map(|r| r.as_ref().map_or(f64::INFINITY, |r| r.1))
+            .collect();
+        let mut pending: Vec<usize> = idx
+            .iter()
+            .copied()
+            .filter(|&i| steps[i].is_some())
+            .collect();
         let mut t = 1.0;
         let mut improved = vec![false; segs.len()];
         for _ in 0..5 {
@@ -565,9 +599,10 @@ fn refine_local(
             pending = still;
             t *= 0.5;
         }
-        stalled = improved.iter().filter(|&&b| !b).count();
-        if stalled == segs.len() {
-            break;
+        stalled = idx.iter().filter(|&&i| !improved[i]).count();
+        for &i in &idx {
+            let after = res[i].as_ref().map_or(f64::INFINITY, |r| r.1);
+            active[i] = improved[i] && after < (1.0 - SETTLED) * before[i];
         }
     }
     let cost1: f64 = res.iter().flatten().map(|r| r.1).sum();
