@@ -406,28 +406,39 @@ fn grow(
             .collect::<Vec<_>>(),
         &before,
     ];
-    for (origin, schedule) in origins
+    // the four (origin, schedule) chains are independent: in parallel
+    // (a few picks leave the segment-parallel refinement a core idle),
+    // taken in order
+    let chains: Vec<(&[Segment], &[usize])> = origins
         .iter()
-        .flat_map(|o| GROW.iter().map(move |s| (o, s)))
-    {
-        let mut trial: Vec<Segment> = origin.to_vec();
-        for &frac in schedule.iter() {
-            let short: Vec<Segment> = trial
-                .iter()
-                .map(|s| Segment {
-                    len: (s.len / frac).max(2),
-                    ..s.clone()
-                })
-                .collect();
-            let (refined, _, f) = refine_local(cmp, model, sim, &short, iterations, false);
-            sims += f.simulations;
-            for (t, r) in trial.iter_mut().zip(refined) {
-                t.u0 = r.u0;
-                t.v0 = r.v0;
+        .flat_map(|o| GROW.iter().map(move |s| (*o, *s)))
+        .collect();
+    let grown: Vec<(Vec<Segment>, DMatrix<f64>, usize)> = chains
+        .par_iter()
+        .map(|&(origin, schedule)| {
+            let mut sims = 0;
+            let mut trial: Vec<Segment> = origin.to_vec();
+            for &frac in schedule {
+                let short: Vec<Segment> = trial
+                    .iter()
+                    .map(|s| Segment {
+                        len: (s.len / frac).max(2),
+                        ..s.clone()
+                    })
+                    .collect();
+                let (refined, _, f) = refine_local(cmp, model, sim, &short, iterations, false);
+                sims += f.simulations;
+                for (t, r) in trial.iter_mut().zip(refined) {
+                    t.u0 = r.u0;
+                    t.v0 = r.v0;
+                }
             }
-        }
-        let (trial, y_new, f) = refine_local(cmp, model, sim, &trial, iterations, false);
-        sims += f.simulations;
+            let (trial, y_new, f) = refine_local(cmp, model, sim, &trial, iterations, false);
+            (trial, y_new, sims + f.simulations)
+        })
+        .collect();
+    for (trial, y_new, n) in grown {
+        sims += n;
         for (b, t) in best.iter_mut().zip(trial) {
             if let Some(r) = residual(cmp, &t, &y_new).filter(|r| r.1 < b.0) {
                 copy_segment(&mut y, &y_new, &t);

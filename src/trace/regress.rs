@@ -184,38 +184,66 @@ fn node_response(ctx: &Context<'_, '_>, force: NodeForce<'_>) -> DMatrix<f64> {
     let (cy, dy) = (ctx.input.cy, ctx.input.dy);
     let s = ctx.nodes.len() - 1;
     let ns = ctx.input.measured.ncols();
+    let nx = 2 * sm.n;
     let mut y = DMatrix::zeros(cy.nrows(), ns);
-    let mut x = DVector::zeros(2 * sm.n);
-    let mut xn = DVector::zeros(2 * sm.n);
-    let proj: Option<(Vec<DVector<f64>>, DVector<f64>)> = match force {
-        NodeForce::Along(dir, _) => Some((ctx.nodes.iter().map(|nj| nj * dir).collect(), dy * dir)),
-        NodeForce::Full(_) => None,
+    let mut x = DVector::zeros(nx);
+    let mut xn = DVector::zeros(nx);
+    // the node inputs side by side, [N_0 … N_S] (projected on the
+    // direction: [N_0 d … N_S d]), so that one product per sample takes
+    // the S + 1 node values, contiguous in the history
+    let (width, feed, data): (usize, DMatrix<f64>, &[f64]) = match force {
+        NodeForce::Along(dir, phi) => {
+            let mut b = DMatrix::zeros(nx, s + 1);
+            for (j, nj) in ctx.nodes.iter().enumerate() {
+                b.set_column(j, &(nj * dir));
+            }
+            (1, b, phi)
+        }
+        NodeForce::Full(f) => {
+            let n = sm.n;
+            let mut b = DMatrix::zeros(nx, n * (s + 1));
+            for (j, nj) in ctx.nodes.iter().enumerate() {
+                b.columns_mut(j * n, n).copy_from(nj);
+            }
+            (n, b, f.as_slice())
+        }
     };
+    let dd = dy * match force {
+        NodeForce::Along(dir, _) => DMatrix::from_column_slice(dir.len(), 1, dir.as_slice()),
+        NodeForce::Full(_) => DMatrix::identity(sm.n, sm.n),
+    };
+    let at = |k: usize, len: usize| {
+        nalgebra::DVectorView::from_slice(&data[k * s * width..(k * s + len) * width], len * width)
+    };
+    // a contact's force is zero while it is open: products with a zero
+    // state or a zero input are skipped (y stays zero there)
+    let mut rest = true;
     for k in 0..ns {
         if k % ctx.seg == 0 {
             x.fill(0.0);
+            rest = true;
         }
+        let here = at(k, 1);
         let mut yk = y.column_mut(k);
-        yk.gemv(1.0, cy, &x, 0.0);
-        match (&force, &proj) {
-            (NodeForce::Along(_, phi), Some((_, dd))) => yk.axpy(phi[k * s], dd, 1.0),
-            (NodeForce::Full(f), _) => yk.gemv(1.0, dy, &f.column(k * s), 1.0),
-            _ => {}
+        if !rest {
+            yk.gemv(1.0, cy, &x, 0.0);
+        }
+        if here.iter().any(|&v| v != 0.0) {
+            yk.gemv(1.0, &dd, &here, 1.0);
         }
         if k + 1 < ns && (k + 1) % ctx.seg != 0 {
-            xn.gemv(1.0, &sm.a, &x, 0.0);
-            for j in 0..=s {
-                match (&force, &proj) {
-                    (NodeForce::Along(_, phi), Some((bj, _))) => {
-                        xn.axpy(phi[k * s + j], &bj[j], 1.0)
-                    }
-                    (NodeForce::Full(f), _) => {
-                        xn.gemv(1.0, &ctx.nodes[j], &f.column(k * s + j), 1.0)
-                    }
-                    _ => {}
+            let input = at(k, s + 1);
+            let driven = input.iter().any(|&v| v != 0.0);
+            if !rest {
+                xn.gemv(1.0, &sm.a, &x, 0.0);
+                if driven {
+                    xn.gemv(1.0, &feed, &input, 1.0);
                 }
+                std::mem::swap(&mut x, &mut xn);
+            } else if driven {
+                x.gemv(1.0, &feed, &input, 0.0);
+                rest = false;
             }
-            std::mem::swap(&mut x, &mut xn);
         }
     }
     y
@@ -580,11 +608,24 @@ struct Eval {
 /// Weighted stacked response column of a candidate at unit strength on the
 /// node states `hires` (internal force on the left-hand side → minus on
 /// the right).
-fn column(cand: &Candidate, ctx: &Context<'_, '_>, hires: &DMatrix<f64>) -> DVector<f64> {
+/// With `node_deltas` (the contact's relative displacement at every node,
+/// computed once for a gap scan) the shape is formed from them.
+fn column(
+    cand: &Candidate,
+    ctx: &Context<'_, '_>,
+    hires: &DMatrix<f64>,
+    node_deltas: Option<&[f64]>,
+) -> DVector<f64> {
     let sm = ctx.input.sampled;
     let y = match cand.direction(sm.n) {
         Some(dir) => {
-            let phi: Vec<f64> = cand.shape(hires, sm.n).iter().map(|x| -x).collect();
+            let phi: Vec<f64> = match (cand.kind, node_deltas) {
+                (EffectKind::Contact, Some(d)) => {
+                    let g = cand.gap.unwrap_or(0.0);
+                    d.iter().map(|x| -(x - g).max(0.0)).collect()
+                }
+                _ => cand.shape(hires, sm.n).iter().map(|x| -x).collect(),
+            };
             node_response(ctx, NodeForce::Along(&dir, &phi))
         }
         None => {
@@ -601,15 +642,16 @@ fn evaluate(
     sel: &Selection,
     r: &DVector<f64>,
     sims: &mut usize,
+    node_deltas: Option<&[f64]>,
 ) -> Option<Eval> {
     *sims += 1;
-    let col = column(cand, ctx, ctx.hires);
+    let col = column(cand, ctx, ctx.hires, node_deltas);
     let mut cols = vec![col];
     let mut used = vec![];
     if cand.kind.linear_in_state() {
         for (j, e) in ctx.hidden.iter().enumerate() {
             *sims += 1;
-            let c = column(cand, ctx, e);
+            let c = column(cand, ctx, e, None);
             if c.norm() > 1e-8 * cols[0].norm() {
                 cols.push(c);
                 used.push(j);
@@ -658,12 +700,15 @@ fn scan_gap(
     let gaps: Vec<f64> = (0..ng)
         .map(|i| lo + (hi - lo) * i as f64 / (ng - 1) as f64)
         .collect();
+    let node_deltas: Vec<f64> = (0..ctx.hires.ncols())
+        .map(|k| cand.delta(ctx.hires, k))
+        .collect();
     let at = |g: f64, sims: &mut usize| {
         let c = Candidate {
             gap: Some(g),
             ..cand.clone()
         };
-        evaluate(&c, ctx, sel, r, sims).map(|e| (c, e))
+        evaluate(&c, ctx, sel, r, sims, Some(&node_deltas)).map(|e| (c, e))
     };
     let mut best: Option<(usize, Candidate, Eval)> = None;
     for (i, &g) in gaps.iter().enumerate() {
@@ -732,7 +777,7 @@ fn score(
         let (c, e, se) = scan_gap(cand, ctx, sel, r, sims)?;
         (c, e, Some(se))
     } else {
-        (cand.clone(), evaluate(cand, ctx, sel, r, sims)?, None)
+        (cand.clone(), evaluate(cand, ctx, sel, r, sims, None)?, None)
     };
     let rss = ev.rss;
     let gain = if sel.rss > 0.0 {
