@@ -159,14 +159,16 @@ pub struct Integrator {
     /// Powers of the sub-step map of a derivative when no element is
     /// active (built on first use by the sensitivities; see
     /// `sensitivity::linear_powers`).
-    linear_powers: std::sync::OnceLock<Option<Vec<f64>>>,
+    linear_powers: std::sync::OnceLock<Option<std::sync::Arc<Vec<f64>>>>,
     /// Indices of the contacts among the elements.
     contacts: Vec<usize>,
     /// C = 0 (undamped): the sensitivities skip its products.
     c_zero: bool,
     /// The affine map of a whole sample without an active element (built
     /// on first use; see [`SampleMap`]).
-    sample_map: std::sync::OnceLock<Option<SampleMap>>,
+    sample_map: std::sync::OnceLock<Option<std::sync::Arc<SampleMap>>>,
+    /// Gaps of the contacts, in element order.
+    contact_gaps: Vec<f64>,
     /// Batch the sub-steps without an active element (off only to test
     /// the batching against the plain recursion).
     batch_linear: bool,
@@ -184,17 +186,62 @@ struct SampleMap {
     /// `(u, v, a)` after the sample: `3n × 5n`, column-major, from the
     /// inputs `(u, v, a, f_prev, f_next)`.
     full: Vec<f64>,
-    /// Per contact: its gap and relative displacement after each sub-step.
-    contacts: Vec<ContactRows>,
+    /// Per contact (in element order): its relative displacement after
+    /// each sub-step of the sample as `S` rows of `5n` coefficients of the
+    /// sample's inputs (the gaps are the integrator's: the map does not
+    /// depend on them).
+    contacts: Vec<Vec<f64>>,
 }
 
-/// A contact's gap and its relative displacement after each sub-step of
-/// a sample as `S` rows of `5n` coefficients of the sample's inputs.
-#[derive(Debug, Clone)]
-struct ContactRows {
-    gap: f64,
-    rows: Vec<f64>,
+/// Recently built linear operators ([`SampleMap`], the derivative powers
+/// of `sensitivity::linear_powers`), shared by integrators whose inactive
+/// sub-step is the same (the same M, C, K, sub-step and contact pairs: a
+/// fit of contact or friction parameters builds a new integrator at every
+/// trial, with the same linear part). A hit returns what the build would
+/// compute, bit for bit.
+pub(crate) struct OperatorCache<T> {
+    entries: std::sync::Mutex<Vec<(Vec<u64>, std::sync::Arc<T>)>>,
 }
+
+/// Entries kept by an [`OperatorCache`].
+const CACHE_ENTRIES: usize = 8;
+
+impl<T> OperatorCache<T> {
+    pub(crate) const fn new() -> Self {
+        OperatorCache {
+            entries: std::sync::Mutex::new(Vec::new()),
+        }
+    }
+
+    /// The entry for `key`, built by `build` when absent (None: nothing is
+    /// cached).
+    pub(crate) fn get_or_build(
+        &self,
+        key: Vec<u64>,
+        build: impl FnOnce() -> Option<T>,
+    ) -> Option<std::sync::Arc<T>> {
+        {
+            let mut e = self.entries.lock().unwrap_or_else(|p| p.into_inner());
+            if let Some(i) = e.iter().position(|(k, _)| *k == key) {
+                let hit = e.remove(i);
+                let value = hit.1.clone();
+                e.push(hit);
+                return Some(value);
+            }
+        }
+        let value = std::sync::Arc::new(build()?);
+        let mut e = self.entries.lock().unwrap_or_else(|p| p.into_inner());
+        if !e.iter().any(|(k, _)| *k == key) {
+            if e.len() >= CACHE_ENTRIES {
+                e.remove(0);
+            }
+            e.push((key, value.clone()));
+        }
+        Some(value)
+    }
+}
+
+static SAMPLE_MAPS: OperatorCache<SampleMap> = OperatorCache::new();
 
 impl Integrator {
     /// Build for a model sampled at `fs` Hz.
@@ -241,7 +288,15 @@ impl Integrator {
             .filter(|&e| matches!(elements[e], Element::Contact { .. }))
             .collect();
         let c_zero = c.iter().all(|&x| x == 0.0);
+        let contact_gaps = elements
+            .iter()
+            .filter_map(|e| match *e {
+                Element::Contact { gap, .. } => Some(gap),
+                _ => None,
+            })
+            .collect();
         Ok(Integrator {
+            contact_gaps,
             n,
             m_diag,
             m,
@@ -464,64 +519,93 @@ impl Integrator {
     fn sample_map(&self) -> Option<&SampleMap> {
         self.sample_map
             .get_or_init(|| {
-                let l = self.j0_chol.as_ref()?;
+                self.j0_chol.as_ref()?;
                 if self.alpha != 0.0 || !self.batch_linear {
                     return None;
                 }
-                let mut contacts = vec![];
+                let mut key = self.linear_key();
                 for e in &self.elements {
                     match *e {
-                        Element::Contact { i, j, gap, .. } => contacts.push((i, j, gap)),
+                        Element::Contact { i, j, .. } => {
+                            key.extend([i as u64, j.map_or(u64::MAX, |j| j as u64)])
+                        }
                         _ => return None,
                     }
                 }
-                let (n, s) = (self.n, self.settings.substeps);
-                let (m3, m5) = (3 * n, 5 * n);
-                let mut full = vec![0.0; m3 * m5];
-                let mut deltas = vec![vec![0.0; s * m5]; contacts.len()];
-                let mut ws = Work::new(n, self.elements.len());
-                for col in 0..m5 {
-                    for v in [
-                        &mut ws.u,
-                        &mut ws.v,
-                        &mut ws.a,
-                        &mut ws.f_prev,
-                        &mut ws.f_next,
-                    ] {
-                        v.fill(0.0);
-                    }
-                    let unit = match col / n {
-                        0 => &mut ws.u,
-                        1 => &mut ws.v,
-                        2 => &mut ws.a,
-                        3 => &mut ws.f_prev,
-                        _ => &mut ws.f_next,
-                    };
-                    unit[col % n] = 1.0;
-                    for sub in 0..s {
-                        // the sub-step of Integrator::advance with every
-                        // element inactive: Newton's answer J0⁻¹ b
-                        self.step_setup::<0>(&mut ws, sub);
-                        ws.un.copy_from_slice(&ws.b);
-                        chol_solve::<0>(l, n, &mut ws.un);
-                        self.accept::<0>(&mut ws);
-                        for (&(i, j, _), d) in contacts.iter().zip(deltas.iter_mut()) {
-                            d[sub * m5 + col] = ws.u[i] - j.map_or(0.0, |j| ws.u[j]);
-                        }
-                    }
-                    let out = &mut full[col * m3..(col + 1) * m3];
-                    out[..n].copy_from_slice(&ws.u);
-                    out[n..2 * n].copy_from_slice(&ws.v);
-                    out[2 * n..].copy_from_slice(&ws.a);
-                }
-                let contacts = contacts
-                    .into_iter()
-                    .zip(deltas)
-                    .map(|((_, _, gap), rows)| ContactRows { gap, rows })
-                    .collect();
-                Some(SampleMap { full, contacts })
+                SAMPLE_MAPS.get_or_build(key, || self.build_sample_map())
             })
-            .as_ref()
+            .as_deref()
+    }
+
+    /// Everything the sub-step without an active element reads, as bits:
+    /// two integrators with the same key step alike while no element acts.
+    pub(crate) fn linear_key(&self) -> Vec<u64> {
+        let mut key = vec![
+            self.n as u64,
+            self.settings.substeps as u64,
+            self.h.to_bits(),
+            self.alpha.to_bits(),
+            self.gamma.to_bits(),
+            self.beta.to_bits(),
+        ];
+        for m in [&self.m, &self.c, &self.k] {
+            key.extend(m.iter().map(|x| x.to_bits()));
+        }
+        key
+    }
+
+    fn build_sample_map(&self) -> Option<SampleMap> {
+        let l = self.j0_chol.as_ref()?;
+        let mut contacts = vec![];
+        for e in &self.elements {
+            match *e {
+                Element::Contact { i, j, .. } => contacts.push((i, j)),
+                _ => return None,
+            }
+        }
+        let (n, s) = (self.n, self.settings.substeps);
+        let (m3, m5) = (3 * n, 5 * n);
+        let mut full = vec![0.0; m3 * m5];
+        let mut deltas = vec![vec![0.0; s * m5]; contacts.len()];
+        let mut ws = Work::new(n, self.elements.len());
+        for col in 0..m5 {
+            for v in [
+                &mut ws.u,
+                &mut ws.v,
+                &mut ws.a,
+                &mut ws.f_prev,
+                &mut ws.f_next,
+            ] {
+                v.fill(0.0);
+            }
+            let unit = match col / n {
+                0 => &mut ws.u,
+                1 => &mut ws.v,
+                2 => &mut ws.a,
+                3 => &mut ws.f_prev,
+                _ => &mut ws.f_next,
+            };
+            unit[col % n] = 1.0;
+            for sub in 0..s {
+                // the sub-step of Integrator::advance with every
+                // element inactive: Newton's answer J0⁻¹ b
+                self.step_setup::<0>(&mut ws, sub);
+                ws.un.copy_from_slice(&ws.b);
+                chol_solve::<0>(l, n, &mut ws.un);
+                self.accept::<0>(&mut ws);
+                for (&(i, j), d) in contacts.iter().zip(deltas.iter_mut()) {
+                    d[sub * m5 + col] = ws.u[i] - j.map_or(0.0, |j| ws.u[j]);
+                }
+            }
+            let out = &mut full[col * m3..(col + 1) * m3];
+            out[..n].copy_from_slice(&ws.u);
+            out[n..2 * n].copy_from_slice(&ws.v);
+            out[2 * n..].copy_from_slice(&ws.a);
+        }
+        Some(SampleMap {
+            full,
+            contacts: deltas,
+        })
     }
 
     /// Take the whole sample (forces in `ws.f_prev`, `ws.f_next`) by the
@@ -540,10 +624,10 @@ impl Integrator {
         {
             x[q * n..(q + 1) * n].copy_from_slice(&v[..n]);
         }
-        for c in &map.contacts {
-            for row in c.rows.chunks_exact(m5) {
+        for (rows, &gap) in map.contacts.iter().zip(&self.contact_gaps) {
+            for row in rows.chunks_exact(m5) {
                 let d: f64 = row.iter().zip(x.iter()).map(|(r, x)| r * x).sum();
-                if !(d <= c.gap) {
+                if !(d <= gap) {
                     return false;
                 }
             }

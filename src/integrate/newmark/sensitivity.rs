@@ -53,11 +53,13 @@
 //! itself (`δ = gap` exactly) the open side is used.
 
 use super::dense::{chol_solve, cholesky_in_place, dim, mat_vec_axpy};
-use super::{Integrator, Outputs, SimStatus, Simulation, Work};
+use super::{Integrator, OperatorCache, Outputs, SimStatus, Simulation, Work};
 use crate::error::{Result, TacitError};
 use crate::model::elements::{self, ElementParam};
 use nalgebra::{DMatrix, DMatrixView, Dyn, LU};
 use serde::Serialize;
+
+static POWERS: OperatorCache<Vec<f64>> = OperatorCache::new();
 
 /// One element parameter in a [`ParamSeed`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -703,48 +705,54 @@ impl Integrator {
     /// Built once per integrator, on first use; None with HHT (`δg` is
     /// carried too), without a Cholesky factor of `J_0`, or when batching
     /// is off.
-    fn linear_powers(&self) -> Option<&[f64]> {
+    pub(super) fn linear_powers(&self) -> Option<&[f64]> {
         self.linear_powers
             .get_or_init(|| {
-                let l = self.j0_chol.as_ref()?;
+                self.j0_chol.as_ref()?;
                 if self.alpha != 0.0 || !self.batch_linear {
                     return None;
                 }
-                let n = self.n;
-                let m3 = 3 * n;
-                let zeros = vec![0.0; self.elements.len()];
-                let (mut dz, mut dw, mut rhs) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-                let mut one = vec![0.0; m3 * m3];
-                for (c, col) in one.chunks_exact_mut(m3).enumerate() {
-                    col[c] = 1.0;
-                    let (du, rest) = col.split_at_mut(n);
-                    let (dv, da) = rest.split_at_mut(n);
-                    self.seed_step::<0>(
-                        &zeros,
-                        (du, dv, da),
-                        None,
-                        None,
-                        (&mut dz, &mut dw, &mut rhs),
-                        |b| {
-                            chol_solve::<0>(l, n, b);
-                            true
-                        },
-                    );
-                }
-                let s = self.settings.substeps;
-                let mut out = Vec::with_capacity(s * m3 * m3);
-                out.extend_from_slice(&one);
-                for k in 1..s {
-                    let prev = out[(k - 1) * m3 * m3..k * m3 * m3].to_vec();
-                    let mut next = vec![0.0; m3 * m3];
-                    for (pc, nc) in prev.chunks_exact(m3).zip(next.chunks_exact_mut(m3)) {
-                        mat_vec_axpy::<0>(&one, m3, pc, 1.0, nc);
-                    }
-                    out.extend_from_slice(&next);
-                }
-                Some(out)
+                POWERS.get_or_build(self.linear_key(), || self.build_linear_powers())
             })
             .as_deref()
+            .map(|v| v.as_slice())
+    }
+
+    fn build_linear_powers(&self) -> Option<Vec<f64>> {
+        let l = self.j0_chol.as_ref()?;
+        let n = self.n;
+        let m3 = 3 * n;
+        let zeros = vec![0.0; self.elements.len()];
+        let (mut dz, mut dw, mut rhs) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let mut one = vec![0.0; m3 * m3];
+        for (c, col) in one.chunks_exact_mut(m3).enumerate() {
+            col[c] = 1.0;
+            let (du, rest) = col.split_at_mut(n);
+            let (dv, da) = rest.split_at_mut(n);
+            self.seed_step::<0>(
+                &zeros,
+                (du, dv, da),
+                None,
+                None,
+                (&mut dz, &mut dw, &mut rhs),
+                |b| {
+                    chol_solve::<0>(l, n, b);
+                    true
+                },
+            );
+        }
+        let s = self.settings.substeps;
+        let mut out = Vec::with_capacity(s * m3 * m3);
+        out.extend_from_slice(&one);
+        for k in 1..s {
+            let prev = out[(k - 1) * m3 * m3..k * m3 * m3].to_vec();
+            let mut next = vec![0.0; m3 * m3];
+            for (pc, nc) in prev.chunks_exact(m3).zip(next.chunks_exact_mut(m3)) {
+                mat_vec_axpy::<0>(&one, m3, pc, 1.0, nc);
+            }
+            out.extend_from_slice(&next);
+        }
+        Some(out)
     }
 
     /// Factor `J_T = J_0 + (1+α)(F_u + a_1 F_v)` for `slopes`, unless the

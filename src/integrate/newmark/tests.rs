@@ -327,3 +327,54 @@ fn whole_samples_without_contact_agree_with_sub_stepping() {
         assert!(batched.u != stepped.u);
     }
 }
+
+#[test]
+fn integrators_sharing_a_linear_part_share_its_operators_not_their_gaps() {
+    // the bumper 5→6 with a wide gap, then the same linear part with a
+    // narrow gap and another stiffness: the second integrator may take
+    // the first one's sample map and derivative powers from the cache,
+    // but it must close its contact at its own gap
+    let ns = 600;
+    let x = crate::signal::random_band(ns, 512.0, (5.0, 200.0), 30.0, 5).unwrap();
+    let mut f = zero_force(8, ns);
+    f.row_mut(0).copy_from_slice(&x);
+    let settings = SimSettings {
+        substeps: 17,
+        ..Default::default()
+    };
+    let mut wide = lanl(true);
+    wide.contacts[0].gap = 5e-3;
+    let first = Integrator::new(&wide, 512.0, settings).unwrap();
+    let open = first.run(f.as_view(), &[0.0; 8], &[0.0; 8]);
+    assert!(open.completed() && open.fint.iter().all(|&v| v == 0.0));
+    assert!(first.sample_map().is_some() && first.linear_powers().is_some());
+    let mut narrow = lanl(true);
+    narrow.contacts[0].gap = 1e-4;
+    narrow.contacts[0].stiffness = 3e6;
+    let integ = Integrator::new(&narrow, 512.0, settings).unwrap();
+    assert_eq!(integ.linear_key(), first.linear_key());
+    let cached = integ.run(f.as_view(), &[0.0; 8], &[0.0; 8]);
+    let mut plain = Integrator::new(&narrow, 512.0, settings).unwrap();
+    plain.batch_linear = false;
+    let stepped = plain.run(f.as_view(), &[0.0; 8], &[0.0; 8]);
+    assert!(cached.completed() && stepped.completed());
+    let closed = (0..ns).filter(|&k| stepped.fint[(4, k)] != 0.0).count();
+    assert!(closed > 10, "the narrow contact closes: {closed} samples");
+    // (rounding differences grow through the impacts: 1.5e-6 after 300
+    // samples; the first integrator's gap would leave this contact open)
+    let e = (cached.u.columns(0, 300) - stepped.u.columns(0, 300)).amax() / stepped.u.amax();
+    assert!(e < 1e-4, "{e:e}");
+    // the derivative powers too: the same sensitivities as the plain
+    // recursion
+    let seeds = crate::integrate::Seeds::initial_state(8);
+    let (_, d1) = integ
+        .run_sensitivities(f.columns(0, 200), &[0.0; 8], &[0.0; 8], &seeds)
+        .unwrap();
+    let (_, d2) = plain
+        .run_sensitivities(f.columns(0, 200), &[0.0; 8], &[0.0; 8], &seeds)
+        .unwrap();
+    for q in 0..16 {
+        let e = (&d1.du[q] - &d2.du[q]).amax() / d2.du[q].amax().max(1e-300);
+        assert!(e < 1e-7, "seed {q}: {e:e}");
+    }
+}
