@@ -6,6 +6,7 @@ use crate::io::{ensure_dir, write_json, write_string};
 use crate::plot::{self, Figure, Panel, Series, SeriesStyle};
 use crate::Result;
 use nalgebra::DMatrix;
+use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -239,7 +240,8 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
     let ns = cmp.force.ncols();
     let t: Vec<f64> = (0..ns).map(|k| k as f64 / cmp.fs).collect();
     let meas = cmp.measured();
-    let mut out = vec![];
+    // (figure, path) pairs, drawn in parallel at the end
+    let mut jobs = vec![];
     // residuals before / after
     let mut panels = vec![];
     for (c, o) in cmp.observations.iter().enumerate() {
@@ -260,10 +262,10 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
         }
         panels.push(plot::time_panel(&o.name(), "residual", &t, series));
     }
-    out.extend(plot::save(
-        &Figure::new("Segment residual, before and after", panels, 1),
-        &dir.join("residual"),
-    )?);
+    jobs.push((
+        Figure::new("Segment residual, before and after", panels, 1),
+        dir.join("residual"),
+    ));
     // responses over the first 0.5 s
     let kmax = ((0.5 * cmp.fs) as usize).min(ns);
     let tt = &t[..kmax];
@@ -295,10 +297,10 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
             series,
         ));
     }
-    out.extend(plot::save(
-        &Figure::new("Responses (segments), first 0.5 s", panels, 1),
-        &dir.join("responses"),
-    )?);
+    jobs.push((
+        Figure::new("Responses (segments), first 0.5 s", panels, 1),
+        dir.join("responses"),
+    ));
     // identified force
     let f = &prep.recon.force;
     let n = f.nrows();
@@ -312,10 +314,10 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
             )
         })
         .collect();
-    out.extend(plot::save(
-        &Figure::new("Identified internal force (left-hand side)", panels, 2),
-        &dir.join("identified_force"),
-    )?);
+    jobs.push((
+        Figure::new("Identified internal force (left-hand side)", panels, 2),
+        dir.join("identified_force"),
+    ));
     // restoring-force plots of the effects (and of the best candidate when none)
     let states = &prep.recon.states;
     let cands: Vec<crate::trace::Candidate> = if d.effects.is_empty() {
@@ -364,12 +366,16 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
             "f_int [N]",
             vec![Series::points("identified", dv, fy)],
         );
-        out.extend(plot::save(
-            &Figure::new(format!("Restoring force: {}", c.label()), vec![p1, p2], 2),
-            &dir.join(format!("restoring_{}", i + 1)),
-        )?);
+        jobs.push((
+            Figure::new(format!("Restoring force: {}", c.label()), vec![p1, p2], 2),
+            dir.join(format!("restoring_{}", i + 1)),
+        ));
     }
-    Ok(out)
+    let saved = jobs
+        .par_iter()
+        .map(|(fig, path)| plot::save(fig, path))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(saved.into_iter().flatten().collect())
 }
 
 fn kind_of(name: &str) -> crate::trace::EffectKind {
