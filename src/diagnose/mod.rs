@@ -851,6 +851,7 @@ pub fn diagnose(
         let screen = companion_screen(current_err, settings);
         let mut screened_out = vec![];
         let mut screen_sims = 0;
+        let mut predicted = None;
         for best in pool {
             let mut trial = current.clone();
             let eff = effects::add(&mut trial, &best);
@@ -859,8 +860,9 @@ pub fn diagnose(
             if !screened {
                 if let Some((segs, sim)) = current_segments.as_ref() {
                     let t = Instant::now();
-                    let (g, n) = companion_gain(&trial, &all, cmp, segs, *sim);
+                    let (g, n, at) = companion_gain(&trial, &all, cmp, segs, *sim);
                     screen_sims += n;
+                    predicted = at;
                     *timings.entry("fit".into()).or_insert(0.0) += t.elapsed().as_secs_f64();
                     if g.is_some_and(|g| g < screen) {
                         screened_out.push(format!(
@@ -919,6 +921,7 @@ pub fn diagnose(
                     &o.comparison,
                     &o.recon.states,
                     None,
+                    predicted.as_deref(),
                     rec.fs,
                     settings,
                 )?,
@@ -928,6 +931,7 @@ pub fn diagnose(
                     cmp,
                     &prep.recon.states,
                     correction.as_ref(),
+                    predicted.as_deref(),
                     rec.fs,
                     settings,
                 )?,
@@ -1243,7 +1247,7 @@ fn companion_gain(
     cmp: &Comparison,
     segs: &[Segment],
     sim: SimSettings,
-) -> (Option<f64>, usize) {
+) -> (Option<f64>, usize, Option<Vec<Vec<f64>>>) {
     let mut params = vec![];
     let mut extra = 0;
     for e in all {
@@ -1252,11 +1256,11 @@ fn companion_gain(
                 extra = p.len();
                 params.extend(p);
             }
-            Err(_) => return (None, 0),
+            Err(_) => return (None, 0, None),
         }
     }
     let Some(last) = all.last() else {
-        return (None, 0);
+        return (None, 0, None);
     };
     let mut problem = cmp.problem(trial, segs.to_vec(), sim);
     problem.parameters = params;
@@ -1275,8 +1279,25 @@ fn companion_gain(
         }
     }
     match joint::predicted_gain(&problem, &x, extra) {
-        Some((g, _, n)) => (Some(g), n),
-        None => (None, 0),
+        Some((g, dx, n)) => {
+            // the Gauss–Newton step's parameter values: a start for the
+            // fit (the trace's value of a companion comes from a
+            // regression on states the effects found already absorb it in)
+            let (lo, hi) = problem.x_bounds();
+            let at = GN_STRIDES
+                .iter()
+                .map(|f| {
+                    problem
+                        .parameters
+                        .iter()
+                        .enumerate()
+                        .map(|(i, p)| p.from_x((x[i] + f * dx[i]).clamp(lo[i], hi[i])))
+                        .collect()
+                })
+                .collect();
+            (Some(g), n, Some(at))
+        }
+        None => (None, 0, None),
     }
 }
 
@@ -1338,12 +1359,14 @@ struct EffectFit {
 
 /// Fit the parameters of all added effects jointly.
 #[allow(clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments)]
 fn fit_effects(
     trial: &Model,
     all: &[AddedEffect],
     cmp: &Comparison,
     states: &DMatrix<f64>,
     correction: Option<&DMatrix<f64>>,
+    predicted: Option<&[Vec<f64>]>,
     fs: f64,
     settings: &DiagnoseSettings,
 ) -> Result<EffectFit> {
@@ -1376,6 +1399,23 @@ fn fit_effects(
     problem.parameters = params;
     let np = problem.parameters.len();
     let mut starts = vec![vec![0.0; np]];
+    // the joint linearization's step at the current fit, when the effect
+    // came in on its predicted gain ([`companion_gain`])
+    for at in predicted
+        .unwrap_or_default()
+        .iter()
+        .filter(|a| a.len() == np)
+    {
+        let s: Vec<f64> = problem
+            .parameters
+            .iter()
+            .zip(at)
+            .map(|(p, &v)| p.to_x(v.clamp(p.lower, p.upper)))
+            .collect();
+        if s.iter().all(|v| v.is_finite()) && !starts.contains(&s) {
+            starts.push(s);
+        }
+    }
     let mut sims = 0;
     let mut stages = [("fit_scan", 0.0), ("fit_race", 0.0), ("fit_polish", 0.0)];
     let mut stiffest = trial.clone();
@@ -1424,6 +1464,61 @@ fn fit_effects(
                 starts.push(s);
                 if kc > stiffest.contacts[ci].stiffness {
                     stiffest.contacts[ci].stiffness = kc;
+                }
+            }
+        }
+    }
+    // a companion taken in on its predicted gain beside a contact found
+    // before: the contact's gap and stiffness scanned again with the
+    // companion at the farthest predicted value (the contact fitted alone
+    // took up part of the companion)
+    if let (Some(last), Some(far)) = (all.last(), predicted.and_then(|p| p.last())) {
+        let contact = all[..all.len() - 1]
+            .iter()
+            .rev()
+            .find(|e| e.candidate.kind == EffectKind::Contact);
+        let slot = |t: crate::update::Target| problem.parameters.iter().position(|p| p.target == t);
+        if let (true, Some(c), true) = (
+            last.candidate.kind.linear_in_state(),
+            contact,
+            far.len() == np,
+        ) {
+            let ci = c.targets.iter().find_map(|t| match t {
+                crate::update::Target::ContactGap(i) => Some(*i),
+                _ => None,
+            });
+            if let Some(ci) = ci {
+                let (ig, ik) = (
+                    slot(crate::update::Target::ContactGap(ci)),
+                    slot(crate::update::Target::ContactStiffness(ci)),
+                );
+                if let (Some(ig), Some(ik)) = (ig, ik) {
+                    let mut at = trial.clone();
+                    for (p, &v) in problem.parameters.iter().zip(far) {
+                        p.target.set(&mut at, v);
+                    }
+                    let t = Instant::now();
+                    let (best, evals) =
+                        scan_contact(&at, ci, &c.candidate, states, cmp, &segments, settings);
+                    sims += evals * segments.len();
+                    stages[0].1 += t.elapsed().as_secs_f64();
+                    for (g, kc) in best {
+                        let mut v = far.to_vec();
+                        v[ig] = g;
+                        v[ik] = kc;
+                        let s: Vec<f64> = problem
+                            .parameters
+                            .iter()
+                            .zip(&v)
+                            .map(|(p, &v)| p.to_x(v.clamp(p.lower, p.upper)))
+                            .collect();
+                        if s.iter().all(|v| v.is_finite()) && !starts.contains(&s) {
+                            starts.push(s);
+                        }
+                        if kc > stiffest.contacts[ci].stiffness {
+                            stiffest.contacts[ci].stiffness = kc;
+                        }
+                    }
                 }
             }
         }
@@ -1493,6 +1588,13 @@ fn fit_effects(
         stages,
     })
 }
+
+/// Multiples of the joint linearization's parameter step that start the
+/// fit of an effect taken in on its predicted gain: a companion of an
+/// effect found before trades against it (a softer spring beside a
+/// bumper whose stiffness took up part of it), and the step from the
+/// current fit, linearized, falls short along that valley.
+const GN_STRIDES: [f64; 3] = [1.0, 2.0, 3.0];
 
 /// Race starts carried on by [`polish`] at most.
 const POLISH_STARTS: usize = 2;
