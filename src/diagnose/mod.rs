@@ -1359,7 +1359,6 @@ struct EffectFit {
 
 /// Fit the parameters of all added effects jointly.
 #[allow(clippy::too_many_arguments)]
-#[allow(clippy::too_many_arguments)]
 fn fit_effects(
     trial: &Model,
     all: &[AddedEffect],
