@@ -853,11 +853,18 @@ pub fn diagnose(
         let mut screen_sims = 0;
         let mut predicted = None;
         for best in pool {
+            predicted = None;
             let mut trial = current.clone();
             let eff = effects::add(&mut trial, &best);
             let mut all: Vec<AddedEffect> = added.iter().map(|a| a.0.clone()).collect();
             all.push(eff.clone());
-            if !screened {
+            // (a spring to ground on a free-free model is judged on states
+            // reconstructed with it, [`rescore_prep`]: linearized on the
+            // declared model's reconstruction its gain is not seen, and
+            // with modal damping its derivative at zero is infinite; the
+            // fit decides)
+            let own = grounded(&trial) && !grounded(&current) && !grounded(declared);
+            if !screened && !own {
                 if let Some((segs, sim)) = current_segments.as_ref() {
                     let t = Instant::now();
                     let (g, n, at) = companion_gain(&trial, &all, cmp, segs, *sim);
@@ -1467,11 +1474,13 @@ fn fit_effects(
             }
         }
     }
-    // a companion taken in on its predicted gain beside a contact found
-    // before: the contact's gap and stiffness scanned again with the
-    // companion at the farthest predicted value (the contact fitted alone
-    // took up part of the companion)
-    if let (Some(last), Some(far)) = (all.last(), predicted.and_then(|p| p.last())) {
+    // a change linear in the state beside a contact found before: the
+    // contact's gap and stiffness scanned again with the change at the
+    // farthest predicted value, or at its start (the contact fitted alone
+    // took up part of it)
+    let start_values: Vec<f64> = problem.parameters.iter().map(|p| p.start).collect();
+    let far = predicted.and_then(|p| p.last()).unwrap_or(&start_values);
+    if let Some(last) = all.last() {
         let contact = all[..all.len() - 1]
             .iter()
             .rev()
