@@ -166,6 +166,48 @@ pub fn without(model: &Model, e: &AddedEffect) -> Model {
     m
 }
 
+/// `model` without the effect `e`, which must be the last one added (its
+/// elements are the last of their lists, so the others' targets stay
+/// valid): its elements removed, a stiffness or damping change set back
+/// to its nominal value.
+pub fn remove(model: &Model, e: &AddedEffect) -> Model {
+    let mut m = without(model, e);
+    let mut targets = e.targets.clone();
+    // from the highest index down
+    targets.sort_by_key(|t| std::cmp::Reverse(index(t)));
+    for t in targets {
+        match (e.candidate.kind, t) {
+            (EffectKind::Stiffness | EffectKind::Damping, _) => {}
+            (EffectKind::GroundSpring, Target::SpringStiffness(i)) if i < m.springs.len() => {
+                m.springs.remove(i);
+            }
+            (_, Target::ContactStiffness(i)) if i < m.contacts.len() => {
+                m.contacts.remove(i);
+            }
+            (_, Target::FrictionLevel(i)) if i < m.frictions.len() => {
+                m.frictions.remove(i);
+            }
+            (_, Target::CubicK3(i)) if i < m.cubics.len() => {
+                m.cubics.remove(i);
+            }
+            _ => {}
+        }
+    }
+    m
+}
+
+fn index(t: &Target) -> usize {
+    match *t {
+        Target::SpringStiffness(i)
+        | Target::ContactStiffness(i)
+        | Target::FrictionLevel(i)
+        | Target::CubicK3(i)
+        | Target::Mass(i)
+        | Target::ContactGap(i) => i,
+        _ => 0,
+    }
+}
+
 /// Report values `(name, value)` of an effect's parameters from a fitted
 /// model (SI; a stiffness or damping change as a relative change of the
 /// nominal; friction at several DOFs as the mean level).

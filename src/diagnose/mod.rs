@@ -967,13 +967,15 @@ pub fn diagnose(
         // others as fitted), it must itself remove the same share of the
         // squared error
         let mut without_err = None;
+        let mut off_shot = None;
         if !screened {
-            let off = effects::without(&fitted, &eff);
+            let off = effects::remove(&fitted, &eff);
             let off_prep = own_prep(&off, rec);
             let off_cmp = off_prep.as_ref().map_or(cmp, |p| &p.comparison);
             let p0 = off_cmp.shoot(&off, sim);
             sims += shot_simulations(p0.as_ref().ok().and_then(|p| p.2.as_ref()), off_cmp);
-            without_err = p0.ok().map(|y| cmp.total_error(&y.0));
+            without_err = p0.as_ref().ok().map(|y| cmp.total_error(&y.0));
+            off_shot = Some((off, off_prep, p0));
         }
         let negligible = match (without_err, new_err) {
             (Some(w), Some(b)) => b * b >= w * w * (1.0 - need),
@@ -1031,6 +1033,28 @@ pub fn diagnose(
             simulations: fit_sims,
         });
         if !pays {
+            // the effects found, as refitted beside the withdrawn
+            // candidate, are kept when they lower the error by the
+            // screen's share on their own (the joint refit left the
+            // earlier fit's local minimum)
+            let better = match (negligible, without_err, current_err) {
+                (true, Some(w), Some(a)) => w * w < a * a * (1.0 - settings.min_improvement),
+                _ => false,
+            };
+            if let (true, Some((off, off_prep, shot))) = (better, off_shot) {
+                if let Some(r) = rounds.last_mut() {
+                    r.note = format!(
+                        "{}; the effects found, as refitted beside it, are kept: multiple-shooting error {:.4} → {:.4}",
+                        r.note,
+                        current_err.unwrap_or(f64::NAN),
+                        without_err.unwrap_or(f64::NAN)
+                    );
+                }
+                current_segments = fit_segs;
+                current = off;
+                current_sub = sub;
+                current_shot = Some((off_prep, shot));
+            }
             break;
         }
         let score = Score {
