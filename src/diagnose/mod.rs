@@ -333,32 +333,21 @@ pub fn locate_record(
     if settings.states != StatesSource::Lifted {
         return Ok(None);
     }
-    let s = setup(model, rec, sensors, settings)?;
-    search(
-        model,
-        &s.sampled,
-        &s.force,
-        &s.measured,
-        &s.channels,
-        settings,
-    )
+    search(model, &setup(model, rec, sensors, settings)?, settings)
 }
 
 fn search(
     model: &Model,
-    sampled: &SampledModel,
-    force: &DMatrix<f64>,
-    measured: &DMatrix<f64>,
-    channels: &[(Quantity, usize)],
+    s: &Setup<'_>,
     settings: &DiagnoseSettings,
 ) -> Result<Option<locate::Located>> {
     if settings.locate_ratio > 0.0 && settings.locate_max > 0 {
         Ok(Some(locate::locate(
             model,
-            sampled,
-            force,
-            measured,
-            channels,
+            &s.sampled,
+            &s.force,
+            &s.measured,
+            &s.channels,
             &settings.lifted,
             settings.locate_ratio,
             settings.locate_max,
@@ -378,6 +367,15 @@ pub fn prepare_located(
     settings: &DiagnoseSettings,
     located_before: Option<&locate::Located>,
 ) -> Result<Prepared> {
+    let st = setup(model, rec, sensors, settings)?;
+    let n = model.ndof();
+    let mut located = None;
+    let t = Instant::now();
+    let loc = match located_before {
+        Some(l) => Some(l.clone()),
+        None if settings.states == StatesSource::Lifted => search(model, &st, settings)?,
+        None => None,
+    };
     let Setup {
         outs,
         segment,
@@ -385,15 +383,8 @@ pub fn prepare_located(
         force,
         measured,
         sampled,
-    } = setup(model, rec, sensors, settings)?;
-    let n = model.ndof();
-    let mut located = None;
+    } = st;
     let mut recon = if settings.states == StatesSource::Lifted {
-        let t = Instant::now();
-        let loc = match located_before {
-            Some(l) => Some(l.clone()),
-            None => search(model, &sampled, &force, &measured, &channels, settings)?,
-        };
         let e = match &loc {
             Some(l) if !l.directions.is_empty() => l.matrix(n),
             _ => DMatrix::identity(n, n),
