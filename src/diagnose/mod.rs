@@ -191,11 +191,20 @@ fn resolved(
     settings: &DiagnoseSettings,
     states: &DMatrix<f64>,
 ) -> SimSettings {
+    // a linear model is stepped a whole sample at a time (the sample map),
+    // at a cost that does not depend on its sub-steps: it gets at least
+    // LINEAR_SUBSTEPS, so that its integration error (period elongation
+    // of the highest modes) is not left for an effect to fit
+    let base = if model.is_nonlinear() {
+        settings.substeps
+    } else {
+        settings.substeps.max(LINEAR_SUBSTEPS)
+    };
     SimSettings {
         substeps: auto_substeps(
             model,
             fs,
-            settings.substeps,
+            base,
             settings.omega_h,
             settings.max_substeps,
             Some(states),
@@ -203,6 +212,9 @@ fn resolved(
         ..Default::default()
     }
 }
+
+/// Fewest sub-steps of a linear model in [`resolved`].
+const LINEAR_SUBSTEPS: usize = 40;
 
 /// The reconstruction from the identification step.
 #[derive(Debug, Clone)]
