@@ -335,3 +335,37 @@ fn contact_6_7_and_ground_spring_at_8() {
     within(param(&d, "ground_spring", "stiffness"), 1500.0, 0.1);
     assert_improved(&d);
 }
+
+/// Two effects at two places, neither dominating the location search
+/// alone: a cubic spring 5–6 and a contact closing when u2 − u1 exceeds
+/// 0.25 mm. The pair of directions is located together (alone, each left
+/// the other's force to the prior, and the cubic came out as a +160 %
+/// stiffness change).
+#[test]
+fn cubic_5_6_and_contact_2_1() {
+    let mut truth = lanl();
+    truth.cubics = vec![Cubic {
+        dofs: vec![5, 6],
+        k3: 1e12,
+    }];
+    truth.contacts = vec![Contact {
+        dofs: vec![2, 1],
+        gap: 0.25e-3,
+        stiffness: 1.5e6,
+    }];
+    let d = run(&truth, &[1, 2, 3, 4, 5, 6, 7, 8], 81);
+    assert!(
+        d.identification.contains("pair 1–2") && d.identification.contains("pair 5–6"),
+        "{}",
+        d.identification
+    );
+    assert_eq!(d.effects.len(), 2, "{}", d.verdict);
+    let cubic = d.effects.iter().find(|e| e.kind == "cubic").unwrap();
+    assert_eq!(cubic.dofs, vec![5, 6]);
+    let contact = d.effects.iter().find(|e| e.kind == "contact").unwrap();
+    assert_eq!(contact.dofs, vec![2, 1]);
+    within(param(&d, "cubic", "k3"), 1e12, 0.1);
+    within(param(&d, "contact", "gap"), 0.25e-3, 0.1);
+    within(param(&d, "contact", "stiffness"), 1.5e6, 0.1);
+    assert_improved(&d);
+}

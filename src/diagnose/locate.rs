@@ -71,6 +71,12 @@ pub struct LocateStep {
     pub runner_up: Option<(String, f64)>,
     /// Whether the best addition was dominant and taken.
     pub taken: bool,
+    /// When the best was not dominant: the direction added together with
+    /// it (the best of the next [`PAIR_TRIALS`]), the pair's weighted
+    /// residual RMS, and whether the pair was taken (two effects at two
+    /// places).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pair: Option<(String, f64, bool)>,
 }
 
 /// The result of [`locate`].
@@ -117,7 +123,13 @@ impl Located {
                 .steps
                 .iter()
                 .filter(|s| s.taken)
-                .map(|s| format!("{:.2} → {:.2}", s.current, s.best.1))
+                .map(|s| match &s.pair {
+                    Some((d, w, true)) => format!(
+                        "{:.2} → {:.2} with {} and {} together",
+                        s.current, w, s.best.0, d
+                    ),
+                    _ => format!("{:.2} → {:.2}", s.current, s.best.1),
+                })
                 .collect();
             format!(
                 "force located at {} (weighted residual {})",
@@ -151,6 +163,10 @@ pub fn directions(model: &Model) -> Vec<Direction> {
 /// Weighted residual RMS (1 = the assumed noise) at which the selection
 /// stops adding directions.
 pub const NOISE_STOP: f64 = 1.5;
+
+/// Directions after the best one tried together with it when it does not
+/// dominate alone.
+pub const PAIR_TRIALS: usize = 4;
 
 /// Greedy forward selection of force directions (module docs); at most
 /// `max` directions, dominance `ratio` in (0, 1).
@@ -203,17 +219,58 @@ pub fn locate(
         };
         let runner = scored.get(1).cloned();
         let taken = wb <= ratio * current && runner.as_ref().is_none_or(|r| wb <= ratio * r.1);
+        // two effects at two places: neither direction dominates the
+        // runner-up (which may be a variant of the best one, at a DOF of
+        // its pair), but the best together with one of the next few
+        // dominates the best alone. At the first step only: later, with
+        // most of the force placed, two more directions fit what is left
+        // of a spread force as well as any (after a contact 6→7, a spring
+        // to ground at 8 was placed at DOFs 4 and 5)
+        let mut pair = None;
+        if !taken && chosen.is_empty() && wb <= ratio * current && chosen.len() + 2 <= max {
+            let tried = scored
+                .iter()
+                .skip(1)
+                .take(PAIR_TRIALS)
+                .par_bridge()
+                .map(|(d, _)| {
+                    let mut sel = chosen.clone();
+                    sel.push(best.clone());
+                    sel.push(d.clone());
+                    Ok((d.clone(), fit(&sel)?))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            // (the parallel results come in any order: the lowest, ties
+            // by pool order)
+            pair = tried
+                .into_iter()
+                .min_by(|a, b| {
+                    a.1.total_cmp(&b.1).then_with(|| {
+                        let at = |d: &Direction| pool.iter().position(|p| p == d);
+                        at(&a.0).cmp(&at(&b.0))
+                    })
+                })
+                .map(|(d, wp)| (d, wp, wp <= ratio * wb));
+        }
         steps.push(LocateStep {
             current,
             best: (best.label(), wb),
-            runner_up: runner.map(|r| (r.0.label(), r.1)),
-            taken,
+            runner_up: runner.as_ref().map(|r| (r.0.label(), r.1)),
+            taken: taken || pair.as_ref().is_some_and(|p| p.2),
+            pair: pair.as_ref().map(|p| (p.0.label(), p.1, p.2)),
         });
-        if !taken {
-            break;
+        match (taken, pair) {
+            (true, _) => {
+                chosen.push(best);
+                current = wb;
+            }
+            (false, Some((d, wp, true))) => {
+                chosen.push(best);
+                chosen.push(d);
+                current = wp;
+            }
+            _ => break,
         }
-        chosen.push(best);
-        current = wb;
     }
     Ok(Located {
         directions: chosen,
