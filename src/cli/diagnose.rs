@@ -28,8 +28,9 @@ pub struct Args {
     /// Most effects to add.
     #[arg(long, default_value_t = 3)]
     max_effects: usize,
-    /// Sub-steps per sample of the linear model (the fit chooses its own
-    /// from the stiffest element).
+    /// Sub-steps per sample of the identification and the trace; the
+    /// scored and fitted models use at least this and at least 40, more
+    /// for a stiff element.
     #[arg(long, default_value_t = 10)]
     substeps: usize,
     /// Jacobian of the effect fits' race of starts: forward sensitivities

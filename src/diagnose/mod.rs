@@ -47,8 +47,10 @@ use std::time::Instant;
 pub struct DiagnoseSettings {
     /// Segment length of the multiple-shooting error, s (default 0.1).
     pub segment_seconds: f64,
-    /// Sub-steps per sample of the linear model and the identification
-    /// (default 10).
+    /// Sub-steps per sample of the identification and the trace's linear
+    /// model (default 10); the simulations of the scored and fitted models
+    /// use at least this and at least [`MIN_SUBSTEPS`], more for a stiff
+    /// element ([`auto_substeps`]).
     pub substeps: usize,
     /// Most effects added (default 3).
     pub max_effects: usize,
@@ -191,15 +193,12 @@ fn resolved(
     settings: &DiagnoseSettings,
     states: &DMatrix<f64>,
 ) -> SimSettings {
-    // a linear model is stepped a whole sample at a time (the sample map),
-    // at a cost that does not depend on its sub-steps: it gets at least
-    // LINEAR_SUBSTEPS, so that its integration error (period elongation
-    // of the highest modes) is not left for an effect to fit
-    let base = if model.is_nonlinear() {
-        settings.substeps
-    } else {
-        settings.substeps.max(LINEAR_SUBSTEPS)
-    };
+    // at least MIN_SUBSTEPS, for every model alike (the declared one and
+    // each fitted one): at 10 the Newmark period error of the highest
+    // modes was left for an effect to fit. A linear model (and a contact
+    // model while its contacts are open) is stepped a whole sample at a
+    // time, so they cost it nothing
+    let base = settings.substeps.max(MIN_SUBSTEPS);
     SimSettings {
         substeps: auto_substeps(
             model,
@@ -213,8 +212,8 @@ fn resolved(
     }
 }
 
-/// Fewest sub-steps of a linear model in [`resolved`].
-const LINEAR_SUBSTEPS: usize = 40;
+/// Fewest sub-steps of a model in [`resolved`].
+pub const MIN_SUBSTEPS: usize = 40;
 
 /// The reconstruction from the identification step.
 #[derive(Debug, Clone)]
