@@ -958,6 +958,73 @@ pub fn diagnose(
         let pred = own_cmp.shoot(&fitted, sim);
         sims += shot_simulations(pred.as_ref().ok().and_then(|p| p.2.as_ref()), own_cmp);
         let new_err = pred.as_ref().ok().map(|y| cmp.total_error(&y.0));
+        let (mut fitted, mut note, mut fit_segs, mut sim, mut sub, mut own, mut pred, mut new_err) =
+            (fitted, note, fit_segs, sim, sub, own, pred, new_err);
+        let (mut best, mut eff) = (best, eff);
+        // a large stiffness change left far from the noise: the cubic
+        // spring on the same pair is fitted too, from the k3 whose
+        // equivalent linearization is that change (the screen's regression
+        // on states the sensors fix poorly can prefer the linear change)
+        if let Some(alt) = cubic_alternative(&best, &eff, &fitted, &tr.ranking, &prep.recon.states)
+            .filter(|_| {
+                screened && new_err.is_some_and(|e| e > ALTERNATIVE_FLOOR * settings.noise_floor)
+            })
+        {
+            progress(&format!("fit {} (alternative)", alt.label));
+            let mut trial2 = current.clone();
+            let eff2 = effects::add(&mut trial2, &alt);
+            let mut all2: Vec<AddedEffect> = added.iter().map(|a| a.0.clone()).collect();
+            all2.push(eff2.clone());
+            let t = Instant::now();
+            let f2 = fit_effects(
+                &trial2,
+                &all2,
+                cmp,
+                &prep.recon.states,
+                None,
+                None,
+                rec.fs,
+                settings,
+            )?;
+            *timings.entry("fit".into()).or_insert(0.0) += t.elapsed().as_secs_f64();
+            sims += f2.simulations;
+            let sim2 = resolved(&f2.model, rec.fs, settings, &prep.recon.states);
+            let own2 = own_prep(&f2.model, rec);
+            let own_cmp2 = own2.as_ref().map_or(cmp, |p| &p.comparison);
+            let pred2 = own_cmp2.shoot(&f2.model, sim2);
+            sims += shot_simulations(pred2.as_ref().ok().and_then(|p| p.2.as_ref()), own_cmp2);
+            let err2 = pred2.as_ref().ok().map(|y| cmp.total_error(&y.0));
+            let taken = err2.is_some_and(|e2| new_err.is_none_or(|e| e2 < e));
+            let line = format!(
+                "{} fitted too, from k3 {:.3e} (the change's equivalent): {}{}",
+                alt.label,
+                alt.parameters
+                    .iter()
+                    .find(|p| p.0 == "k3")
+                    .map_or(f64::NAN, |p| p.1),
+                err2.map_or("failed".into(), |e| format!("{:.2} %", 100.0 * e)),
+                if taken { ", taken" } else { "" }
+            );
+            if taken {
+                note = format!(
+                    "{}; {line} instead of {} at {:.2} %",
+                    f2.note,
+                    best.label,
+                    100.0 * new_err.unwrap_or(f64::NAN)
+                );
+                fitted = f2.model;
+                fit_segs = f2.fitted;
+                sim = sim2;
+                sub = sim2.substeps;
+                own = own2;
+                pred = pred2;
+                new_err = err2;
+                best = alt;
+                eff = eff2;
+            } else {
+                note = format!("{note}; {line}");
+            }
+        }
         // a change the screen did not propose must explain more
         let need = if screened {
             settings.min_improvement
@@ -1630,6 +1697,58 @@ fn fit_effects(
 /// current fit, linearized, falls short along that valley.
 const GN_STRIDES: [f64; 3] = [1.0, 2.0, 3.0];
 
+/// A screened effect leaving the error above this multiple of the noise
+/// floor may be replaced by the cubic spring at its place
+/// ([`cubic_alternative`]).
+const ALTERNATIVE_FLOOR: f64 = 4.0;
+
+/// The cubic spring on the pair of a stiffness change of more than 50 %,
+/// with the k3 whose equivalent linearization `3 k3 ⟨δ²⟩` (δ the
+/// reconstructed relative displacement) is the fitted change; None for any
+/// other effect or when the trace did not rank that cubic.
+fn cubic_alternative(
+    best: &RankedEffect,
+    eff: &AddedEffect,
+    fitted: &Model,
+    ranking: &[RankedEffect],
+    states: &DMatrix<f64>,
+) -> Option<RankedEffect> {
+    if best.candidate.kind != EffectKind::Stiffness || best.candidate.dofs.len() != 2 {
+        return None;
+    }
+    let delta = effects::values(fitted, eff)
+        .into_iter()
+        .find(|v| v.0 == "delta")?
+        .1;
+    if !(delta.abs() > 0.5) {
+        return None;
+    }
+    let mut alt = ranking
+        .iter()
+        .find(|e| {
+            e.candidate.kind == EffectKind::Cubic && {
+                let (mut a, mut b) = (e.candidate.dofs.clone(), best.candidate.dofs.clone());
+                a.sort_unstable();
+                b.sort_unstable();
+                a == b
+            }
+        })?
+        .clone();
+    let ns = states.ncols().max(1);
+    let msq = (0..states.ncols())
+        .map(|k| best.candidate.delta(states, k).powi(2))
+        .sum::<f64>()
+        / ns as f64;
+    let k3 = delta * eff.nominal / (3.0 * msq.max(f64::MIN_POSITIVE));
+    if !(k3.is_finite() && k3 > 0.0) {
+        return None;
+    }
+    for p in alt.parameters.iter_mut().filter(|p| p.0 == "k3") {
+        p.1 = k3;
+    }
+    Some(alt)
+}
+
 /// Race starts carried on by [`polish`] at most.
 const POLISH_STARTS: usize = 2;
 
@@ -1886,4 +2005,71 @@ fn validate(
         after,
         nonparametric_relative_error: Some(cmp.total_error(&y)),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::trace::Candidate;
+
+    fn ranked(c: Candidate, parameters: Vec<(&str, f64)>) -> RankedEffect {
+        RankedEffect {
+            label: c.label(),
+            candidate: c,
+            parameters: parameters.into_iter().map(|(n, v)| (n.into(), v)).collect(),
+            std_errors: vec![],
+            residual_explained: 0.3,
+            force_explained: None,
+            bic_change: -100.0,
+            hidden: vec![],
+        }
+    }
+
+    /// The cubic alternative of a large stiffness change: `k3` from the
+    /// equivalent linearization `3 k3 ⟨δ²⟩ = Δk`; none for a small change.
+    #[test]
+    fn a_large_stiffness_change_offers_the_cubic_with_its_equivalent_k3() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let model = Model::from_file(std::path::Path::new(p)).unwrap();
+        let k0 = model.springs[6].stiffness;
+        let mut stiff = Candidate::new(EffectKind::Stiffness, vec![6, 7]);
+        stiff.spring = Some(6);
+        stiff.nominal = k0;
+        let cubic = ranked(
+            Candidate::new(EffectKind::Cubic, vec![7, 6]),
+            vec![("k3", 1.0)],
+        );
+        // relative displacement u7 − u8 alternating ±2e-4 m: ⟨δ²⟩ = 4e-8
+        let states = DMatrix::from_fn(16, 100, |i, k| match i {
+            6 => {
+                if k % 2 == 0 {
+                    2e-4
+                } else {
+                    -2e-4
+                }
+            }
+            _ => 0.0,
+        });
+        for (delta, expect) in [(2.0, true), (0.3, false), (-0.8, false)] {
+            let best = ranked(stiff.clone(), vec![("delta", delta)]);
+            let mut fitted = model.clone();
+            let eff = effects::add(&mut fitted, &best);
+            let got = cubic_alternative(&best, &eff, &fitted, &[cubic.clone()], &states);
+            assert_eq!(got.is_some(), expect, "delta {delta}");
+            if let Some(alt) = got {
+                assert_eq!(alt.candidate.kind, EffectKind::Cubic);
+                let k3 = alt.parameters.iter().find(|p| p.0 == "k3").unwrap().1;
+                let want = delta * k0 / (3.0 * 4e-8);
+                assert!((k3 / want - 1.0).abs() < 1e-9, "{k3} vs {want}");
+            }
+        }
+        // not for another kind
+        let contact = ranked(
+            Candidate::new(EffectKind::Contact, vec![6, 7]),
+            vec![("gap", 1e-4), ("stiffness", 1e6)],
+        );
+        let mut fitted = model.clone();
+        let eff = effects::add(&mut fitted, &contact);
+        assert!(cubic_alternative(&contact, &eff, &fitted, &[cubic], &states).is_none());
+    }
 }
