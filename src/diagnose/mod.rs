@@ -2054,7 +2054,8 @@ mod tests {
             let best = ranked(stiff.clone(), vec![("delta", delta)]);
             let mut fitted = model.clone();
             let eff = effects::add(&mut fitted, &best);
-            let got = cubic_alternative(&best, &eff, &fitted, &[cubic.clone()], &states);
+            let got =
+                cubic_alternative(&best, &eff, &fitted, std::slice::from_ref(&cubic), &states);
             assert_eq!(got.is_some(), expect, "delta {delta}");
             if let Some(alt) = got {
                 assert_eq!(alt.candidate.kind, EffectKind::Cubic);
