@@ -227,29 +227,17 @@ pub fn locate(
         // of a spread force as well as any (after a contact 6→7, a spring
         // to ground at 8 was placed at DOFs 4 and 5)
         let mut pair = None;
-        if !taken && chosen.is_empty() && wb <= ratio * current && chosen.len() + 2 <= max {
-            let tried = scored
-                .iter()
-                .skip(1)
-                .take(PAIR_TRIALS)
-                .par_bridge()
-                .map(|(d, _)| {
-                    let mut sel = chosen.clone();
-                    sel.push(best.clone());
-                    sel.push(d.clone());
-                    Ok((d.clone(), fit(&sel)?))
-                })
+        if !taken && chosen.is_empty() && wb <= ratio * current && max >= 2 {
+            let next = &scored[1..scored.len().min(1 + PAIR_TRIALS)];
+            // in parallel, collected in order: the lowest, the first of
+            // equals
+            let tried = next
+                .par_iter()
+                .map(|(d, _)| Ok((d.clone(), fit(&[best.clone(), d.clone()])?)))
                 .collect::<Result<Vec<_>>>()?;
-            // (the parallel results come in any order: the lowest, ties
-            // by pool order)
             pair = tried
                 .into_iter()
-                .min_by(|a, b| {
-                    a.1.total_cmp(&b.1).then_with(|| {
-                        let at = |d: &Direction| pool.iter().position(|p| p == d);
-                        at(&a.0).cmp(&at(&b.0))
-                    })
-                })
+                .min_by(|a, b| a.1.total_cmp(&b.1))
                 .map(|(d, wp)| (d, wp, wp <= ratio * wb));
         }
         steps.push(LocateStep {

@@ -265,6 +265,7 @@ pub fn prepare(
 
 /// The channels, input and sampled linear part of a record, checked.
 struct Setup<'a> {
+    rec: &'a Record,
     outs: Vec<&'a crate::record::Channel>,
     segment: usize,
     channels: Vec<(Quantity, usize)>,
@@ -322,6 +323,7 @@ fn setup<'a>(
     let measured = DMatrix::from_fn(outs.len(), rec.len(), |c, k| outs[c].data[k]);
     let sampled = SampledModel::from_model(&model.linear_part(), rec.fs, settings.substeps)?;
     Ok(Setup {
+        rec,
         outs,
         segment,
         channels,
@@ -331,28 +333,18 @@ fn setup<'a>(
     })
 }
 
-/// The force directions of `rec` (the greedy search of
-/// [`locate::locate`]), when `settings` reconstruct with the lifted
-/// smoother and search; None otherwise. [`prepare_located`] with the
-/// result reconstructs as [`prepare`] does.
-pub fn locate_record(
-    model: &Model,
-    rec: &Record,
-    sensors: Option<&[usize]>,
-    settings: &DiagnoseSettings,
-) -> Result<Option<locate::Located>> {
-    if settings.states != StatesSource::Lifted {
-        return Ok(None);
-    }
-    search(model, &setup(model, rec, sensors, settings)?, settings)
-}
-
+/// The force directions of a record (the greedy search of
+/// [`locate::locate`]) when `settings` reconstruct with the lifted smoother
+/// and search; None otherwise.
 fn search(
     model: &Model,
     s: &Setup<'_>,
     settings: &DiagnoseSettings,
 ) -> Result<Option<locate::Located>> {
-    if settings.locate_ratio > 0.0 && settings.locate_max > 0 {
+    if settings.states == StatesSource::Lifted
+        && settings.locate_ratio > 0.0
+        && settings.locate_max > 0
+    {
         Ok(Some(locate::locate(
             model,
             &s.sampled,
@@ -379,15 +371,27 @@ pub fn prepare_located(
     located_before: Option<&locate::Located>,
 ) -> Result<Prepared> {
     let st = setup(model, rec, sensors, settings)?;
-    let n = model.ndof();
-    let mut located = None;
     let t = Instant::now();
     let loc = match located_before {
         Some(l) => Some(l.clone()),
-        None if settings.states == StatesSource::Lifted => search(model, &st, settings)?,
-        None => None,
+        None => search(model, &st, settings)?,
     };
+    prepare_from(model, st, settings, loc, t)
+}
+
+/// [`prepare_located`] from the record's [`setup`], with the force
+/// directions `loc` (the reconstruction timed from `t`).
+fn prepare_from(
+    model: &Model,
+    st: Setup<'_>,
+    settings: &DiagnoseSettings,
+    loc: Option<locate::Located>,
+    t: Instant,
+) -> Result<Prepared> {
+    let n = model.ndof();
+    let mut located = None;
     let Setup {
+        rec,
         outs,
         segment,
         channels,
@@ -708,13 +712,14 @@ pub fn diagnose(
     let mut timings = BTreeMap::new();
     progress("identify");
     let t = Instant::now();
-    let found = locate_record(declared, rec, sensors, settings)?;
+    let st = setup(declared, rec, sensors, settings)?;
+    let found = search(declared, &st, settings)?;
     let t_locate = t.elapsed().as_secs_f64();
     // the validation record is identified with the force directions
     // located on the record (the same structure; no second search), both
     // smoothers at once (each one a sequential sweep)
     let (prep, vprep) = rayon::join(
-        || prepare_located(declared, rec, sensors, settings, found.as_ref()),
+        || prepare_from(declared, st, settings, found.clone(), Instant::now()),
         || {
             validation
                 .map(|v| prepare_located(declared, v, sensors, settings, found.as_ref()))
@@ -903,6 +908,47 @@ pub fn diagnose(
             break;
         };
         progress(&format!("fit {}", best.label));
+        // a trial with a spring to ground is fitted from states
+        // reconstructed with its own linear part (as it is scored), not
+        // from the declared reconstruction corrected along the hidden
+        // trajectories
+        let fit_trial = |trial: &Model,
+                         all: &[AddedEffect],
+                         correction: Option<&DMatrix<f64>>,
+                         predicted: Option<&[Vec<f64>]>| {
+            match &own_prep(trial, rec) {
+                Some(o) => fit_effects(
+                    trial,
+                    all,
+                    &o.comparison,
+                    &o.recon.states,
+                    None,
+                    predicted,
+                    rec.fs,
+                    settings,
+                ),
+                None => fit_effects(
+                    trial,
+                    all,
+                    cmp,
+                    &prep.recon.states,
+                    correction,
+                    predicted,
+                    rec.fs,
+                    settings,
+                ),
+            }
+        };
+        // a model's multiple shooting (from its own reconstruction when it
+        // needs one), the simulations run and the error on the record
+        let shoot = |m: &Model, sim: SimSettings| {
+            let own = own_prep(m, rec);
+            let own_cmp = own.as_ref().map_or(cmp, |p| &p.comparison);
+            let pred = own_cmp.shoot(m, sim);
+            let n = shot_simulations(pred.as_ref().ok().and_then(|p| p.2.as_ref()), own_cmp);
+            let err = pred.as_ref().ok().map(|y| cmp.total_error(&y.0));
+            (own, pred, n, err)
+        };
         // the effect's fit of the states along the hidden trajectories
         let correction = (!best.hidden.is_empty()).then(|| {
             let mut d = DMatrix::zeros(prep.recon.states.nrows(), prep.recon.states.ncols());
@@ -913,53 +959,20 @@ pub fn diagnose(
         });
         let t = Instant::now();
         let EffectFit {
-            model: fitted,
-            note,
+            model: mut fitted,
+            mut note,
             simulations: fit_sims,
-            fitted: fit_segs,
+            fitted: mut fit_segs,
             stages,
-        } = {
-            // a trial with a spring to ground is fitted from states
-            // reconstructed with its own linear part (as it is scored),
-            // not from the declared reconstruction corrected along the
-            // hidden trajectories
-            match &own_prep(&trial, rec) {
-                Some(o) => fit_effects(
-                    &trial,
-                    &all,
-                    &o.comparison,
-                    &o.recon.states,
-                    None,
-                    predicted.as_deref(),
-                    rec.fs,
-                    settings,
-                )?,
-                None => fit_effects(
-                    &trial,
-                    &all,
-                    cmp,
-                    &prep.recon.states,
-                    correction.as_ref(),
-                    predicted.as_deref(),
-                    rec.fs,
-                    settings,
-                )?,
-            }
-        };
+        } = fit_trial(&trial, &all, correction.as_ref(), predicted.as_deref())?;
         sims += fit_sims;
         *timings.entry("fit".into()).or_insert(0.0) += t.elapsed().as_secs_f64();
         for (name, secs) in stages {
             *timings.entry(name.into()).or_insert(0.0) += secs;
         }
-        let sim = resolved(&fitted, rec.fs, settings, &prep.recon.states);
-        let sub = sim.substeps;
-        let own = own_prep(&fitted, rec);
-        let own_cmp = own.as_ref().map_or(cmp, |p| &p.comparison);
-        let pred = own_cmp.shoot(&fitted, sim);
-        sims += shot_simulations(pred.as_ref().ok().and_then(|p| p.2.as_ref()), own_cmp);
-        let new_err = pred.as_ref().ok().map(|y| cmp.total_error(&y.0));
-        let (mut fitted, mut note, mut fit_segs, mut sim, mut sub, mut own, mut pred, mut new_err) =
-            (fitted, note, fit_segs, sim, sub, own, pred, new_err);
+        let mut sim = resolved(&fitted, rec.fs, settings, &prep.recon.states);
+        let (mut own, mut pred, n, mut new_err) = shoot(&fitted, sim);
+        sims += n;
         let (mut best, mut eff) = (best, eff);
         // a large stiffness change left far from the noise: the cubic
         // spring on the same pair is fitted too, from the k3 whose
@@ -976,24 +989,12 @@ pub fn diagnose(
             let mut all2: Vec<AddedEffect> = added.iter().map(|a| a.0.clone()).collect();
             all2.push(eff2.clone());
             let t = Instant::now();
-            let f2 = fit_effects(
-                &trial2,
-                &all2,
-                cmp,
-                &prep.recon.states,
-                None,
-                None,
-                rec.fs,
-                settings,
-            )?;
+            let f2 = fit_trial(&trial2, &all2, None, None)?;
             *timings.entry("fit".into()).or_insert(0.0) += t.elapsed().as_secs_f64();
             sims += f2.simulations;
             let sim2 = resolved(&f2.model, rec.fs, settings, &prep.recon.states);
-            let own2 = own_prep(&f2.model, rec);
-            let own_cmp2 = own2.as_ref().map_or(cmp, |p| &p.comparison);
-            let pred2 = own_cmp2.shoot(&f2.model, sim2);
-            sims += shot_simulations(pred2.as_ref().ok().and_then(|p| p.2.as_ref()), own_cmp2);
-            let err2 = pred2.as_ref().ok().map(|y| cmp.total_error(&y.0));
+            let (own2, pred2, n2, err2) = shoot(&f2.model, sim2);
+            sims += n2;
             let taken = err2.is_some_and(|e2| new_err.is_none_or(|e| e2 < e));
             let line = format!(
                 "{} fitted too, from k3 {:.3e} (the change's equivalent): {}{}",
@@ -1015,7 +1016,6 @@ pub fn diagnose(
                 fitted = f2.model;
                 fit_segs = f2.fitted;
                 sim = sim2;
-                sub = sim2.substeps;
                 own = own2;
                 pred = pred2;
                 new_err = err2;
@@ -1025,6 +1025,7 @@ pub fn diagnose(
                 note = format!("{note}; {line}");
             }
         }
+        let sub = sim.substeps;
         // a change the screen did not propose must explain more
         let need = if screened {
             settings.min_improvement
@@ -1039,11 +1040,9 @@ pub fn diagnose(
         let mut off_shot = None;
         if !screened {
             let off = effects::remove(&fitted, &eff);
-            let off_prep = own_prep(&off, rec);
-            let off_cmp = off_prep.as_ref().map_or(cmp, |p| &p.comparison);
-            let p0 = off_cmp.shoot(&off, sim);
-            sims += shot_simulations(p0.as_ref().ok().and_then(|p| p.2.as_ref()), off_cmp);
-            without_err = p0.as_ref().ok().map(|y| cmp.total_error(&y.0));
+            let (off_prep, p0, n, w) = shoot(&off, sim);
+            sims += n;
+            without_err = w;
             off_shot = Some((off, off_prep, p0));
         }
         let negligible = match (without_err, new_err) {
@@ -1500,20 +1499,8 @@ fn fit_effects(
     let mut starts = vec![vec![0.0; np]];
     // the joint linearization's step at the current fit, when the effect
     // came in on its predicted gain ([`companion_gain`])
-    for at in predicted
-        .unwrap_or_default()
-        .iter()
-        .filter(|a| a.len() == np)
-    {
-        let s: Vec<f64> = problem
-            .parameters
-            .iter()
-            .zip(at)
-            .map(|(p, &v)| p.to_x(v.clamp(p.lower, p.upper)))
-            .collect();
-        if s.iter().all(|v| v.is_finite()) && !starts.contains(&s) {
-            starts.push(s);
-        }
+    for at in predicted.unwrap_or_default() {
+        push_start(&mut starts, &problem.parameters, at);
     }
     let mut sims = 0;
     let mut stages = [("fit_scan", 0.0), ("fit_race", 0.0), ("fit_polish", 0.0)];
@@ -1607,15 +1594,7 @@ fn fit_effects(
                         let mut v = far.to_vec();
                         v[ig] = g;
                         v[ik] = kc;
-                        let s: Vec<f64> = problem
-                            .parameters
-                            .iter()
-                            .zip(&v)
-                            .map(|(p, &v)| p.to_x(v.clamp(p.lower, p.upper)))
-                            .collect();
-                        if s.iter().all(|v| v.is_finite()) && !starts.contains(&s) {
-                            starts.push(s);
-                        }
+                        push_start(&mut starts, &problem.parameters, &v);
                         if kc > stiffest.contacts[ci].stiffness {
                             stiffest.contacts[ci].stiffness = kc;
                         }
@@ -1688,6 +1667,22 @@ fn fit_effects(
         fitted: Some((k.segments, problem.sim)),
         stages,
     })
+}
+
+/// Add the start at parameter `values` (clamped to the bounds, scaled)
+/// unless it is there already, has the wrong length or is not finite.
+fn push_start(starts: &mut Vec<Vec<f64>>, params: &[crate::update::Parameter], values: &[f64]) {
+    if values.len() != params.len() {
+        return;
+    }
+    let s: Vec<f64> = params
+        .iter()
+        .zip(values)
+        .map(|(p, &v)| p.to_x(v.clamp(p.lower, p.upper)))
+        .collect();
+    if s.iter().all(|v| v.is_finite()) && !starts.contains(&s) {
+        starts.push(s);
+    }
 }
 
 /// Multiples of the joint linearization's parameter step that start the

@@ -157,15 +157,17 @@ pub struct Integrator {
     /// M's diagonal when M is diagonal (lumped masses): `M z` in n products.
     m_diag: Option<Vec<f64>>,
     /// Powers of the sub-step map of a derivative when no element is
-    /// active (built on first use by the sensitivities; see
+    /// active (taken on first use by the sensitivities from the cache of
+    /// integrators with the same linear part; see
     /// `sensitivity::linear_powers`).
     linear_powers: std::sync::OnceLock<Option<std::sync::Arc<Vec<f64>>>>,
     /// Indices of the contacts among the elements.
     contacts: Vec<usize>,
     /// C = 0 (undamped): the sensitivities skip its products.
     c_zero: bool,
-    /// The affine map of a whole sample without an active element (built
-    /// on first use; see [`SampleMap`]).
+    /// The affine map of a whole sample without an active element (taken
+    /// on first use from the cache of integrators with the same linear part
+    /// and contact pairs; see [`SampleMap`]).
     sample_map: std::sync::OnceLock<Option<std::sync::Arc<SampleMap>>>,
     /// Gaps of the contacts, in element order.
     contact_gaps: Vec<f64>,
@@ -519,22 +521,31 @@ impl Integrator {
     fn sample_map(&self) -> Option<&SampleMap> {
         self.sample_map
             .get_or_init(|| {
-                self.j0_chol.as_ref()?;
-                if self.alpha != 0.0 || !self.batch_linear {
+                if !self.batches() {
                     return None;
                 }
+                // every element a contact: their DOF pairs
+                let pairs = self
+                    .elements
+                    .iter()
+                    .map(|e| match *e {
+                        Element::Contact { i, j, .. } => Some((i, j)),
+                        _ => None,
+                    })
+                    .collect::<Option<Vec<_>>>()?;
                 let mut key = self.linear_key();
-                for e in &self.elements {
-                    match *e {
-                        Element::Contact { i, j, .. } => {
-                            key.extend([i as u64, j.map_or(u64::MAX, |j| j as u64)])
-                        }
-                        _ => return None,
-                    }
+                for &(i, j) in &pairs {
+                    key.extend([i as u64, j.map_or(u64::MAX, |j| j as u64)]);
                 }
-                SAMPLE_MAPS.get_or_build(key, || self.build_sample_map())
+                SAMPLE_MAPS.get_or_build(key, || self.build_sample_map(&pairs))
             })
             .as_deref()
+    }
+
+    /// Sub-steps without an active element are batched (the sample map,
+    /// the derivative powers): α = 0, `J_0` factored, batching on.
+    pub(super) fn batches(&self) -> bool {
+        self.alpha == 0.0 && self.j0_chol.is_some() && self.batch_linear
     }
 
     /// Everything the sub-step without an active element reads, as bits:
@@ -554,15 +565,10 @@ impl Integrator {
         key
     }
 
-    fn build_sample_map(&self) -> Option<SampleMap> {
+    /// The sample map of an integrator whose elements are the contacts
+    /// between the DOF pairs `contacts`.
+    fn build_sample_map(&self, contacts: &[(usize, Option<usize>)]) -> Option<SampleMap> {
         let l = self.j0_chol.as_ref()?;
-        let mut contacts = vec![];
-        for e in &self.elements {
-            match *e {
-                Element::Contact { i, j, .. } => contacts.push((i, j)),
-                _ => return None,
-            }
-        }
         let (n, s) = (self.n, self.settings.substeps);
         let (m3, m5) = (3 * n, 5 * n);
         let mut full = vec![0.0; m3 * m5];

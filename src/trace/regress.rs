@@ -208,11 +208,13 @@ fn node_response(ctx: &Context<'_, '_>, force: NodeForce<'_>) -> DMatrix<f64> {
             (n, b, f.as_slice())
         }
     };
-    let dd = dy
-        * match force {
-            NodeForce::Along(dir, _) => DMatrix::from_column_slice(dir.len(), 1, dir.as_slice()),
-            NodeForce::Full(_) => DMatrix::identity(sm.n, sm.n),
-        };
+    // the feed-through of the same inputs
+    let dd = match force {
+        NodeForce::Along(dir, _) => {
+            DMatrix::from_column_slice(dy.nrows(), 1, (dy * dir).as_slice())
+        }
+        NodeForce::Full(_) => dy.clone(),
+    };
     let at = |k: usize, len: usize| {
         nalgebra::DVectorView::from_slice(&data[k * s * width..(k * s + len) * width], len * width)
     };

@@ -702,14 +702,13 @@ impl Integrator {
     /// derivative `(δu, δv, δa)` without a parameter term when no element
     /// is active: the map of [`Integrator::seed_step`] with zero slopes and
     /// the tangent `J_0`, which does not change from sub-step to sub-step.
-    /// Built once per integrator, on first use; None with HHT (`δg` is
-    /// carried too), without a Cholesky factor of `J_0`, or when batching
-    /// is off.
+    /// Built on first use, or taken from the cache of integrators with the
+    /// same linear part; None with HHT (`δg` is carried too), without a
+    /// Cholesky factor of `J_0`, or when batching is off.
     pub(super) fn linear_powers(&self) -> Option<&[f64]> {
         self.linear_powers
             .get_or_init(|| {
-                self.j0_chol.as_ref()?;
-                if self.alpha != 0.0 || !self.batch_linear {
+                if !self.batches() {
                     return None;
                 }
                 POWERS.get_or_build(self.linear_key(), || self.build_linear_powers())
