@@ -20,6 +20,7 @@ pub mod signal;
 pub mod simulate;
 
 pub use error::{Result, TacitError};
+pub mod calibrate;
 pub mod correlate;
 pub mod diagnose;
 pub mod horizon;

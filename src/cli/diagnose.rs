@@ -42,6 +42,15 @@ pub struct Args {
     /// later steps independently of the identification).
     #[arg(long, hide = true)]
     truth_states: bool,
+    /// A record at a level where the structure behaves linearly
+    /// (repeatable): the linear part is calibrated on these instead of on
+    /// the record diagnosed, then refined with the effects found.
+    #[arg(long = "linear-record")]
+    linear_records: Vec<PathBuf>,
+    /// Trust the declared linear part: no calibration of springs and
+    /// damping, no joint refinement.
+    #[arg(long)]
+    trust_linear: bool,
     #[command(flatten)]
     rec: RecordOpts,
     /// Output directory.
@@ -85,12 +94,23 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     } else {
         ProgressBar::hidden()
     };
-    let d = diagnose::diagnose(
+    let linear = a
+        .linear_records
+        .iter()
+        .map(|p| load_record(p, &a.rec))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let cal = diagnose::calibrated::CalibratedSettings {
+        off: a.trust_linear,
+        ..Default::default()
+    };
+    let d = diagnose::calibrated::diagnose_calibrated(
         &model,
         &rec,
         val.as_ref(),
+        &linear,
         sensors.as_deref(),
         &settings,
+        &cal,
         &|m| bar.set_message(m.to_string()),
     )?;
     bar.finish_and_clear();

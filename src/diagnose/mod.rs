@@ -17,6 +17,7 @@
 //!    pays for itself.
 //! 5. **After**: the errors again, on the record and on a validation record.
 
+pub mod calibrated;
 pub mod effects;
 pub mod errors;
 pub mod joint;
@@ -668,9 +669,16 @@ pub struct Diagnosis {
     pub identification: String,
     /// Timings, s.
     pub timings: BTreeMap<String, f64>,
+    /// The calibration of the linear part and its corrections (None when
+    /// the declared model was trusted).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<calibrated::CalibrationReport>,
     /// The fitted model.
     #[serde(skip)]
     pub model: Model,
+    /// The effects' parameter bookkeeping, in the order of `effects`.
+    #[serde(skip)]
+    pub added: Vec<AddedEffect>,
     /// Data of the first record (for figures).
     #[serde(skip)]
     pub prepared: Prepared,
@@ -1189,18 +1197,7 @@ pub fn diagnose(
     if validation.is_some() {
         timings.insert("validation".into(), t.elapsed().as_secs_f64());
     }
-    let verdict = if effects.is_empty() {
-        "no missing effect found".to_string()
-    } else {
-        format!(
-            "found {}",
-            effects
-                .iter()
-                .map(|e| e.label.clone())
-                .collect::<Vec<_>>()
-                .join(", ")
-        )
-    };
+    let verdict = verdict(&effects);
     timings.insert("total".into(), t_all.elapsed().as_secs_f64());
     Ok(Diagnosis {
         verdict,
@@ -1218,10 +1215,28 @@ pub fn diagnose(
             prep.recon.lambda, prep.recon.status
         ),
         timings,
+        calibration: None,
         model: current,
+        added: added.iter().map(|a| a.0.clone()).collect(),
         prepared: prep,
         predictions: (pred_before, pred_after),
     })
+}
+
+/// "no missing effect found" or "found ..." with the effects' labels.
+pub fn verdict(effects: &[EffectReport]) -> String {
+    if effects.is_empty() {
+        "no missing effect found".to_string()
+    } else {
+        format!(
+            "found {}",
+            effects
+                .iter()
+                .map(|e| e.label.clone())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    }
 }
 
 /// True when `model` has a spring from a DOF to ground.

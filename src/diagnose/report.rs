@@ -177,6 +177,9 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
             pct(e.score.error_after)
         );
     }
+    if let Some(c) = &d.calibration {
+        linear_corrections(&mut s, c);
+    }
     let _ = writeln!(s, "\n## How the loop went\n");
     for (i, r) in d.rounds.iter().enumerate() {
         let _ = writeln!(
@@ -228,6 +231,49 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
         let _ = writeln!(s, "![{name}]({name})");
     }
     s
+}
+
+/// The linear corrections, apart from the effects.
+fn linear_corrections(s: &mut String, c: &super::calibrated::CalibrationReport) {
+    let _ = writeln!(s, "\n## Linear part: corrections to the declared model\n");
+    let on = &c.calibration.records;
+    let _ = writeln!(
+        s,
+        "Springs and damping calibrated on {} (relative output error of the linear model {:.2} % → {:.2} %), then refined with the effects found: {}. {}.\n",
+        on.join(", "),
+        100.0 * c.calibration.error_before,
+        100.0 * c.calibration.error_after,
+        c.refinement,
+        c.choice
+    );
+    let _ = writeln!(
+        s,
+        "± is one standard error from measurement noise alone (white residual assumed); a correction is significant when it exceeds 3 standard errors and 0.5 %.\n"
+    );
+    let _ = writeln!(
+        s,
+        "| parameter | declared | calibrated | final | change | ± | significant | identifiable |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+    for x in &c.corrections {
+        let unit = if x.unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {}", x.unit)
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {:.4e}{unit} | {:.4e}{unit} | {:.4e}{unit} | {:+.2} % | {} | {} | {} |",
+            x.name,
+            x.declared,
+            x.calibrated,
+            x.value,
+            100.0 * x.change,
+            x.std_error.map_or("—".into(), |e| format!("{e:.2e}{unit}")),
+            if x.significant { "yes" } else { "no" },
+            if x.identifiable { "yes" } else { "no" }
+        );
+    }
 }
 
 fn row(m: &DMatrix<f64>, r: usize) -> Vec<f64> {

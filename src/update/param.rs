@@ -25,9 +25,17 @@ pub enum Target {
     SpringStiffness(usize),
     /// Mass of DOF `i` (0-based), kg.
     Mass(usize),
-    /// The single modal damping ratio (`damping.kind = "modal"` with
-    /// `ratio`), dimensionless.
+    /// The modal damping ratio (`damping.kind = "modal"`), dimensionless:
+    /// the single `ratio`, or with one ratio per mode their mean, every
+    /// ratio moved in proportion.
     DampingRatio,
+    /// The damping ratio of flexible mode `r` (0-based, ascending
+    /// frequency) of a model with one ratio per mode, dimensionless.
+    ModalRatio(usize),
+    /// Rayleigh mass-proportional coefficient α, 1/s.
+    RayleighAlpha,
+    /// Rayleigh stiffness-proportional coefficient β, s.
+    RayleighBeta,
     /// Gap of `model.contacts[i]`, m.
     ContactGap(usize),
     /// Penalty stiffness of `model.contacts[i]`, N/m.
@@ -58,15 +66,34 @@ impl Target {
                 .masses
                 .get(i)
                 .ok_or_else(|| missing("masses", i, model.masses.len()))?,
-            Target::DampingRatio => {
-                match &model.damping {
-                    Damping::Modal { ratio: Some(z), .. } => *z,
-                    _ => return Err(TacitError::Setting(
-                        "parameter zeta: the model's damping is not modal with a single `ratio`"
-                            .into(),
-                    )),
+            Target::DampingRatio => match &model.damping {
+                Damping::Modal { ratio: Some(z), .. } => *z,
+                Damping::Modal {
+                    ratio: None,
+                    ratios,
+                } if !ratios.is_empty() => ratios.iter().sum::<f64>() / ratios.len() as f64,
+                _ => {
+                    return Err(TacitError::Setting(
+                        "parameter zeta: the model's damping is not modal".into(),
+                    ))
                 }
-            }
+            },
+            Target::ModalRatio(r) => match &model.damping {
+                Damping::Modal {
+                    ratio: None,
+                    ratios,
+                } if r < ratios.len() => ratios[r],
+                _ => return Err(missing("damping.ratios", r, 0)),
+            },
+            Target::RayleighAlpha | Target::RayleighBeta => match (&model.damping, self) {
+                (Damping::Rayleigh { alpha, .. }, Target::RayleighAlpha) => *alpha,
+                (Damping::Rayleigh { beta, .. }, _) => *beta,
+                _ => {
+                    return Err(TacitError::Setting(
+                        "parameter alpha/beta: the model's damping is not Rayleigh".into(),
+                    ))
+                }
+            },
             Target::ContactGap(i) => {
                 model
                     .contacts
@@ -104,9 +131,35 @@ impl Target {
         match *self {
             Target::SpringStiffness(i) => model.springs[i].stiffness = value,
             Target::Mass(i) => model.masses[i] = value,
-            Target::DampingRatio => {
-                if let Damping::Modal { ratio, .. } = &mut model.damping {
-                    *ratio = Some(value);
+            Target::DampingRatio => match &mut model.damping {
+                Damping::Modal { ratio: Some(z), .. } => *z = value,
+                Damping::Modal {
+                    ratio: None,
+                    ratios,
+                } if !ratios.is_empty() => {
+                    let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
+                    let f = if mean > 0.0 { value / mean } else { 0.0 };
+                    ratios
+                        .iter_mut()
+                        .for_each(|z| *z = if mean > 0.0 { *z * f } else { value });
+                }
+                _ => {}
+            },
+            Target::ModalRatio(r) => {
+                if let Damping::Modal { ratios, .. } = &mut model.damping {
+                    if let Some(z) = ratios.get_mut(r) {
+                        *z = value;
+                    }
+                }
+            }
+            Target::RayleighAlpha => {
+                if let Damping::Rayleigh { alpha, .. } = &mut model.damping {
+                    *alpha = value;
+                }
+            }
+            Target::RayleighBeta => {
+                if let Damping::Rayleigh { beta, .. } = &mut model.damping {
+                    *beta = value;
                 }
             }
             Target::ContactGap(i) => model.contacts[i].gap = value,
@@ -122,7 +175,12 @@ impl Target {
     pub fn physical_floor(&self) -> Option<f64> {
         match self {
             Target::SpringStiffness(_) | Target::Mass(_) | Target::ContactStiffness(_) => Some(0.0),
-            Target::DampingRatio | Target::ContactGap(_) | Target::FrictionLevel(_) => Some(0.0),
+            Target::DampingRatio
+            | Target::ModalRatio(_)
+            | Target::RayleighAlpha
+            | Target::RayleighBeta
+            | Target::ContactGap(_)
+            | Target::FrictionLevel(_) => Some(0.0),
             Target::CubicK3(_) => None,
         }
     }
@@ -146,6 +204,9 @@ impl Target {
                 .unwrap_or_else(|| format!("k{}", i + 1)),
             Target::Mass(i) => format!("m{}", i + 1),
             Target::DampingRatio => "zeta".into(),
+            Target::ModalRatio(r) => format!("zeta{}", r + 1),
+            Target::RayleighAlpha => "alpha".into(),
+            Target::RayleighBeta => "beta".into(),
             Target::ContactGap(i) => format!("gap{}", i + 1),
             Target::ContactStiffness(i) => format!("kc{}", i + 1),
             Target::FrictionLevel(i) => format!("friction{}", i + 1),

@@ -174,11 +174,8 @@ pub fn target_seed(
                 ..Default::default()
             }
         }
-        Target::DampingRatio => {
-            let unit = Damping::Modal {
-                ratio: Some(1.0),
-                ratios: vec![],
-            };
+        Target::DampingRatio | Target::ModalRatio(_) => {
+            let unit = unit_damping(model, target)?;
             let c1 = crate::model::damping_matrix(
                 &unit,
                 &model.mass_matrix(),
@@ -190,10 +187,56 @@ pub fn target_seed(
                 ..Default::default()
             }
         }
+        Target::RayleighAlpha => ParamSeed {
+            dc: Some(model.mass_matrix() * s),
+            ..Default::default()
+        },
+        Target::RayleighBeta => ParamSeed {
+            dc: Some(model.stiffness_matrix() * s),
+            ..Default::default()
+        },
         Target::ContactGap(i) => element(i, ElementParam::Gap),
         Target::ContactStiffness(i) => element(i, ElementParam::Stiffness),
         Target::FrictionLevel(i) => element(nc + i, ElementParam::Level),
         Target::CubicK3(i) => element(nc + nf + i, ElementParam::K3),
+    })
+}
+
+/// The damping whose matrix is `∂C/∂p` for a modal damping target: every
+/// ratio 1 (a single ratio), the ratios over their mean (ratios moved in
+/// proportion), or a 1 at mode `r` alone.
+fn unit_damping(model: &Model, target: Target) -> std::result::Result<Damping, String> {
+    let ratios = match (&model.damping, target) {
+        (Damping::Modal { ratio: Some(_), .. }, Target::DampingRatio) => {
+            return Ok(Damping::Modal {
+                ratio: Some(1.0),
+                ratios: vec![],
+            })
+        }
+        (
+            Damping::Modal {
+                ratio: None,
+                ratios,
+            },
+            Target::DampingRatio,
+        ) if !ratios.is_empty() => {
+            let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
+            ratios.iter().map(|z| z / mean.max(1e-300)).collect()
+        }
+        (
+            Damping::Modal {
+                ratio: None,
+                ratios,
+            },
+            Target::ModalRatio(r),
+        ) if r < ratios.len() => (0..ratios.len())
+            .map(|j| if j == r { 1.0 } else { 0.0 })
+            .collect(),
+        _ => return Err("the model's damping is not modal".into()),
+    };
+    Ok(Damping::Modal {
+        ratio: None,
+        ratios,
     })
 }
 

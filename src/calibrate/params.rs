@@ -1,0 +1,211 @@
+//! The numbers of a model's linear part that a calibration may correct.
+//!
+//! Every parameter is moved on a logarithmic scale, `p = p_0 e^{q}`, so a
+//! stiffness, a mass or a damping ratio stays positive and `q` is the
+//! relative change to first order.
+
+use crate::error::{Result, TacitError};
+use crate::modal;
+use crate::model::{Damping, Model};
+use serde::{Deserialize, Serialize};
+
+/// One number of the linear part.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "kind", content = "index", rename_all = "snake_case")]
+pub enum LinearParam {
+    /// Stiffness of `model.springs[i]` (0-based), N/m.
+    Spring(usize),
+    /// Mass of DOF `i` (0-based), kg.
+    Mass(usize),
+    /// Modal damping ratio of flexible mode `r` (0-based, ascending
+    /// frequency), dimensionless.
+    ModalRatio(usize),
+    /// Rayleigh mass-proportional coefficient α, 1/s.
+    RayleighAlpha,
+    /// Rayleigh stiffness-proportional coefficient β, s.
+    RayleighBeta,
+}
+
+impl LinearParam {
+    /// A name for reports: `k5` (the spring's label), `m3`, `zeta2`,
+    /// `alpha`, `beta` (indices from 1).
+    pub fn label(&self, model: &Model) -> String {
+        match *self {
+            LinearParam::Spring(i) => model.springs[i].label(i),
+            LinearParam::Mass(i) => format!("m{}", i + 1),
+            LinearParam::ModalRatio(r) => format!("zeta{}", r + 1),
+            LinearParam::RayleighAlpha => "alpha".into(),
+            LinearParam::RayleighBeta => "beta".into(),
+        }
+    }
+
+    /// Unit of the parameter.
+    pub fn unit(&self) -> &'static str {
+        match self {
+            LinearParam::Spring(_) => "N/m",
+            LinearParam::Mass(_) => "kg",
+            LinearParam::ModalRatio(_) => "",
+            LinearParam::RayleighAlpha => "1/s",
+            LinearParam::RayleighBeta => "s",
+        }
+    }
+
+    /// Value in `model` (damping ratios after [`per_mode`]).
+    pub fn get(&self, model: &Model) -> Result<f64> {
+        match (*self, &model.damping) {
+            (LinearParam::Spring(i), _) => Ok(model.springs[i].stiffness),
+            (LinearParam::Mass(i), _) => Ok(model.masses[i]),
+            (LinearParam::ModalRatio(r), Damping::Modal { ratio, ratios }) => Ok(ratio
+                .or_else(|| ratios.get(r).or(ratios.last()).copied())
+                .unwrap_or(0.0)),
+            (LinearParam::RayleighAlpha, Damping::Rayleigh { alpha, .. }) => Ok(*alpha),
+            (LinearParam::RayleighBeta, Damping::Rayleigh { beta, .. }) => Ok(*beta),
+            (p, _) => Err(TacitError::Setting(format!(
+                "calibration parameter {}: the model's damping is not of that kind",
+                p.label(model)
+            ))),
+        }
+    }
+
+    /// Set the value in `model` (which must have been through [`per_mode`]).
+    pub fn set(&self, model: &mut Model, value: f64) {
+        match (*self, &mut model.damping) {
+            (LinearParam::Spring(i), _) => model.springs[i].stiffness = value,
+            (LinearParam::Mass(i), _) => model.masses[i] = value,
+            (LinearParam::ModalRatio(r), Damping::Modal { ratios, .. }) => ratios[r] = value,
+            (LinearParam::RayleighAlpha, Damping::Rayleigh { alpha, .. }) => *alpha = value,
+            (LinearParam::RayleighBeta, Damping::Rayleigh { beta, .. }) => *beta = value,
+            _ => {}
+        }
+    }
+}
+
+/// Number of flexible modes of the model's linear part.
+pub fn flexible_modes(model: &Model) -> Result<usize> {
+    let modes = modal::solve(&model.mass_matrix(), &model.stiffness_matrix())?;
+    Ok(modes.rigid.iter().filter(|r| !**r).count())
+}
+
+/// The model with modal damping written as one ratio per flexible mode
+/// (`ratio = z` becomes `ratios = [z; modes]`), so that each can be
+/// corrected on its own; other damping kinds are returned as they are.
+pub fn per_mode(model: &Model) -> Result<Model> {
+    let mut m = model.clone();
+    if let Damping::Modal { ratio, ratios } = &model.damping {
+        let nf = flexible_modes(model)?;
+        let all = (0..nf)
+            .map(|r| {
+                ratio
+                    .or_else(|| ratios.get(r).or(ratios.last()).copied())
+                    .unwrap_or(0.0)
+            })
+            .collect();
+        m.damping = Damping::Modal {
+            ratio: None,
+            ratios: all,
+        };
+    }
+    Ok(m)
+}
+
+/// What a calibration may correct.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Freedom {
+    /// Every spring's stiffness (default true).
+    pub springs: bool,
+    /// The damping: every modal ratio, or both Rayleigh coefficients
+    /// (default true; a model without damping is given none).
+    pub damping: bool,
+    /// Every mass (default false: with one force gauge and accelerations
+    /// the masses and stiffnesses are only fixed together through the
+    /// driving point, and the declared masses are usually weighed).
+    pub masses: bool,
+}
+
+impl Default for Freedom {
+    fn default() -> Self {
+        Freedom {
+            springs: true,
+            damping: true,
+            masses: false,
+        }
+    }
+}
+
+/// The parameters `freedom` opens on `model` (after [`per_mode`]).
+pub fn select(model: &Model, freedom: &Freedom) -> Vec<LinearParam> {
+    let mut out = vec![];
+    if freedom.springs {
+        out.extend((0..model.springs.len()).map(LinearParam::Spring));
+    }
+    if freedom.masses {
+        out.extend((0..model.ndof()).map(LinearParam::Mass));
+    }
+    if freedom.damping {
+        match &model.damping {
+            Damping::Modal { ratios, .. } => {
+                out.extend((0..ratios.len()).map(LinearParam::ModalRatio));
+            }
+            Damping::Rayleigh { alpha, beta } => {
+                if *alpha > 0.0 {
+                    out.push(LinearParam::RayleighAlpha);
+                }
+                if *beta > 0.0 {
+                    out.push(LinearParam::RayleighBeta);
+                }
+            }
+            Damping::None => {}
+        }
+    }
+    out
+}
+
+/// `model` with every parameter at `p_0 e^{q}`.
+pub fn apply(model: &Model, params: &[LinearParam], p0: &[f64], q: &[f64]) -> Model {
+    let mut m = model.clone();
+    for ((p, v0), qi) in params.iter().zip(p0).zip(q) {
+        p.set(&mut m, v0 * qi.exp());
+    }
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chain() -> Model {
+        Model::from_toml_str(
+            r#"
+name = "chain"
+masses = [1.0, 1.0, 1.0]
+[[spring]]
+dofs = [1, 2]
+stiffness = 1000.0
+[[spring]]
+dofs = [2, 3]
+stiffness = 2000.0
+[damping]
+kind = "modal"
+ratio = 0.02
+"#,
+            "chain",
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn modal_damping_is_opened_per_flexible_mode() {
+        let m = per_mode(&chain()).unwrap();
+        let p = select(&m, &Freedom::default());
+        // two springs, two flexible modes (one rigid-body mode)
+        assert_eq!(p.len(), 4);
+        assert_eq!(p[3], LinearParam::ModalRatio(1));
+        let moved = apply(&m, &p, &[1000.0, 2000.0, 0.02, 0.02], &[0.1, 0.0, 0.0, 0.5]);
+        assert!((moved.springs[0].stiffness - 1000.0 * 0.1f64.exp()).abs() < 1e-9);
+        assert!(
+            (LinearParam::ModalRatio(1).get(&moved).unwrap() - 0.02 * 0.5f64.exp()).abs() < 1e-12
+        );
+        assert!((LinearParam::ModalRatio(0).get(&moved).unwrap() - 0.02).abs() < 1e-15);
+    }
+}
