@@ -11,9 +11,11 @@ use crate::error::{Result, TacitError};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+pub mod checks;
 pub mod csvio;
 pub mod hdf5io;
 pub mod matio;
+pub mod units;
 
 /// What a channel measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
@@ -307,20 +309,27 @@ pub struct MatMapping {
     pub remove_mean: bool,
 }
 
-/// Read a record (HDF5 or CSV; `.mat` needs [`read_mat`]) and validate it.
+/// Read a record (HDF5 or CSV; `.mat` needs [`read_mat`]), convert its
+/// channels to SI by their `unit` and validate it.
 pub fn read(path: &Path) -> Result<Record> {
-    let rec = match Format::from_path(path)? {
+    read_with_conversions(path).map(|(rec, _)| rec)
+}
+
+/// [`read`], also returning the unit conversions made.
+pub fn read_with_conversions(path: &Path) -> Result<(Record, Vec<units::Conversion>)> {
+    let mut rec = match Format::from_path(path)? {
         Format::Hdf5 => hdf5io::read(path)?,
         Format::Csv => csvio::read(path)?,
         Format::Mat => {
             return Err(TacitError::record(
                 path,
-                "a .mat file needs a channel mapping and a sample rate (--mat-map, --fs)",
+                "a .mat file needs a channel mapping and a sample rate (--mat-map, --mat-fs)",
             ))
         }
     };
+    let conversions = units::to_si(&mut rec)?;
     rec.validate(None)?;
-    Ok(rec)
+    Ok((rec, conversions))
 }
 
 /// Read a MATLAB v5 record with a mapping.
