@@ -34,10 +34,10 @@ pub struct Args {
     /// for a stiff element.
     #[arg(long, default_value_t = 10)]
     substeps: usize,
-    /// Jacobian of the effect fits' race of starts: forward sensitivities
-    /// of the integrator or centered finite differences (the joint fit of
+    /// Jacobian of the effect fits' race of starts: sens (forward
+    /// sensitivities of the integrator) or fd (centered finite differences; the joint fit of
     /// parameters and start states always uses the sensitivities).
-    #[arg(long, value_enum, default_value = "sens")]
+    #[arg(long, value_enum, default_value = "sens", hide_possible_values = true)]
     jacobian: tacit::update::JacobianMethod,
     /// Use the truth stored in a simulated record as the states (checks the
     /// later steps independently of the identification).
@@ -117,7 +117,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         tacit_version: env!("CARGO_PKG_VERSION").to_string(),
         warnings,
     };
-    report::write(staging.dir(), &meta, &d, &settings).map_err(|e| staging.user_message(e.into()))?;
+    report::write(staging.dir(), &meta, &d, &settings)
+        .map_err(|e| staging.user_message(e.into()))?;
     staging.commit()?;
     outln!("{}", d.verdict);
     let pct = |x: Option<f64>| x.map_or("failed".to_string(), |v| format!("{:.2} %", 100.0 * v));

@@ -126,7 +126,11 @@ impl Lock {
                 }
             }
         }
-        bail!("{}: cannot take the lock {}", target.display(), path.display())
+        bail!(
+            "{}: cannot take the lock {}",
+            target.display(),
+            path.display()
+        )
     }
 }
 
@@ -213,8 +217,9 @@ impl Staging {
             let _ = std::fs::remove_dir_all(&tmp);
         }
         register(&tmp);
-        std::fs::create_dir(&tmp)
-            .with_context(|| format!("{}: cannot create a directory beside it", target.display()))?;
+        std::fs::create_dir(&tmp).with_context(|| {
+            format!("{}: cannot create a directory beside it", target.display())
+        })?;
         std::fs::write(
             tmp.join(".tacit-output"),
             format!("tacit {}\n", env!("CARGO_PKG_VERSION")),
@@ -233,11 +238,6 @@ impl Staging {
         &self.tmp
     }
 
-    /// The user's target directory.
-    pub fn target(&self) -> &Path {
-        &self.target
-    }
-
     /// A message naming the temporary directory rewritten to name the
     /// target instead.
     pub fn user_message(&self, e: anyhow::Error) -> anyhow::Error {
@@ -252,14 +252,22 @@ impl Staging {
         if self.replace {
             register(&old);
             std::fs::rename(&self.target, &old).with_context(|| {
-                format!("{}: cannot move the old output aside", self.target.display())
+                format!(
+                    "{}: cannot move the old output aside",
+                    self.target.display()
+                )
             })?;
         }
         if let Err(e) = std::fs::rename(&self.tmp, &self.target) {
             if self.replace {
                 let _ = std::fs::rename(&old, &self.target);
             }
-            return Err(e).with_context(|| format!("{}: cannot move the output into place", self.target.display()));
+            return Err(e).with_context(|| {
+                format!(
+                    "{}: cannot move the output into place",
+                    self.target.display()
+                )
+            });
         }
         unregister(&self.tmp);
         if self.replace {
@@ -314,6 +322,11 @@ pub fn write_files(files: &[(&Path, &dyn Fn(&Path) -> Result<()>)]) -> Result<()
         }
     }
     result
+}
+
+/// Write a text file whole (parents created).
+pub fn save_text(path: &Path, text: &str) -> Result<()> {
+    write_files(&[(path, &|tmp: &Path| Ok(std::fs::write(tmp, text)?))])
 }
 
 /// A hidden temporary name beside `path` keeping its extension (the
@@ -393,8 +406,13 @@ mod tests {
         let b = d.path().join("new/rec-truth.csv");
         let ok = |p: &Path| -> Result<()> { Ok(std::fs::write(p, "x")?) };
         let bad = |p: &Path| -> Result<()> { bail!("{}: disk full", p.display()) };
-        let e = write_files(&[(&a, &ok), (&b, &bad)]).unwrap_err().to_string();
-        assert!(e.contains("rec-truth.csv: disk full") && !e.contains("tmp-"), "{e}");
+        let e = write_files(&[(&a, &ok), (&b, &bad)])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("rec-truth.csv: disk full") && !e.contains("tmp-"),
+            "{e}"
+        );
         assert!(!a.exists());
         assert_eq!(std::fs::read_dir(d.path().join("new")).unwrap().count(), 0);
         write_files(&[(&a, &ok), (&b, &ok)]).unwrap();

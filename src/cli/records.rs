@@ -17,8 +17,17 @@ pub fn check(rec: &Record, model: &Model, selected: Option<&[usize]>) -> Result<
     let s = CheckSettings::default();
     let mut found = checks::check_record(rec, selected, &s);
     if !rec.inputs.is_empty() {
-        if let Some(f) = scale_finding(rec, model, &s) {
-            found.push(f);
+        found.extend(scale_finding(rec, model, &s));
+        // a spike or a clipped run shifts a mean too: named already
+        let shifted = found
+            .iter()
+            .any(|f| matches!(f.kind, checks::Kind::Spike | checks::Kind::Clipped));
+        if !shifted {
+            found.extend(
+                balances(rec, model)
+                    .iter()
+                    .filter_map(|b| checks::momentum(b, &s)),
+            );
         }
     }
     report(rec, &found)
@@ -88,4 +97,64 @@ fn scale_finding(rec: &Record, model: &Model, s: &CheckSettings) -> Option<Findi
         })
         .collect();
     checks::scale(&pairs, s)
+}
+
+/// The rigid-body momentum balances of a record: one per rigid-body mode
+/// of a model with no element to ground and no damping of its rigid
+/// motion, when every DOF the mode moves carries an accelerometer.
+fn balances(rec: &Record, model: &Model) -> Vec<checks::Balance> {
+    let grounded = model.springs.iter().any(|s| s.dofs.len() < 2)
+        || model.contacts.iter().any(|c| c.dofs.len() < 2)
+        || !model.frictions.is_empty()
+        || model.cubics.iter().any(|c| c.dofs.len() < 2);
+    let n = model.ndof();
+    if grounded || rec.inputs.iter().chain(&rec.outputs).any(|c| c.dof > n) {
+        return vec![];
+    }
+    let (m, k) = (model.mass_matrix(), model.stiffness_matrix());
+    let (Ok(modes), Ok(c)) = (tacit::modal::solve(&m, &k), model.damping_matrix()) else {
+        return vec![];
+    };
+    let mut out = vec![];
+    for (r, _) in modes.rigid.iter().enumerate().filter(|(_, rigid)| **rigid) {
+        // scaled to a largest entry of 1: a translation's coefficients are
+        // the masses and the balance is in N
+        let mut phi = modes.shapes.column(r).into_owned();
+        let big = phi
+            .iter()
+            .copied()
+            .fold(0.0f64, |a, x| if x.abs() > a.abs() { x } else { a });
+        if big == 0.0 {
+            continue;
+        }
+        phi /= big;
+        let coef = m.transpose() * &phi;
+        let scale = coef.amax();
+        if (c.transpose() * &phi).amax() > 1e-9 * (c.amax() * phi.amax()).max(f64::MIN_POSITIVE) {
+            continue;
+        }
+        let mut terms = vec![];
+        for i in (0..n).filter(|&i| coef[i].abs() > 1e-9 * scale) {
+            match rec.output(Quantity::Accel, i + 1) {
+                Some(ch) => terms.push((ch.name(), coef[i], mean(&ch.data))),
+                None => return out,
+            }
+        }
+        let mut f = vec![0.0; rec.len()];
+        for ch in &rec.inputs {
+            for (fk, v) in f.iter_mut().zip(&ch.data) {
+                *fk += phi[ch.dof - 1] * v;
+            }
+        }
+        out.push(checks::Balance {
+            terms,
+            force_mean: mean(&f),
+            force_rms: checks::rms(&f),
+        });
+    }
+    out
+}
+
+fn mean(x: &[f64]) -> f64 {
+    x.iter().sum::<f64>() / x.len().max(1) as f64
 }

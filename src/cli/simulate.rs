@@ -79,7 +79,12 @@ pub struct Args {
     #[arg(long, default_value_t = 10, value_name = "N")]
     substeps: usize,
     /// HHT-α in [-1/3, 0] (0 = Newmark average acceleration).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_name = "ALPHA")]
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        allow_hyphen_values = true,
+        value_name = "ALPHA"
+    )]
     hht_alpha: f64,
     /// Output record: .h5 (with its truth) or .csv (truth in
     /// <name>-truth.csv); missing parent directories are created.
@@ -91,7 +96,13 @@ pub struct Args {
 fn validate(a: &Args) -> anyhow::Result<()> {
     check::substeps(a.substeps)?;
     check::in_range("--hht-alpha", a.hht_alpha, -1.0 / 3.0, 0.0, "HHT-α")?;
-    check::in_range("--noise", a.noise, 0.0, 1.0, "fraction of each channel's RMS")?;
+    check::in_range(
+        "--noise",
+        a.noise,
+        0.0,
+        1.0,
+        "fraction of each channel's RMS",
+    )?;
     if matches!(a.input, InputKind::Record) {
         return Ok(());
     }
@@ -103,11 +114,21 @@ fn validate(a: &Args) -> anyhow::Result<()> {
             check::band("--band", a.band, a.fs)?;
         }
         InputKind::Sweep => {
-            check::band("--sweep", (a.sweep.0.min(a.sweep.1), a.sweep.0.max(a.sweep.1)), a.fs)?;
+            check::band(
+                "--sweep",
+                (a.sweep.0.min(a.sweep.1), a.sweep.0.max(a.sweep.1)),
+                a.fs,
+            )?;
             check::positive("--amplitude", a.amplitude.abs(), 1e9, "N")?;
         }
         InputKind::Impulse => {
-            check::count("--width", a.width, 1, a.samples, "impulse duration, samples")?;
+            check::count(
+                "--width",
+                a.width,
+                1,
+                a.samples,
+                "impulse duration, samples",
+            )?;
             check::positive("--amplitude", a.amplitude.abs(), 1e9, "N")?;
         }
         InputKind::Record => {}
@@ -120,7 +141,10 @@ fn validate(a: &Args) -> anyhow::Result<()> {
 fn check_output(path: &std::path::Path) -> anyhow::Result<record::Format> {
     let fmt = record::Format::from_path(path)?;
     if fmt == record::Format::Mat {
-        anyhow::bail!("{}: tacit writes .h5 or .csv records, not .mat", path.display());
+        anyhow::bail!(
+            "{}: tacit writes .h5 or .csv records, not .mat",
+            path.display()
+        );
     }
     if fmt == record::Format::Hdf5 && path.to_str().is_none() {
         anyhow::bail!(
@@ -129,8 +153,14 @@ fn check_output(path: &std::path::Path) -> anyhow::Result<record::Format> {
         );
     }
     if path.is_dir() {
-        anyhow::bail!("{}: is a directory; give a file name ending in .h5 or .csv", path.display());
+        anyhow::bail!(
+            "{}: is a directory; give a file name ending in .h5 or .csv",
+            path.display()
+        );
     }
+    let parent = super::output::parent_of(path);
+    std::fs::create_dir_all(&parent)
+        .map_err(|e| anyhow::anyhow!("{}: cannot create the directory: {e}", parent.display()))?;
     Ok(fmt)
 }
 

@@ -38,6 +38,9 @@ pub enum Kind {
     Offset,
     /// An acceleration with a linear trend.
     Drift,
+    /// Mean accelerations that do not balance the mean force over a
+    /// rigid-body mode (an accelerometer offset).
+    Momentum,
     /// Responses larger or smaller than the model predicts from the force
     /// by a factor near a unit conversion (9.81, 1000).
     Scale,
@@ -80,6 +83,9 @@ pub struct CheckSettings {
     /// An acceleration whose linear trend changes by more than this
     /// fraction of its standard deviation over the record drifts.
     pub drift_share: f64,
+    /// A rigid-body momentum balance off by more than this fraction of
+    /// the force's RMS flags an offset.
+    pub momentum_share: f64,
     /// A scale ratio within this factor of 9.81 or 1000 (or their
     /// inverses) is flagged as a probable unit error.
     pub unit_tolerance: f64,
@@ -96,6 +102,7 @@ impl Default for CheckSettings {
             spike_isolation: 10.0,
             offset_share: 0.1,
             drift_share: 0.5,
+            momentum_share: 0.01,
             unit_tolerance: 1.6,
             scale_limit: 4.0,
         }
@@ -311,6 +318,51 @@ pub fn offset_and_drift(c: &Channel, s: &CheckSettings) -> Vec<Finding> {
     out
 }
 
+/// The time mean of the equation of motion projected on a rigid-body
+/// mode φ of a structure with no element to ground: `Σᵢ cᵢ āᵢ = Σⱼ φⱼ f̄ⱼ`
+/// with `c = φᵀM` (springs, damping and internal elements cancel).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Balance {
+    /// (acceleration channel, coefficient cᵢ in kg, mean āᵢ in m/s²).
+    pub terms: Vec<(String, f64, f64)>,
+    /// `Σⱼ φⱼ f̄ⱼ`, N.
+    pub force_mean: f64,
+    /// RMS of `Σⱼ φⱼ fⱼ(t)`, N.
+    pub force_rms: f64,
+}
+
+/// An accelerometer offset seen as a rigid-body momentum balance that
+/// does not close: the finding names the channels whose means weigh most.
+pub fn momentum(b: &Balance, s: &CheckSettings) -> Option<Finding> {
+    let lhs: f64 = b.terms.iter().map(|(_, c, m)| c * m).sum();
+    let residual = lhs - b.force_mean;
+    if !(b.force_rms > 0.0) || residual.abs() <= s.momentum_share * b.force_rms {
+        return None;
+    }
+    let mut weigh: Vec<&(String, f64, f64)> = b.terms.iter().collect();
+    weigh.sort_by(|x, y| (y.1 * y.2).abs().total_cmp(&(x.1 * x.2).abs()));
+    let top: Vec<String> = weigh
+        .iter()
+        .take(2)
+        .map(|(n, c, m)| {
+            format!(
+                "{n} (mean {m:.4} m/s^2; an offset of {:.4} m/s^2 there explains it)",
+                residual / c
+            )
+        })
+        .collect();
+    Some(Finding {
+        kind: Kind::Momentum,
+        severity: Severity::Warning,
+        channel: weigh.first().map(|t| t.0.clone()),
+        message: format!(
+            "the mean accelerations do not balance the mean force over the rigid-body motion: Σ m·ā − F̄ = {residual:.4} N, {:.1} % of the force's RMS; an accelerometer probably has an offset; the largest terms: {}",
+            100.0 * residual.abs() / b.force_rms,
+            top.join(", ")
+        ),
+    })
+}
+
 /// Compare the measured RMS of each response channel with the RMS the
 /// model predicts from the measured force: `pairs` holds (channel name,
 /// measured RMS, model RMS). One finding for the record when the median
@@ -430,7 +482,8 @@ mod tests {
         assert_eq!(f[0].channel.as_deref(), Some("accel_2"));
         // clamped at ±0.5 of a ±1.9 signal: most samples are on the rails
         assert_eq!(f[0].severity, Severity::Error, "{}", f[0]);
-        let share: f64 = r.outputs[1].data.iter().filter(|x| x.abs() == 0.5).count() as f64 / 2048.0;
+        let share: f64 =
+            r.outputs[1].data.iter().filter(|x| x.abs() == 0.5).count() as f64 / 2048.0;
         assert!(share > 0.25, "{share}");
     }
 
@@ -454,16 +507,49 @@ mod tests {
             *x += 2.0 * k as f64 / 2048.0;
         }
         let f = check_record(&r, None, &CheckSettings::default());
-        let kinds: Vec<_> = f.iter().map(|f| (f.kind, f.channel.clone().unwrap())).collect();
-        assert!(kinds.contains(&(Kind::Offset, "accel_1".into())), "{kinds:?}");
-        assert!(kinds.contains(&(Kind::Drift, "accel_2".into())), "{kinds:?}");
+        let kinds: Vec<_> = f
+            .iter()
+            .map(|f| (f.kind, f.channel.clone().unwrap()))
+            .collect();
+        assert!(
+            kinds.contains(&(Kind::Offset, "accel_1".into())),
+            "{kinds:?}"
+        );
+        assert!(
+            kinds.contains(&(Kind::Drift, "accel_2".into())),
+            "{kinds:?}"
+        );
         assert!(!kinds.iter().any(|k| k.1 == "accel_1" && k.0 == Kind::Drift));
+    }
+
+    #[test]
+    fn momentum_balance_names_the_offset() {
+        let s = CheckSettings::default();
+        let mut b = Balance {
+            terms: vec![
+                ("accel_1".into(), 0.5, 0.01),
+                ("accel_2".into(), 0.4, 2.45),
+                ("accel_3".into(), 0.4, -2.46),
+            ],
+            force_mean: 0.0,
+            force_rms: 20.0,
+        };
+        assert!(momentum(&b, &s).is_none());
+        b.terms[2].2 += 5.0;
+        let f = momentum(&b, &s).unwrap();
+        assert_eq!(f.channel.as_deref(), Some("accel_3"));
+        assert!(f.message.contains("an offset of 4.9875 m/s^2"), "{f}");
     }
 
     #[test]
     fn scale_flags_units() {
         let s = CheckSettings::default();
-        let p = |r: f64| vec![("accel_1".to_string(), r, 1.0), ("accel_5".to_string(), r * 1.2, 1.0)];
+        let p = |r: f64| {
+            vec![
+                ("accel_1".to_string(), r, 1.0),
+                ("accel_5".to_string(), r * 1.2, 1.0),
+            ]
+        };
         assert!(scale(&p(1.0), &s).is_none());
         assert!(scale(&p(0.6), &s).is_none());
         let g = scale(&p(1.0 / 9.81), &s).unwrap();

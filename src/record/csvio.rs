@@ -238,7 +238,8 @@ pub(crate) fn time_base_with(t: &[f64], resolution: f64) -> Msg<(f64, f64)> {
     }
     for (k, &tk) in t.iter().enumerate() {
         let expected = t[0] + k as f64 * dt;
-        let tol = (TIME_RTOL * dt + 1e-10 * tk.abs()).max(resolution * (1.0 + 1e-6));
+        // a stamp's own rounding and that of the two ends defining the grid
+        let tol = (TIME_RTOL * dt + 1e-10 * tk.abs()).max(2.0 * resolution);
         if (tk - expected).abs() > tol {
             return Err(format!(
                 "time: sample {k} is not on a uniform grid: {tk} s, expected {expected} s (mean step {dt} s, tolerance {tol:.3e} s)"
@@ -300,20 +301,34 @@ pub(crate) fn check_truth(t: &Truth, n: usize) -> Msg<()> {
 struct Table {
     names: Vec<String>,
     cols: Vec<Vec<f64>>,
-    /// Half a unit of the last decimal printed in the time column (the
-    /// coarsest row), s; 0 without a time column.
+    /// How finely the time column is known, s ([`time_resolution`]).
     time_resolution: f64,
 }
 
-/// Half a unit of the last decimal of a number as printed: `0.001953`
-/// → 5e-7, `1.953125e-3` → 5e-10, `12` → 0.5.
-fn printed_resolution(field: &str) -> f64 {
+/// Decimals of a number's mantissa as printed and its exponent:
+/// `0.001953` → (6, 0), `1.953125e-3` → (6, -3), `12` → (0, 0).
+fn printed_digits(field: &str) -> (usize, i32) {
     let (mantissa, exp) = match field.find(['e', 'E']) {
         Some(i) => (&field[..i], field[i + 1..].parse::<i32>().unwrap_or(0)),
         None => (field, 0),
     };
-    let decimals = mantissa.split_once('.').map_or(0, |(_, f)| f.len()) as i32;
-    0.5 * 10f64.powi(exp - decimals)
+    (mantissa.split_once('.').map_or(0, |(_, f)| f.len()), exp)
+}
+
+/// How finely a time column is known: a column printed with a fixed
+/// count `d > 0` of decimals (as `%.6f` or `%.6e` write it) is known to
+/// half a unit of its last decimal, `0.5·10^(e−d)` at the largest
+/// exponent `e`; a column printed in shortest form (varying counts) or as
+/// integers is taken as exact (0).
+fn time_resolution(digits: &[(usize, i32)]) -> f64 {
+    let Some(&(d, _)) = digits.first() else {
+        return 0.0;
+    };
+    if d == 0 || digits.iter().any(|&(di, _)| di != d) {
+        return 0.0;
+    }
+    let e = digits.iter().map(|&(_, e)| e).max().unwrap_or(0);
+    0.5 * 10f64.powi(e - d as i32)
 }
 
 impl Table {
@@ -348,7 +363,7 @@ fn read_table(path: &Path, check_name: impl Fn(&str) -> Msg<()>) -> Result<Table
     let mut row = csv::StringRecord::new();
     let mut k = 0usize;
     let time_col = names.iter().position(|n| n == "time");
-    let mut time_resolution = 0.0f64;
+    let mut time_digits = vec![];
     loop {
         match rdr.read_record(&mut row) {
             Ok(true) => {}
@@ -367,7 +382,7 @@ fn read_table(path: &Path, check_name: impl Fn(&str) -> Msg<()>) -> Result<Table
             col.push(parse_value(field, name, k, line).map_err(err)?);
         }
         if let Some(field) = time_col.and_then(|i| row.get(i)) {
-            time_resolution = time_resolution.max(printed_resolution(field));
+            time_digits.push(printed_digits(field));
         }
         k += 1;
     }
@@ -377,7 +392,7 @@ fn read_table(path: &Path, check_name: impl Fn(&str) -> Msg<()>) -> Result<Table
         _ => Ok(Table {
             names,
             cols,
-            time_resolution,
+            time_resolution: time_resolution(&time_digits),
         }),
     }
 }
@@ -685,7 +700,10 @@ mod tests {
             bad.push_str(&format!("{t:.6},1\n"));
         }
         let e = err_text(&bad);
-        assert!(e.contains("time: sample 40 is not on a uniform grid"), "{e}");
+        assert!(
+            e.contains("time: sample 40 is not on a uniform grid"),
+            "{e}"
+        );
         // two decimals cannot resolve a 512 Hz step
         let e = err_text("time,force_1\n0.00,1\n0.00,1\n");
         assert!(e.contains("not increasing"), "{e}");
@@ -695,7 +713,12 @@ mod tests {
         }
         let e = err_text(&coarse);
         assert!(e.contains("too coarse"), "{e}");
-        assert!((printed_resolution("0.001953") / 5e-7 - 1.0).abs() < 1e-12);
-        assert!((printed_resolution("1.953125e-3") / 5e-10 - 1.0).abs() < 1e-12);
+        let r = |fields: &[&str]| {
+            time_resolution(&fields.iter().map(|f| printed_digits(f)).collect::<Vec<_>>())
+        };
+        assert!((r(&["0.000000", "0.001953"]) / 5e-7 - 1.0).abs() < 1e-12);
+        assert!((r(&["1.953125e-3", "3.906250e-3"]) / 5e-10 - 1.0).abs() < 1e-12);
+        assert_eq!(r(&["0", "0.1", "0.25"]), 0.0, "shortest form is exact");
+        assert_eq!(r(&["0", "1", "2"]), 0.0, "integers are exact");
     }
 }

@@ -156,10 +156,16 @@ mod tests {
         let c = to_si(&mut r).unwrap();
         assert_eq!(r.outputs[0].data, vec![G0, -2.0 * G0]);
         assert_eq!(r.outputs[0].unit, "m/s^2");
-        assert_eq!(c[0].to_string(), "accel_3: converted from g to m/s^2 (×9.80665)");
+        assert_eq!(
+            c[0].to_string(),
+            "accel_3: converted from g to m/s^2 (×9.80665)"
+        );
         let mut r = rec("kN", Quantity::Accel);
         let e = to_si(&mut r).unwrap_err().to_string();
-        assert!(e.contains("accel_3") && e.contains("\"kN\"") && e.contains("r.h5"), "{e}");
+        assert!(
+            e.contains("accel_3") && e.contains("\"kN\"") && e.contains("r.h5"),
+            "{e}"
+        );
         let mut r = rec("mm", Quantity::Disp);
         to_si(&mut r).unwrap();
         assert_eq!(r.outputs[0].data, vec![1e-3, -2e-3]);
