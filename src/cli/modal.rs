@@ -218,6 +218,9 @@ fn test_modes(a: &Args, model: &Model) -> anyhow::Result<(TestModes, Option<serd
         }
     };
     super::check_dofs(&sensors, model.ndof(), "--sensors")?;
+    for r in &recs {
+        super::records::check(r, model, Some(&sensors))?;
+    }
     let mut frf = FrfSettings::default();
     let shortest = recs.iter().map(|r| r.len()).min().unwrap_or(0);
     if let Some(s) = a.segment {

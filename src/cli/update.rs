@@ -258,8 +258,8 @@ fn print_summary(r: &FitResult) -> anyhow::Result<()> {
         );
     }
     outln!(
-        "termination: {:?}; {} iterations, {} simulations, {:.2} s",
-        r.termination,
+        "termination: {}; {} iterations, {} simulations, {:.2} s",
+        termination_words(&r.termination),
         r.iterations,
         r.simulations,
         r.elapsed_s
@@ -275,8 +275,11 @@ fn print_summary(r: &FitResult) -> anyhow::Result<()> {
 /// from the requested one.
 fn jacobian_line(r: &FitResult) -> String {
     let mut s = format!(
-        "{:?}, {} Jacobians ({} simulations with sensitivities), {:.2} s",
-        r.jacobian, r.jacobians, r.sensitivity_simulations, r.jacobian_s
+        "{}, {} Jacobians ({} simulations with sensitivities), {:.2} s",
+        jacobian_words(r.jacobian),
+        r.jacobians,
+        r.sensitivity_simulations,
+        r.jacobian_s
     );
     if let Some(note) = &r.jacobian_note {
         s.push_str(&format!(" ({note})"));
@@ -316,8 +319,9 @@ fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
         ));
     }
     s.push_str(&format!(
-        "\nTermination: {:?}. Iterations {}, cost evaluations {}, simulations {}, failed trials {}, {:.2} s.\n\n",
-        r.termination, r.iterations, r.evaluations, r.simulations, r.failed_trials, r.elapsed_s
+        "\nTermination: {}. Iterations {}, cost evaluations {}, simulations {}, failed trials {}, {:.2} s.\n\n",
+        termination_words(&r.termination),
+        r.iterations, r.evaluations, r.simulations, r.failed_trials, r.elapsed_s
     ));
     s.push_str(&format!("Jacobian: {}.\n\n", jacobian_line(r)));
     s.push_str("| channel | error before | error after |\n|---|---|---|\n");
@@ -352,4 +356,26 @@ fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
     }
     s.push_str("\nFigures: update_before.png, update_after.png (test solid, model dashed).\n");
     s
+}
+
+/// How the optimizer stopped, in words.
+fn termination_words(t: &update::Termination) -> String {
+    use update::Termination as T;
+    match t {
+        T::Converged { criterion } => format!("converged ({criterion} test)"),
+        T::IterationLimit => "stopped at the iteration limit (--max-iterations)".into(),
+        T::EvaluationLimit => "stopped at the limit of cost evaluations".into(),
+        T::Stalled { reason } => format!("stalled: {reason}"),
+        T::StartFailed { failure } => {
+            format!("the model could not be simulated at the start: {failure}")
+        }
+    }
+}
+
+/// The Jacobian method, in words.
+fn jacobian_words(j: JacobianMethod) -> &'static str {
+    match j {
+        JacobianMethod::Sensitivity => "forward sensitivities",
+        JacobianMethod::CentralDifference => "centered finite differences",
+    }
 }

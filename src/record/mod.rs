@@ -351,6 +351,32 @@ pub fn write(rec: &Record, path: &Path) -> Result<()> {
     })
 }
 
+/// A file of the shared data set that sits beside a checkout
+/// (`<checkout>/../shared/data/<rel>`), for tests that read measured or
+/// reference data the repository does not ship. `None`, with a message
+/// on stderr, when it is absent; a panic instead when the environment
+/// variable `TACIT_REQUIRE_SHARED` is `1` (CI sets it).
+#[doc(hidden)]
+pub fn shared_data(rel: &str) -> Option<PathBuf> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(rel);
+    if path.exists() {
+        return Some(path);
+    }
+    if std::env::var("TACIT_REQUIRE_SHARED").as_deref() == Ok("1") {
+        panic!(
+            "{} is absent and TACIT_REQUIRE_SHARED=1: the shared data set must sit beside the checkout",
+            path.display()
+        );
+    }
+    eprintln!(
+        "skipped: {} is absent (the shared data set beside the checkout; set TACIT_REQUIRE_SHARED=1 to make this a failure)",
+        path.display()
+    );
+    None
+}
+
 /// Path of the record for messages.
 pub fn display_path(rec: &Record) -> PathBuf {
     rec.source.clone()
