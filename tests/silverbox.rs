@@ -2,7 +2,6 @@
 //! Schoukens, ECC 2013, read from the shared data set beside the checkout)
 //! through the close-the-loop diagnosis.
 
-use std::path::Path;
 use tacit::silverbox::{self, Settings};
 
 #[test]

@@ -287,10 +287,13 @@ impl Drop for Staging {
     }
 }
 
+/// Writes one file to the path it is given.
+pub type FileWriter<'a> = dyn Fn(&Path) -> Result<()> + 'a;
+
 /// Write one or more files whole: each is written to a hidden temporary
 /// beside it; all are renamed into place only when every one succeeded.
 /// Parent directories are created.
-pub fn write_files(files: &[(&Path, &dyn Fn(&Path) -> Result<()>)]) -> Result<()> {
+pub fn write_files(files: &[(&Path, &FileWriter)]) -> Result<()> {
     let mut tmps: Vec<(PathBuf, &Path)> = vec![];
     let result = (|| -> Result<()> {
         for (path, write) in files {

@@ -259,10 +259,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let elapsed = t.elapsed();
     rec.validate(None)?;
     let write_rec = |p: &std::path::Path| -> anyhow::Result<()> {
-        Ok(match fmt {
+        match fmt {
             record::Format::Csv => record::csvio::write(&rec, p)?,
             _ => record::hdf5io::write(&rec, p)?,
-        })
+        }
+        Ok(())
     };
     let write_truth =
         |p: &std::path::Path| -> anyhow::Result<()> { Ok(record::csvio::write_truth(&rec, p)?) };

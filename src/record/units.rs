@@ -21,8 +21,7 @@ pub fn si_factor(quantity: Quantity, unit: &str) -> Option<f64> {
         .collect::<String>()
         .replace('²', "^2")
         .replace("**", "^")
-        .replace('µ', "u")
-        .replace('μ', "u");
+        .replace(['µ', 'μ'], "u");
     let u = u.as_str();
     match quantity {
         Quantity::Force => match u {
