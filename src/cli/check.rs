@@ -150,7 +150,8 @@ pub fn segment_in_record(segment: f64, fs: f64, samples: usize) -> Result<()> {
     let (lo, hi) = (8.0, (samples / 2) as f64);
     if !(k >= lo && k <= hi) {
         bail!(
-            "--segment {segment} s is {k:.3} samples at {fs} Hz; give {:.6} to {:.6} s (8 samples to half the record's {samples})",
+            "--segment {segment} s is {} samples at {fs} Hz; give {:.6} to {:.6} s (8 samples to half the record's {samples})",
+            if k.abs() >= 0.01 { format!("{k:.3}") } else { format!("{k:.3e}") },
             lo / fs,
             hi / fs
         );

@@ -134,10 +134,14 @@ fn balances(rec: &Record, model: &Model) -> Vec<checks::Balance> {
             continue;
         }
         let mut terms = vec![];
+        let mut inertia = vec![0.0; rec.len()];
         for i in (0..n).filter(|&i| coef[i].abs() > 1e-9 * scale) {
-            match rec.output(Quantity::Accel, i + 1) {
-                Some(ch) => terms.push((ch.name(), coef[i], mean(&ch.data))),
-                None => return out,
+            let Some(ch) = rec.output(Quantity::Accel, i + 1) else {
+                return out;
+            };
+            terms.push((ch.name(), coef[i], mean(&ch.data)));
+            for (s, a) in inertia.iter_mut().zip(&ch.data) {
+                *s += coef[i] * a;
             }
         }
         let mut f = vec![0.0; rec.len()];
@@ -150,6 +154,7 @@ fn balances(rec: &Record, model: &Model) -> Vec<checks::Balance> {
             terms,
             force_mean: mean(&f),
             force_rms: checks::rms(&f),
+            inertia_rms: checks::rms(&inertia),
         });
     }
     out

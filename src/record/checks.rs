@@ -329,6 +329,9 @@ pub struct Balance {
     pub force_mean: f64,
     /// RMS of `Σⱼ φⱼ fⱼ(t)`, N.
     pub force_rms: f64,
+    /// RMS of `Σᵢ cᵢ aᵢ(t)`, N (equal to `force_rms` when the record
+    /// balances; far from it when a unit is wrong).
+    pub inertia_rms: f64,
 }
 
 /// An accelerometer offset seen as a rigid-body momentum balance that
@@ -336,7 +339,8 @@ pub struct Balance {
 pub fn momentum(b: &Balance, s: &CheckSettings) -> Option<Finding> {
     let lhs: f64 = b.terms.iter().map(|(_, c, m)| c * m).sum();
     let residual = lhs - b.force_mean;
-    if !(b.force_rms > 0.0) || residual.abs() <= s.momentum_share * b.force_rms {
+    let scale = b.force_rms.max(b.inertia_rms);
+    if !(scale > 0.0) || residual.abs() <= s.momentum_share * scale {
         return None;
     }
     let mut weigh: Vec<&(String, f64, f64)> = b.terms.iter().collect();
@@ -357,7 +361,7 @@ pub fn momentum(b: &Balance, s: &CheckSettings) -> Option<Finding> {
         channel: weigh.first().map(|t| t.0.clone()),
         message: format!(
             "the mean accelerations do not balance the mean force over the rigid-body motion: Σ m·ā − F̄ = {residual:.4} N, {:.1} % of the force's RMS; an accelerometer probably has an offset; the largest terms: {}",
-            100.0 * residual.abs() / b.force_rms,
+            100.0 * residual.abs() / scale,
             top.join(", ")
         ),
     })
@@ -533,6 +537,7 @@ mod tests {
             ],
             force_mean: 0.0,
             force_rms: 20.0,
+            inertia_rms: 20.0,
         };
         assert!(momentum(&b, &s).is_none());
         b.terms[2].2 += 5.0;
