@@ -17,12 +17,12 @@ setup:
 demo: setup
 	cargo build --release
 	$(TACIT) diagnose --model data/lanl8dof.toml --record data/lanl8dof-bumper.h5 \
-		--validate data/lanl8dof-bumper-validation.h5 -o out/demo
+		--validate data/lanl8dof-bumper-validation.h5 -o out/demo --force
 	@echo "main job done: report in out/demo/report.md (machine-readable: out/demo/report.json)"
 
-## The test suite (what CI runs).
+## The test suite (what CI runs), on the release build `make demo` made.
 test: setup
-	cargo test
+	cargo test --release
 
 ## Benchmarks (release, criterion).
 bench: setup
@@ -31,4 +31,4 @@ bench: setup
 ## Lints, as CI runs them.
 check:
 	cargo fmt --check
-	cargo clippy --all-targets -- -D warnings
+	cargo clippy --release --all-targets -- -D warnings

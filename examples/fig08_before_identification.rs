@@ -4,7 +4,7 @@
 //!
 //! Writes `out/fig08_before_identification/<run>_{first90,whole}.{png,svg}` for the runs: the
 //! published scheme on the paper's first 90 samples and on the whole record
-//! (where it diverges, CONTEXT §3 fact 1), MHE (the default, SEREP on 1, 5,
+//! (where it diverges, docs/theory.md, fact R1), MHE (the default, SEREP on 1, 5,
 //! 6) and MHE on the full-order model (forces localise at DOFs 5–6).
 //! Run: `cargo run --release --example fig08_before_identification`.
 

@@ -1,5 +1,5 @@
 //! Multiple-shooting fit of the bumper of the LANL 8-DOF testbed (issue 6
-//! check; CONTEXT §3 facts 4–6): gap and contact stiffness of
+//! check; docs/theory.md, facts R4–R6): gap and contact stiffness of
 //! `data/lanl8dof-contact.toml` from a 4096-sample record with 1 % noise
 //! (accelerations at DOFs 1, 5, 6), started 30 % away from the truth
 //! (gap +30 %, stiffness −30 %), with 0.1 s segments started from the true

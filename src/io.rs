@@ -36,8 +36,59 @@ where
         }),
         Err(e) => {
             let _ = std::fs::remove_file(&tmp);
-            Err(e)
+            Err(naming(e, &tmp, path))
         }
+    }
+}
+
+/// The error of a write to `tmp`, naming the user's `path` instead of the
+/// hidden temporary file.
+fn naming(e: TacitError, tmp: &Path, path: &Path) -> TacitError {
+    let swap = |p: PathBuf| if p == tmp { path.to_path_buf() } else { p };
+    let text = |m: String| m.replace(&tmp.display().to_string(), &path.display().to_string());
+    match e {
+        TacitError::Io { path: p, source } => TacitError::Io {
+            path: swap(p),
+            source,
+        },
+        TacitError::Record { path: p, message } => TacitError::Record {
+            path: swap(p),
+            message: text(message),
+        },
+        TacitError::Setting(m) => TacitError::Setting(text(m)),
+        TacitError::Numerical(m) => TacitError::Numerical(text(m)),
+        TacitError::Model {
+            source_name,
+            message,
+        } => TacitError::Model {
+            source_name,
+            message: text(message),
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn errors_name_the_target_not_the_temporary_file() {
+        let d = tempfile::tempdir().unwrap();
+        let target = d.path().join("report.md");
+        let e = write_atomic(&target, |tmp| {
+            Err(TacitError::io(tmp, std::io::Error::other("disk full")))
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with(&target.display().to_string()), "{e}");
+        assert!(!e.contains(".report.md."), "{e}");
+        let e = write_atomic(&target, |tmp| {
+            Err(TacitError::record(tmp, format!("cannot write {}", tmp.display())))
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(!e.contains(".report.md."), "{e}");
+        assert_eq!(std::fs::read_dir(d.path()).unwrap().count(), 0);
     }
 }
 

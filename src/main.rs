@@ -10,10 +10,16 @@ use clap::Parser;
 
 fn main() {
     let args = cli::Cli::parse();
+    cli::output::install_signal_cleanup();
     match cli::run(args) {
         Ok(()) => {}
+        Err(e) if cli::out::is_pipe_closed(&e) => {
+            // the reader of stdout has gone (`| head`): a quiet end
+            cli::output::remove_registered();
+        }
         Err(e) => {
-            eprintln!("tacit: error: {e:#}");
+            cli::output::remove_registered();
+            eprintln!("tacit: error: {}", cli::out::error_message(&e));
             std::process::exit(1);
         }
     }

@@ -1,5 +1,5 @@
 //! Correlation metrics between a measured signal `m` and a computed one `c`
-//! (CONTEXT §5): relative error, Sprague–Geers magnitude/phase/combined,
+//! (docs/theory.md, Definitions): relative error, Sprague–Geers magnitude/phase/combined,
 //! TRAC.
 
 use serde::Serialize;

@@ -251,6 +251,7 @@ pub fn run(path: &Path, s: &Settings, out: Option<&Path>) -> Result<SilverboxRes
             validation_record: Some(format!("{} [{}..{})", path.display(), s.test.0, s.test.1)),
             sensors: vec![1],
             tacit_version: env!("CARGO_PKG_VERSION").into(),
+            warnings: vec![],
         };
         diagnose::report::write(dir, &meta, &diag, &settings)?;
     }

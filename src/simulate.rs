@@ -3,7 +3,7 @@
 //! internal force, and the model) beside them.
 
 use crate::error::{Result, TacitError};
-use crate::integrate::{Integrator, SimSettings, Simulation};
+use crate::integrate::{Integrator, SimSettings, SimStatus, Simulation};
 use crate::model::Model;
 use crate::record::{Channel, Quantity, Record, Truth};
 use crate::signal;
@@ -154,8 +154,9 @@ pub fn simulate_record(model: &Model, spec: &RecordSpec) -> Result<(Record, Simu
     let sim = integ.run(force.as_view(), u0, v0);
     if !sim.completed() {
         return Err(TacitError::Numerical(format!(
-            "simulation of {} stopped: {:?}",
-            model.name, sim.status
+            "simulation of {} stopped: {}",
+            model.name,
+            describe_status(&sim.status)
         )));
     }
     let mut g = signal::rng(spec.seed ^ 0x9e37_79b9_7f4a_7c15);
@@ -193,4 +194,22 @@ pub fn simulate_record(model: &Model, spec: &RecordSpec) -> Result<(Record, Simu
         source: Default::default(),
     };
     Ok((rec, sim))
+}
+
+/// How a simulation ended, in words with its facts.
+pub fn describe_status(status: &SimStatus) -> String {
+    match status {
+        SimStatus::Completed => "completed".into(),
+        SimStatus::NewtonFailed {
+            time,
+            sample,
+            iterations,
+            residual,
+        } => format!(
+            "the Newton iterations did not converge at t = {time:.6} s (after sample {sample}; {iterations} iterations, residual {residual:.3e} N); more sub-steps may resolve the element"
+        ),
+        SimStatus::NonFinite { time, sample } => format!(
+            "the state became non-finite at t = {time:.6} s (after sample {sample}): the model or the step is unstable"
+        ),
+    }
 }

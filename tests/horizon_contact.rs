@@ -1,7 +1,7 @@
 //! The lanl8dof contact record (bumper 0.381 mm between masses 5 and 6,
 //! accelerations at DOFs 1, 5, 6 with 1 % noise, 4096 samples, full-order
 //! linear model, 8 unknown forces): the identified force localises at DOFs
-//! 5 and 6 and follows the true contact force (CONTEXT §3 fact 3; the
+//! 5 and 6 and follows the true contact force (docs/theory.md, fact R3; the
 //! textbook augmented Kalman filter of fact 7 gave correlation 0.01).
 
 mod horizon_common;
@@ -82,7 +82,7 @@ fn run(model: &tacit::model::Model) -> (Vec<f64>, Vec<f64>, f64) {
     (corr56, rms_other, r.diagnostics.relative_residual_total)
 }
 
-/// CONTEXT §3 facts 1–3: contact 5–6 with gap 0.6 mm, 2e5 N/m, and 0.3 N
+/// docs/theory.md, facts R1–R3: contact 5–6 with gap 0.6 mm, 2e5 N/m, and 0.3 N
 /// Coulomb friction on every mass.
 #[test]
 fn contact_force_localises_at_dofs_5_and_6() {
@@ -110,7 +110,7 @@ fn contact_force_localises_at_dofs_5_and_6() {
 
 /// The data file's bumper (0.381 mm, 2e6 N/m): the contact rings near
 /// 490 Hz, above the 256 Hz Nyquist frequency of the 512 Hz record
-/// (CONTEXT §3 fact 5), so a force linear between samples cannot
+/// (docs/theory.md, fact R5), so a force linear between samples cannot
 /// represent it. Reported, not asserted beyond a finite answer.
 #[test]
 fn stiff_bumper_above_nyquist_is_reported() {

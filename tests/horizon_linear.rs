@@ -1,6 +1,6 @@
 //! Full-horizon identification on linear records made with the exact
 //! sampled model: known forces come back, a record without a missing force
-//! gives no force (CONTEXT §3 fact 7), ±2σ bands cover at the nominal rate,
+//! gives no force (docs/theory.md, fact R7), ±2σ bands cover at the nominal rate,
 //! long records stay bounded, records that do not start at rest are
 //! handled by estimating x0, and the weight rules and the QP behave.
 

@@ -16,7 +16,7 @@ fn bumper_record(samples: usize) -> (Model, Record) {
     let spec = RecordSpec {
         samples,
         sensors: vec![1, 5, 6],
-        // resolved contact (CONTEXT §3 fact 5): 40 sub-steps for the "test"
+        // resolved contact (docs/theory.md, fact R5): 40 sub-steps for the "test"
         settings: SimSettings {
             substeps: 40,
             ..Default::default()
@@ -57,7 +57,7 @@ fn mhe_default_holds_over_the_whole_bumper_record() {
         "force grows: {:?}",
         est.diagnostics.force_rms_by_tenth
     );
-    // the published scheme on the same record diverges (CONTEXT §3 fact 1)
+    // the published scheme on the same record diverges (docs/theory.md, fact R1)
     let paper = identify(&prob, &IdentifySettings::paper(1.0)).unwrap();
     assert!(
         matches!(paper.status, Status::Diverged { .. }),

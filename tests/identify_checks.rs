@@ -14,7 +14,7 @@ fn lanl() -> Model {
     Model::from_file(concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml").as_ref()).unwrap()
 }
 
-/// CONTEXT §3 setup (facts 1–3): lanl8dof + 2 kN/m shaker suspension at DOF 1.
+/// the setup of docs/theory.md, facts R1–R3: lanl8dof + 2 kN/m shaker suspension at DOF 1.
 fn context_model() -> Model {
     let mut t = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml"))
         .unwrap();

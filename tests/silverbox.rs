@@ -1,15 +1,15 @@
-//! End-to-end: the Silverbox benchmark (real measurements, read from
-//! ../shared/data/silverbox/) through the close-the-loop diagnosis.
+//! End-to-end: the Silverbox benchmark (real measurements, Wigren &
+//! Schoukens, ECC 2013, read from the shared data set beside the checkout)
+//! through the close-the-loop diagnosis.
 
-use std::path::Path;
 use tacit::silverbox::{self, Settings};
 
 #[test]
 fn silverbox_loop_finds_the_cubic_and_beats_the_reference_fit() {
-    let path = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/data/silverbox/SNLS80mV.mat"
-    ));
+    let Some(path) = tacit::record::shared_data("silverbox/SNLS80mV.mat") else {
+        return;
+    };
+    let path = path.as_path();
     let r = silverbox::run(path, &Settings::default(), None).unwrap();
     eprintln!("{}", r.summary());
     // the loop names a cubic spring to ground at the only DOF
@@ -27,10 +27,10 @@ fn silverbox_loop_finds_the_cubic_and_beats_the_reference_fit() {
 
 #[test]
 fn silverbox_bad_mapping_is_a_clear_error() {
-    let path = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/data/silverbox/SNLS80mV.mat"
-    ));
+    let Some(path) = tacit::record::shared_data("silverbox/SNLS80mV.mat") else {
+        return;
+    };
+    let path = path.as_path();
     let e = tacit::record::read_mat(
         path,
         &tacit::record::MatMapping {

@@ -16,7 +16,7 @@ pub fn runs() -> Vec<(&'static str, ForceEstimate)> {
     let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof-contact.toml");
     let model = Model::from_file(std::path::Path::new(p)).expect("model");
     // "test": 4096 samples at 512 Hz, 20 N random at DOF 1, contact resolved
-    // with 40 sub-steps (CONTEXT §3 fact 5), accelerations at 1, 5, 6
+    // with 40 sub-steps (docs/theory.md, fact R5), accelerations at 1, 5, 6
     let spec = RecordSpec {
         samples: 4096,
         sensors: vec![1, 5, 6],

@@ -1,5 +1,6 @@
 //! `tacit diagnose`: the close-the-loop diagnosis.
 
+use super::out::outln;
 use super::{load_record, DofList, RecordOpts};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
@@ -33,10 +34,10 @@ pub struct Args {
     /// for a stiff element.
     #[arg(long, default_value_t = 10)]
     substeps: usize,
-    /// Jacobian of the effect fits' race of starts: forward sensitivities
-    /// of the integrator or centered finite differences (the joint fit of
+    /// Jacobian of the effect fits' race of starts: sens (forward
+    /// sensitivities of the integrator) or fd (centered finite differences; the joint fit of
     /// parameters and start states always uses the sensitivities).
-    #[arg(long, value_enum, default_value = "sens")]
+    #[arg(long, value_enum, default_value = "sens", hide_possible_values = true)]
     jacobian: tacit::update::JacobianMethod,
     /// Use the truth stored in a simulated record as the states (checks the
     /// later steps independently of the identification).
@@ -53,21 +54,34 @@ pub struct Args {
     trust_linear: bool,
     #[command(flatten)]
     rec: RecordOpts,
-    /// Output directory.
+    /// Output directory (created with its parents; written whole at the
+    /// end).
     #[arg(short, long)]
     output: PathBuf,
+    /// Replace an output directory that already holds a tacit report.
+    #[arg(long)]
+    force: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    super::check::diagnose_options(a.segment, a.max_effects, a.substeps)?;
+    let staging = super::output::Staging::begin(&a.output, a.force)?;
     let model = Model::from_file(&a.model)?;
     let rec = load_record(&a.record, &a.rec)?;
     let val = match &a.validate {
         Some(p) => Some(load_record(p, &a.rec)?),
         None => None,
     };
-    if !(a.segment > 0.0) {
-        anyhow::bail!("--segment {} must be > 0", a.segment);
+    super::check::segment_in_record(a.segment, rec.fs, rec.len())?;
+    let chosen = a.sensors.as_ref().map(|d| d.0.as_slice());
+    let mut warnings = super::records::check(&rec, &model, chosen)?;
+    if let Some(v) = &val {
+        warnings.extend(super::records::check(v, &model, chosen)?);
     }
+    super::check::memory(
+        super::check::diagnose_bytes(model.ndof(), a.substeps, rec.len()),
+        "the diagnosis of this record",
+    )?;
     let defaults = DiagnoseSettings::default();
     let settings = DiagnoseSettings {
         fit: tacit::update::FitSettings {
@@ -121,11 +135,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         validation_record: a.validate.as_ref().map(|p| p.display().to_string()),
         sensors: used,
         tacit_version: env!("CARGO_PKG_VERSION").to_string(),
+        warnings,
     };
-    report::write(&a.output, &meta, &d, &settings)?;
-    println!("{}", d.verdict);
+    report::write(staging.dir(), &meta, &d, &settings)
+        .map_err(|e| staging.user_message(e.into()))?;
+    staging.commit()?;
+    outln!("{}", d.verdict);
     let pct = |x: Option<f64>| x.map_or("failed".to_string(), |v| format!("{:.2} %", 100.0 * v));
-    println!(
+    outln!(
         "relative_error {} -> {}   simulation_error {} -> {}",
         pct(d.before.relative_error),
         pct(d.after.relative_error),
@@ -133,12 +150,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         pct(d.after.simulation_error)
     );
     if let Some(v) = &d.validation {
-        println!(
+        outln!(
             "validation: relative_error {} -> {}",
             pct(v.before.relative_error),
             pct(v.after.relative_error)
         );
     }
-    println!("report: {}", a.output.join("report.md").display());
+    outln!("report: {}", a.output.join("report.md").display());
     Ok(())
 }

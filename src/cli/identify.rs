@@ -1,8 +1,9 @@
 //! `tacit identify`: reconstruct the internal force a linear model lacks
-//! from a record (sliding windows: the paper's scheme or moving-horizon
-//! estimation).
+//! from a record (moving-horizon estimation, the paper's sequential
+//! windows, or the full-horizon formulation).
 
-use super::{check_dofs, DofList};
+use super::out::outln;
+use super::{check, check_dofs, DofList};
 use std::path::PathBuf;
 use tacit::identify::{
     self, Constraints, IdentifySettings, Method, Problem, Reduce, Regularization, Solver, Status,
@@ -45,23 +46,28 @@ pub struct Args {
     /// Record (.h5 or .csv) with the input force and the measured responses.
     #[arg(long)]
     record: PathBuf,
-    /// Sensor DOFs, e.g. 1,5,6 (every output channel at them is fitted).
-    #[arg(long)]
+    /// Sensor DOFs numbered from 1, e.g. 1,5,6 (every output channel at
+    /// them is fitted).
+    #[arg(long, value_name = "DOFS")]
     sensors: DofList,
     /// Reduction onto the sensor DOFs (none = full-order model).
     #[arg(long, value_enum, default_value = "serep")]
     reduce: Reduce,
-    /// Window length in samples (MHE: samples committed per window).
-    #[arg(long, default_value_t = 3)]
+    /// Window length in samples, from 1 to the record's length (MHE:
+    /// samples committed per window).
+    #[arg(long, default_value_t = 3, value_name = "SAMPLES")]
     window: usize,
-    /// MHE horizon in samples (>= window).
-    #[arg(long, default_value_t = 24)]
+    /// MHE horizon in samples, from --window to the record's length.
+    #[arg(long, default_value_t = 24, value_name = "SAMPLES")]
     horizon: usize,
-    /// Integration sub-steps per sample of the linear model.
-    #[arg(long, default_value_t = 10)]
+    /// Integration sub-steps per sample of the linear model, 1 to 1000.
+    #[arg(long, default_value_t = 10, value_name = "N")]
     substeps: usize,
-    /// Window solver: least squares or QP (Clarabel, with constraints).
-    #[arg(long, value_enum, default_value = "ls")]
+    /// Window solver: ls (regularized least squares through a gain
+    /// computed once) or qp (quadratic program solved by Clarabel, with the
+    /// --lower, --upper, --equilibrium, --pair, --push-apart and --active
+    /// constraints).
+    #[arg(long, value_enum, default_value = "ls", hide_possible_values = true)]
     solver: Solver,
     /// Scheme: the published sequential windows, moving-horizon estimation,
     /// or the full-horizon optimal-control formulation.
@@ -71,60 +77,67 @@ pub struct Args {
     /// with the --noise level).
     #[arg(long, value_enum, default_value = "discrepancy")]
     weights: WeightRule,
-    /// Horizon method: λ, weight of Σ‖f_k‖² (start of the weight search).
+    /// Horizon method: λ > 0, weight of Σ‖f_k‖² (start of the weight
+    /// search).
     #[arg(long, default_value_t = 1e-2)]
     lambda: f64,
-    /// Horizon method: μ, weight of Σ‖f_{k+1} − f_k‖².
+    /// Horizon method: μ >= 0, weight of Σ‖f_{k+1} − f_k‖².
     #[arg(long, default_value_t = 0.0)]
     mu: f64,
-    /// Horizon method: channel noise as a fraction of each channel's RMS.
-    #[arg(long, default_value_t = 0.01)]
+    /// Horizon method: channel noise as a fraction of each channel's RMS,
+    /// in (0, 1].
+    #[arg(long, default_value_t = 0.01, value_name = "FRACTION")]
     noise: f64,
     /// Horizon method: the record starts at rest (x0 = 0 instead of estimated).
     #[arg(long)]
     at_rest: bool,
-    /// Tikhonov weight α (SI units: (output unit / N)²). Default 1e-3.
+    /// Tikhonov weight α > 0 (SI units: (output unit / N)²). Default 1e-3.
     #[arg(long, conflicts_with = "alpha_select")]
     alpha: Option<f64>,
     /// Choose α automatically over --alpha-grid.
     #[arg(long, value_enum)]
     alpha_select: Option<AlphaRule>,
-    /// α grid for --alpha-select: lowest,highest,count.
-    #[arg(long, default_value = "1e-10,1e2,25", value_parser = parse_grid)]
+    /// α grid for --alpha-select: lowest,highest,count (0 < lowest <
+    /// highest, 2 to 200 points, log-spaced).
+    #[arg(long, default_value = "1e-10,1e2,25", value_parser = parse_grid, value_name = "LO,HI,COUNT")]
     alpha_grid: (f64, f64, usize),
-    /// Weight of the first differences of the force (same units as α).
+    /// Weight >= 0 of the first differences of the force (same units as α).
     #[arg(long, default_value_t = 0.0)]
     smoothness: f64,
-    /// MHE arrival-cost weight μ (relative).
+    /// MHE arrival-cost weight >= 0 (relative).
     #[arg(long, default_value_t = 1e-2)]
     prior_weight: f64,
     /// MHE leak ε towards a zero start state (relative, > 0).
     #[arg(long, default_value_t = 1e-4)]
     leak: f64,
-    /// QP: lower bound DOF:VALUE (N), repeatable.
-    #[arg(long, value_parser = parse_bound)]
+    /// QP: lower bound DOF:VALUE (DOF from 1, VALUE in N), repeatable.
+    #[arg(long, value_parser = parse_bound, value_name = "DOF:N")]
     lower: Vec<(usize, f64)>,
-    /// QP: upper bound DOF:VALUE (N), repeatable.
-    #[arg(long, value_parser = parse_bound)]
+    /// QP: upper bound DOF:VALUE (DOF from 1, VALUE in N), repeatable.
+    #[arg(long, value_parser = parse_bound, value_name = "DOF:N")]
     upper: Vec<(usize, f64)>,
     /// QP: the force components sum to zero (purely internal force).
     #[arg(long)]
     equilibrium: bool,
-    /// QP: pair I,J with f_I = −f_J, repeatable.
-    #[arg(long, value_parser = parse_pair_dofs)]
+    /// QP: pair I,J (DOFs from 1) with f_I = −f_J, repeatable.
+    #[arg(long, value_parser = parse_pair_dofs, value_name = "I,J")]
     pair: Vec<(usize, usize)>,
     /// QP: each pair only pushes apart (f_I >= 0; contact closes as u_I − u_J grows).
     #[arg(long)]
     push_apart: bool,
-    /// QP: only these DOFs carry a force.
-    #[arg(long)]
+    /// QP: only these DOFs (from 1) carry a force.
+    #[arg(long, value_name = "DOFS")]
     active: Option<DofList>,
     /// Do not draw the figures.
     #[arg(long)]
     no_figures: bool,
-    /// Output directory.
+    /// Output directory (created with its parents; written whole at the
+    /// end).
     #[arg(short, long)]
     output: PathBuf,
+    /// Replace an output directory that already holds tacit output.
+    #[arg(long)]
+    force: bool,
 }
 
 fn parse_grid(s: &str) -> Result<(f64, f64, usize), String> {
@@ -162,12 +175,82 @@ fn parse_pair_dofs(s: &str) -> Result<(usize, usize), String> {
     Ok((a, b))
 }
 
+/// Check every numeric option that needs no record.
+fn validate(a: &Args) -> anyhow::Result<()> {
+    check::substeps(a.substeps)?;
+    let (lo, hi, count) = a.alpha_grid;
+    if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && hi > lo) {
+        anyhow::bail!("--alpha-grid {lo},{hi},{count}: give 0 < lowest < highest");
+    }
+    check::count(
+        "--alpha-grid",
+        count,
+        2,
+        check::MAX_GRID,
+        "count of α values",
+    )?;
+    if let Some(x) = a.alpha {
+        check::positive("--alpha", x, 1e12, "Tikhonov weight")?;
+    }
+    check::positive("--lambda", a.lambda, 1e12, "weight of the force")?;
+    check::in_range("--mu", a.mu, 0.0, 1e12, "weight of the force's differences")?;
+    check::positive("--noise", a.noise, 1.0, "fraction of each channel's RMS")?;
+    check::in_range("--smoothness", a.smoothness, 0.0, 1e12, "weight")?;
+    check::in_range(
+        "--prior-weight",
+        a.prior_weight,
+        0.0,
+        1e12,
+        "relative weight",
+    )?;
+    check::positive("--leak", a.leak, 1.0, "relative leak")?;
+    for (opt, b) in [("--lower", &a.lower), ("--upper", &a.upper)] {
+        for &(d, v) in b.iter() {
+            if !v.is_finite() {
+                anyhow::bail!("{opt} {d}:{v}: the bound must be a finite force in N");
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Window and horizon against the record's length.
+fn validate_windows(a: &Args, samples: usize) -> anyhow::Result<()> {
+    check::count(
+        "--window",
+        a.window,
+        1,
+        samples,
+        "samples per window, at most the record's length",
+    )?;
+    if a.method == CliMethod::Mhe {
+        check::count(
+            "--horizon",
+            a.horizon,
+            a.window,
+            samples,
+            "samples, from --window to the record's length",
+        )?;
+    }
+    Ok(())
+}
+
 /// Run `tacit identify`.
 pub fn run(a: Args) -> anyhow::Result<()> {
+    validate(&a)?;
+    let staging = super::output::Staging::begin(&a.output, a.force)?;
     let model = Model::from_file(&a.model)?;
     let n = model.ndof();
     check_dofs(&a.sensors.0, n, "--sensors")?;
-    let rec = record::read(&a.record)?;
+    let rec = super::read_record(&a.record)?;
+    rec.validate(Some(n))?;
+    validate_windows(&a, rec.len())?;
+    super::records::check(&rec, &model, Some(&a.sensors.0))?;
+    check::memory(
+        check::integration_bytes(n, 0, a.substeps, rec.len()) * 4.0
+            + (rec.len() as f64) * (n as f64).powi(2) * 8.0 * 4.0,
+        "the identification of this record",
+    )?;
     let regularization = match (a.alpha, a.alpha_select) {
         (_, Some(AlphaRule::Gcv)) => Regularization::Gcv,
         (_, Some(AlphaRule::Lcurve)) => Regularization::LCurve,
@@ -175,7 +258,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         (None, None) => IdentifySettings::default().regularization,
     };
     if a.method == CliMethod::Horizon {
-        return run_horizon(&a, &model, &rec);
+        return run_horizon(&a, &model, &rec, staging);
     }
     let settings = IdentifySettings {
         method: if a.method == CliMethod::Paper {
@@ -194,12 +277,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         prior_weight: a.prior_weight,
         leak: a.leak,
         constraints: Constraints {
-            lower: a.lower,
-            upper: a.upper,
+            lower: a.lower.clone(),
+            upper: a.upper.clone(),
             equilibrium: a.equilibrium,
-            pairs: a.pair,
+            pairs: a.pair.clone(),
             push_apart: a.push_apart,
-            active: a.active.map(|d| d.0),
+            active: a.active.as_ref().map(|d| d.0.clone()),
         },
         ..Default::default()
     };
@@ -219,17 +302,44 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         bar.set_position(done as u64);
     })?;
     bar.finish_and_clear();
-    let files = identify::output::write_all(&est, &a.output, !a.no_figures)?;
-    report(&est);
+    finish(&a, &est, staging)
+}
+
+/// Write the outputs whole, print the summary, and fail (after writing)
+/// when the estimate diverged or stopped.
+fn finish(
+    a: &Args,
+    est: &identify::ForceEstimate,
+    staging: super::output::Staging,
+) -> anyhow::Result<()> {
+    let files = identify::output::write_all(est, staging.dir(), !a.no_figures)
+        .map_err(|e| staging.user_message(e.into()))?;
+    staging.commit()?;
+    report(est)?;
     for f in files {
-        println!("wrote {}", f.display());
+        let name = f.file_name().map(|n| a.output.join(n)).unwrap_or(f);
+        outln!("wrote {}", name.display());
     }
-    Ok(())
+    match &est.status {
+        Status::Diverged { sample, growth } => anyhow::bail!(
+            "the identification diverged from sample {sample} on (state {growth:.3e} times its size without force); the files in {} hold the diverged estimate for inspection",
+            a.output.display()
+        ),
+        Status::Failed { window, sample, message } => anyhow::bail!(
+            "the identification stopped at window {window} (sample {sample}): {message}; the values after it are NaN"
+        ),
+        _ => Ok(()),
+    }
 }
 
 /// `--method horizon`: the full-horizon formulation through the same
 /// outputs as the window methods.
-fn run_horizon(a: &Args, model: &Model, rec: &record::Record) -> anyhow::Result<()> {
+fn run_horizon(
+    a: &Args,
+    model: &Model,
+    rec: &record::Record,
+    staging: super::output::Staging,
+) -> anyhow::Result<()> {
     use tacit::horizon;
     let prob = Problem::new(&model.linear_part(), rec, &a.sensors.0)?;
     let sys = identify::System::new(&prob, a.reduce, a.substeps)?;
@@ -269,43 +379,35 @@ fn run_horizon(a: &Args, model: &Model, rec: &record::Record) -> anyhow::Result<
         ..Default::default()
     };
     let (_, est) = horizon::convert::identify_problem(&prob, &sys, &[], &hs)?;
-    let files = identify::output::write_all(&est, &a.output, !a.no_figures)?;
-    report(&est);
-    for f in files {
-        println!("wrote {}", f.display());
-    }
-    Ok(())
+    finish(a, &est, staging)
 }
 
-fn report(est: &identify::ForceEstimate) {
+fn report(est: &identify::ForceEstimate) -> anyhow::Result<()> {
     let (b, af, rp) = est.overall_errors();
-    println!(
+    outln!(
         "{} on {} ({} samples): status {}",
         est.method,
         est.record,
         est.time.len(),
-        match &est.status {
-            Status::Ok => "ok".to_string(),
-            s => serde_json::to_string(s).unwrap_or_default(),
-        }
+        status_words(&est.status)
     );
     if let Some(r) = est.diagnostics.spectral_radius {
-        println!("closed-loop spectral radius per window: {r:.6}");
+        outln!("closed-loop spectral radius per window: {r:.6}");
     }
     if let Some(reg) = &est.diagnostics.regularization {
-        println!("alpha = {:.3e} ({})", reg.alpha, reg.rule);
+        outln!("alpha = {:.3e} ({})", reg.alpha, reg.rule);
     }
     if let Some(id) = &est.diagnostics.identifiability {
-        println!("identifiability: {}", id.note);
+        outln!("identifiability: {}", id.note);
     }
-    println!(
+    outln!(
         "relative error over all channels: before {:.2} %, after {:.2} %, open-loop replay {:.2} %",
         100.0 * b,
         100.0 * af,
         100.0 * rp
     );
     for c in &est.channels {
-        println!(
+        outln!(
             "  {:>8}: before {:7.2} %  after {:7.3} %",
             c.name,
             100.0 * c.error_before,
@@ -313,12 +415,29 @@ fn report(est: &identify::ForceEstimate) {
         );
     }
     let rms: Vec<String> = est.force_rms().iter().map(|v| format!("{v:.3}")).collect();
-    println!("force RMS per DOF [N]: {}", rms.join(", "));
-    println!(
+    outln!("force RMS per DOF [N]: {}", rms.join(", "));
+    outln!(
         "time: setup {:.3} s, selection {:.3} s, solve {:.3} s",
-        est.timings.setup, est.timings.selection, est.timings.solve
+        est.timings.setup,
+        est.timings.selection,
+        est.timings.solve
     );
     for w in &est.warnings {
-        eprintln!("warning: {w}");
+        eprintln!("tacit: warning: {w}");
+    }
+    Ok(())
+}
+
+/// The status of an estimate in words.
+fn status_words(s: &Status) -> String {
+    match s {
+        Status::Ok => "ok".into(),
+        Status::Warning => "finished with warnings (below)".into(),
+        Status::Diverged { sample, growth } => {
+            format!("diverged from sample {sample} on (growth {growth:.3e})")
+        }
+        Status::Failed { window, sample, .. } => {
+            format!("stopped at window {window} (sample {sample})")
+        }
     }
 }

@@ -1,8 +1,12 @@
 //! Command-line front end: one file per subcommand.
 
+pub mod check;
 mod diagnose;
 mod identify;
 mod modal;
+pub mod out;
+pub mod output;
+pub mod records;
 mod simulate;
 mod update;
 
@@ -23,9 +27,9 @@ enum Command {
     Modal(modal::Args),
     /// Simulate a model under an input and write a record (with its truth).
     Simulate(simulate::Args),
-    /// Reconstruct the internal forces a linear model lacks (sliding windows).
+    /// Reconstruct the internal forces a linear model lacks from a record.
     Identify(identify::Args),
-    /// Update model parameters so simulated responses match a record (GLS or PCD).
+    /// Update model parameters so simulated responses match a record.
     Update(update::Args),
     /// Find what the model misses, trace it to an effect, add and fit it, report before/after.
     Diagnose(diagnose::Args),
@@ -42,7 +46,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
-/// A list of DOFs (from 1) given as `1,5,6` or `1-8`.
+/// A list of DOFs (numbered from 1) given as `1,5,6` or `1-8`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct DofList(pub Vec<usize>);
 
@@ -120,25 +124,27 @@ pub fn with_suffix(path: &std::path::Path, suffix: &str) -> PathBuf {
 /// How to read a record file: `.mat` files need a variable mapping and a rate.
 #[derive(Debug, Clone, clap::Args)]
 pub struct RecordOpts {
-    /// For .mat records: variable=channel pairs, e.g. `V1=force_1,V2=disp_1`.
-    #[arg(long)]
+    /// For .mat records: variable=channel pairs, e.g. `V1=force_1,V2=disp_1`
+    /// (channel = force, disp, vel or accel, then the DOF from 1).
+    #[arg(long, value_name = "VAR=CHANNEL,...")]
     pub mat_map: Option<String>,
     /// For .mat records: sample rate, Hz.
-    #[arg(long)]
+    #[arg(long, value_name = "HZ")]
     pub mat_fs: Option<f64>,
     /// For .mat records: subtract each channel's mean.
     #[arg(long)]
     pub remove_mean: bool,
 }
 
-/// Read a record (HDF5, CSV, or MAT with `opts`).
+/// Read a record (HDF5, CSV, or MAT with `opts`); unit conversions are
+/// reported on stderr.
 pub fn load_record(
     path: &std::path::Path,
     opts: &RecordOpts,
 ) -> anyhow::Result<tacit::record::Record> {
     use tacit::record::{self, Format, MatMapping, Quantity};
     if record::Format::from_path(path)? != Format::Mat {
-        return Ok(record::read(path)?);
+        return read_record(path);
     }
     let map = opts.mat_map.as_ref().ok_or_else(|| {
         anyhow::anyhow!(
@@ -149,6 +155,7 @@ pub fn load_record(
     let fs = opts
         .mat_fs
         .ok_or_else(|| anyhow::anyhow!("{}: a .mat record needs --mat-fs", path.display()))?;
+    check::positive("--mat-fs", fs, 1e9, "sample rate, Hz")?;
     let mut channels = vec![];
     for pair in map.split(',') {
         let (var, ch) = pair
@@ -173,4 +180,13 @@ pub fn load_record(
             remove_mean: opts.remove_mean,
         },
     )?)
+}
+
+/// Read an HDF5 or CSV record; unit conversions are reported on stderr.
+pub fn read_record(path: &std::path::Path) -> anyhow::Result<tacit::record::Record> {
+    let (rec, conversions) = tacit::record::read_with_conversions(path)?;
+    for c in conversions {
+        eprintln!("tacit: note: {}: {c}", path.display());
+    }
+    Ok(rec)
 }

@@ -3,7 +3,8 @@
 //! modes (MAC, pairing, frequency error: the paper's Tables 2–3) and, with
 //! `--update`, modal updating of the spring stiffnesses (Figs 2–3).
 
-use super::DofList;
+use super::out::{out, outln};
+use super::{check, DofList};
 use std::path::{Path, PathBuf};
 use tacit::correlate::{
     self, report, CorrelationSettings, Expansion, FitSettings, FrfSettings, Residue, TestModes,
@@ -30,41 +31,47 @@ pub struct Args {
     /// LSCF/LSFD curve fit). Repeat for several records.
     #[arg(long)]
     record: Vec<PathBuf>,
-    /// Accelerometer DOFs used from the record(s), e.g. `1-8` or `1,4,7`
-    /// (default: every acceleration channel of the first record).
-    #[arg(long, requires = "record")]
+    /// Accelerometer DOFs used from the record(s), numbered from 1, e.g.
+    /// `1-8` or `1,4,7` (default: every acceleration channel of the first
+    /// record).
+    #[arg(long, requires = "record", value_name = "DOFS")]
     sensors: Option<DofList>,
-    /// DOF of the input force (default: the record's only force channel).
-    #[arg(long, requires = "record")]
+    /// DOF of the input force, from 1 (default: the record's only force
+    /// channel).
+    #[arg(long, requires = "record", value_name = "DOF")]
     input_dof: Option<usize>,
-    /// Curve-fit band, Hz, as `lo,hi` (default 5,150).
-    #[arg(long, value_parser = super::parse_pair, requires = "record")]
+    /// Curve-fit band, Hz, as `lo,hi` below the Nyquist frequency
+    /// (default 5,150).
+    #[arg(long, value_parser = super::parse_pair, requires = "record", value_name = "LO,HI")]
     band: Option<(f64, f64)>,
-    /// FRF segment length in samples (default 2048).
-    #[arg(long, requires = "record")]
+    /// FRF segment length in samples, 16 to the record's length (default
+    /// 2048).
+    #[arg(long, requires = "record", value_name = "SAMPLES")]
     segment: Option<usize>,
-    /// Correlate (and update with) the first N test modes only.
-    #[arg(long)]
+    /// Correlate (and update with) the first N test modes only (N >= 1).
+    #[arg(long, value_name = "N")]
     modes: Option<usize>,
-    /// Correlate at these DOFs only (a subset of the measured ones), e.g.
-    /// `1,4,7`.
-    #[arg(long)]
+    /// Correlate at these DOFs only (a subset of the measured ones,
+    /// numbered from 1), e.g. `1,4,7`.
+    #[arg(long, value_name = "DOFS")]
     dofs: Option<DofList>,
-    /// Update the spring stiffnesses by minimising modal residues.
-    #[arg(long, value_parser = parse_residue)]
+    /// Update the spring stiffnesses by minimising modal residues:
+    /// `force` (force residues) or `hybrid` (hybrid residues).
+    #[arg(long, value_parser = parse_residue, value_name = "force|hybrid")]
     update: Option<Residue>,
-    /// Expansion of the test shapes to unmeasured DOFs for `--update`.
-    #[arg(long, value_parser = parse_expansion, default_value = "serep")]
+    /// Expansion of the test shapes to unmeasured DOFs for `--update`:
+    /// `serep` or `dynamic`.
+    #[arg(long, value_parser = parse_expansion, default_value = "serep", value_name = "serep|dynamic")]
     expansion: Expansion,
     /// Write figures (MAC matrix, stiffness adjustments) as
     /// `<STEM>_mac.{png,svg}` and `<STEM>_update.{png,svg}`.
-    #[arg(long)]
+    #[arg(long, value_name = "STEM")]
     plot: Option<PathBuf>,
     /// Write the test modes (identified or read) to this TOML file.
-    #[arg(long)]
+    #[arg(long, value_name = "FILE")]
     save_test_modes: Option<PathBuf>,
     /// Write the updated model to this TOML file (with `--update`).
-    #[arg(long, requires = "update")]
+    #[arg(long, requires = "update", value_name = "FILE")]
     save_model: Option<PathBuf>,
 }
 
@@ -108,7 +115,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         test = test.first(n);
     }
     if let Some(p) = &a.save_test_modes {
-        tacit::io::write_string(p, &test.to_toml_string())?;
+        super::output::save_text(p, &test.to_toml_string())?;
     }
     let modes = tacit::modal::solve(&model.mass_matrix(), &model.stiffness_matrix())?;
     let corr = correlate::correlate(&test, &modes, &CorrelationSettings::default())?;
@@ -120,7 +127,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             let modes2 = tacit::modal::solve(&m2.mass_matrix(), &m2.stiffness_matrix())?;
             let after = correlate::correlate(&test, &modes2, &CorrelationSettings::default())?;
             if let Some(p) = &a.save_model {
-                tacit::io::write_string(p, &m2.to_toml_string())?;
+                super::output::save_text(p, &m2.to_toml_string())?;
             }
             Some((r, after))
         }
@@ -147,10 +154,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             update: update.as_ref().map(|u| &u.0),
             correlation_after_update: update.as_ref().map(|u| &u.1),
         };
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        outln!("{}", serde_json::to_string_pretty(&doc)?);
         return Ok(());
     }
-    println!(
+    outln!(
         "test modes: {} ({} modes at DOFs {:?}{})",
         test.name,
         test.modes.len(),
@@ -161,17 +168,18 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             ""
         }
     );
-    print!("{}", report::modes_table(&[(test.name.as_str(), &test)]));
-    println!("\ncorrelation with model {} (before updating)", model.name);
-    print!("{}", report::correlation_table(&corr, None));
+    out!("{}", report::modes_table(&[(test.name.as_str(), &test)]));
+    outln!("\ncorrelation with model {} (before updating)", model.name);
+    out!("{}", report::correlation_table(&corr, None));
     if let Some((r, after)) = &update {
-        println!(
+        outln!(
             "\nstiffness updating: {:?} residues, {:?} expansion",
-            r.residue, r.expansion
+            r.residue,
+            r.expansion
         );
-        print!("{}", report::adjustment_table(&[("change", r)]));
-        println!("\ncorrelation with the updated model");
-        print!("{}", report::correlation_table(after, None));
+        out!("{}", report::adjustment_table(&[("change", r)]));
+        outln!("\ncorrelation with the updated model");
+        out!("{}", report::correlation_table(after, None));
     }
     Ok(())
 }
@@ -184,7 +192,7 @@ fn test_modes(a: &Args, model: &Model) -> anyhow::Result<(TestModes, Option<serd
     }
     let mut recs = Vec::with_capacity(a.record.len());
     for p in &a.record {
-        let mut r = tacit::record::read(p)?;
+        let mut r = super::read_record(p)?;
         r.validate(Some(model.ndof()))?;
         r.source = p.clone();
         recs.push(r);
@@ -210,13 +218,28 @@ fn test_modes(a: &Args, model: &Model) -> anyhow::Result<(TestModes, Option<serd
         }
     };
     super::check_dofs(&sensors, model.ndof(), "--sensors")?;
+    for r in &recs {
+        super::records::check(r, model, Some(&sensors))?;
+    }
     let mut frf = FrfSettings::default();
+    let shortest = recs.iter().map(|r| r.len()).min().unwrap_or(0);
     if let Some(s) = a.segment {
+        check::count(
+            "--segment",
+            s,
+            16,
+            shortest.max(16),
+            "FRF segment length, samples, at most the record's length",
+        )?;
         frf.segment = s;
     }
     let mut fit = FitSettings::default();
     if let Some(b) = a.band {
+        check::band("--band", b, recs[0].fs)?;
         fit.band_hz = b;
+    }
+    if let Some(d) = a.input_dof {
+        super::check_dofs(&[d], model.ndof(), "--input-dof")?;
     }
     let id = correlate::identify_records(&recs, a.input_dof, &sensors, &frf, &fit)?;
     for d in &id.fit.diagnostics {
@@ -295,29 +318,30 @@ fn model_modes(model: &Model, json: bool) -> anyhow::Result<()> {
             ndof: n,
             modes: &out,
         };
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        outln!("{}", serde_json::to_string_pretty(&doc)?);
         return Ok(());
     }
-    println!(
+    outln!(
         "model {} ({} DOFs), undamped modes, shapes scaled to max |φ| = 1",
-        model.name, n
+        model.name,
+        n
     );
-    print!("{:>4} {:>10}  ", "mode", "freq (Hz)");
+    out!("{:>4} {:>10}  ", "mode", "freq (Hz)");
     for d in 1..=n {
-        print!("{:>7}", format!("dof{d}"));
+        out!("{:>7}", format!("dof{d}"));
     }
-    println!();
+    outln!();
     for m in &out {
         let f = if m.rigid {
             "rigid".to_string()
         } else {
             format!("{:.3}", m.frequency_hz)
         };
-        print!("{:>4} {:>10}  ", m.mode, f);
+        out!("{:>4} {:>10}  ", m.mode, f);
         for x in &m.shape {
-            print!("{x:>7.3}");
+            out!("{x:>7.3}");
         }
-        println!();
+        outln!();
     }
     Ok(())
 }

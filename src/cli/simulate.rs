@@ -1,6 +1,7 @@
 //! `tacit simulate`: simulate a model and write a record with its truth.
 
-use super::{check_dofs, parse_pair, DofList};
+use super::out::outln;
+use super::{check, check_dofs, parse_pair, DofList};
 use std::path::PathBuf;
 use tacit::integrate::SimSettings;
 use tacit::model::Model;
@@ -32,57 +33,140 @@ pub struct Args {
     /// the force channels of a record (--from).
     #[arg(long, value_enum, default_value = "random")]
     input: InputKind,
-    /// RMS of the random force, N.
-    #[arg(long, default_value_t = 20.0)]
+    /// RMS of the random force, N (> 0).
+    #[arg(long, default_value_t = 20.0, value_name = "N")]
     rms: f64,
-    /// Band of the random force, Hz: low,high.
-    #[arg(long, default_value = "5,200", value_parser = parse_pair)]
+    /// Band of the random force, Hz: low,high (below the Nyquist
+    /// frequency fs/2).
+    #[arg(long, default_value = "5,200", value_parser = parse_pair, value_name = "LOW,HIGH")]
     band: (f64, f64),
-    /// Sweep frequencies, Hz: start,end.
-    #[arg(long, default_value = "5,200", value_parser = parse_pair)]
+    /// Sweep frequencies, Hz: start,end (below fs/2).
+    #[arg(long, default_value = "5,200", value_parser = parse_pair, value_name = "START,END")]
     sweep: (f64, f64),
     /// Amplitude of the sweep or impulse, N.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, value_name = "N")]
     amplitude: f64,
-    /// Impulse duration, samples.
-    #[arg(long, default_value_t = 3)]
+    /// Impulse duration, samples (>= 1).
+    #[arg(long, default_value_t = 3, value_name = "SAMPLES")]
     width: usize,
-    /// Record whose force channels drive the model (--input record).
-    #[arg(long = "from")]
+    /// Record whose force channel drives the model (with --input record).
+    #[arg(long = "from", value_name = "RECORD")]
     from: Option<PathBuf>,
-    /// DOF where the force acts (random, sweep, impulse).
-    #[arg(long, default_value_t = 1)]
+    /// DOF where the force acts (random, sweep, impulse), numbered from 1.
+    #[arg(long, default_value_t = 1, value_name = "DOF")]
     input_dof: usize,
-    /// Sample rate, Hz.
-    #[arg(long, default_value_t = 512.0)]
+    /// Sample rate, Hz (> 0).
+    #[arg(long, default_value_t = 512.0, value_name = "HZ")]
     fs: f64,
-    /// Number of samples.
+    /// Number of samples (>= 16).
     #[arg(long, default_value_t = 4096)]
     samples: usize,
-    /// Sensor DOFs, e.g. 1,5,6 or 1-8 (default: all).
-    #[arg(long)]
+    /// Sensor DOFs numbered from 1, e.g. 1,5,6 or 1-8 (default: all).
+    #[arg(long, value_name = "DOFS")]
     sensors: Option<DofList>,
     /// Measured quantity (repeatable).
     #[arg(long, value_enum, default_values_t = vec![Kind::Accel])]
     kind: Vec<Kind>,
-    /// Noise standard deviation as a fraction of each channel's RMS.
-    #[arg(long, default_value_t = 0.0)]
+    /// Noise standard deviation as a fraction of each channel's RMS, in
+    /// [0, 1].
+    #[arg(long, default_value_t = 0.0, value_name = "FRACTION")]
     noise: f64,
     /// Seed of the input and the noise.
     #[arg(long, default_value_t = 7)]
     seed: u64,
-    /// Integration sub-steps per sample.
-    #[arg(long, default_value_t = 10)]
+    /// Integration sub-steps per sample, 1 to 1000 (a stiff contact needs
+    /// more: 40 resolve the shipped bumper at 512 Hz).
+    #[arg(long, default_value_t = 10, value_name = "N")]
     substeps: usize,
-    /// HHT-α (0 = Newmark average acceleration; in [-1/3, 0]).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    /// HHT-α in [-1/3, 0] (0 = Newmark average acceleration).
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        allow_hyphen_values = true,
+        value_name = "ALPHA"
+    )]
     hht_alpha: f64,
-    /// Output record: .h5 (with truth) or .csv (truth in <name>-truth.csv).
-    #[arg(short, long)]
+    /// Output record: .h5 (with its truth) or .csv (truth in
+    /// <name>-truth.csv); missing parent directories are created.
+    #[arg(short, long, value_name = "FILE")]
     output: PathBuf,
 }
 
+/// Check every numeric option (before the model is read).
+fn validate(a: &Args) -> anyhow::Result<()> {
+    check::substeps(a.substeps)?;
+    check::in_range("--hht-alpha", a.hht_alpha, -1.0 / 3.0, 0.0, "HHT-α")?;
+    check::in_range(
+        "--noise",
+        a.noise,
+        0.0,
+        1.0,
+        "fraction of each channel's RMS",
+    )?;
+    if matches!(a.input, InputKind::Record) {
+        return Ok(());
+    }
+    check::positive("--fs", a.fs, 1e7, "sample rate, Hz")?;
+    check::count("--samples", a.samples, 16, check::MAX_SAMPLES, "samples")?;
+    match a.input {
+        InputKind::Random => {
+            check::positive("--rms", a.rms, 1e9, "RMS of the random force, N")?;
+            check::band("--band", a.band, a.fs)?;
+        }
+        InputKind::Sweep => {
+            check::band(
+                "--sweep",
+                (a.sweep.0.min(a.sweep.1), a.sweep.0.max(a.sweep.1)),
+                a.fs,
+            )?;
+            check::positive("--amplitude", a.amplitude.abs(), 1e9, "N")?;
+        }
+        InputKind::Impulse => {
+            check::count(
+                "--width",
+                a.width,
+                1,
+                a.samples,
+                "impulse duration, samples",
+            )?;
+            check::positive("--amplitude", a.amplitude.abs(), 1e9, "N")?;
+        }
+        InputKind::Record => {}
+    }
+    Ok(())
+}
+
+/// The output location: a known extension, a UTF-8 name for HDF5, not a
+/// directory.
+fn check_output(path: &std::path::Path) -> anyhow::Result<record::Format> {
+    let fmt = record::Format::from_path(path)?;
+    if fmt == record::Format::Mat {
+        anyhow::bail!(
+            "{}: tacit writes .h5 or .csv records, not .mat",
+            path.display()
+        );
+    }
+    if fmt == record::Format::Hdf5 && path.to_str().is_none() {
+        anyhow::bail!(
+            "{}: an HDF5 file name must be valid UTF-8 (the HDF5 library reads only such names)",
+            path.display()
+        );
+    }
+    if path.is_dir() {
+        anyhow::bail!(
+            "{}: is a directory; give a file name ending in .h5 or .csv",
+            path.display()
+        );
+    }
+    let parent = super::output::parent_of(path);
+    std::fs::create_dir_all(&parent)
+        .map_err(|e| anyhow::anyhow!("{}: cannot create the directory: {e}", parent.display()))?;
+    Ok(fmt)
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
+    validate(&a)?;
+    let fmt = check_output(&a.output)?;
     let model = Model::from_file(&a.model)?;
     let n = model.ndof();
     let sensors = a
@@ -92,7 +176,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .unwrap_or_else(|| (1..=n).collect());
     check_dofs(&sensors, n, "--sensors")?;
     check_dofs(&[a.input_dof], n, "--input-dof")?;
-    let fmt = record::Format::from_path(&a.output)?;
     let (input, fs, samples, input_dof) = match a.input {
         InputKind::Random => (
             InputSpec::Random {
@@ -127,7 +210,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 .from
                 .as_ref()
                 .ok_or_else(|| anyhow::anyhow!("--input record needs --from <record>"))?;
-            let rec = record::read(path)?;
+            let rec = super::read_record(path)?;
             rec.validate(Some(n))?;
             let ch = match rec.inputs.as_slice() {
                 [one] => one,
@@ -167,15 +250,30 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         u0: vec![],
         v0: vec![],
     };
+    check::memory(
+        check::integration_bytes(n, model.contacts.len(), a.substeps, samples),
+        &format!("{samples} samples of {n} DOFs at {} sub-steps", a.substeps),
+    )?;
     let t = std::time::Instant::now();
     let (rec, sim) = simulate_record(&model, &spec)?;
     let elapsed = t.elapsed();
-    record::write(&rec, &a.output)?;
+    rec.validate(None)?;
+    let write_rec = |p: &std::path::Path| -> anyhow::Result<()> {
+        match fmt {
+            record::Format::Csv => record::csvio::write(&rec, p)?,
+            _ => record::hdf5io::write(&rec, p)?,
+        }
+        Ok(())
+    };
+    let write_truth =
+        |p: &std::path::Path| -> anyhow::Result<()> { Ok(record::csvio::write_truth(&rec, p)?) };
     let mut written = vec![a.output.display().to_string()];
     if fmt == record::Format::Csv {
         let tpath = super::with_suffix(&a.output, "-truth");
-        tacit::io::write_atomic(&tpath, |tmp| record::csvio::write_truth(&rec, tmp))?;
+        super::output::write_files(&[(&a.output, &write_rec), (&tpath, &write_truth)])?;
         written.push(tpath.display().to_string());
+    } else {
+        super::output::write_files(&[(&a.output, &write_rec)])?;
     }
     let active = sim.fint.column_iter().filter(|c| c.amax() > 0.0).count();
     eprintln!(
@@ -187,6 +285,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         elapsed.as_secs_f64() * 1e3,
         100.0 * active as f64 / sim.len() as f64
     );
-    println!("wrote {}", written.join(", "));
+    outln!("wrote {}", written.join(", "));
     Ok(())
 }

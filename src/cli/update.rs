@@ -1,6 +1,8 @@
 //! `tacit update`: time-domain model updating (GLS or PCD) of a model
 //! against a record.
 
+use super::check;
+use super::out::outln;
 use std::path::PathBuf;
 use tacit::integrate::SimSettings;
 use tacit::model::Model;
@@ -33,9 +35,11 @@ pub struct Args {
     /// Record with the measured channels (and the force, if any).
     #[arg(long)]
     record: PathBuf,
-    /// Free parameters: spring labels (k3), ranges (k1..k4), m<i>, zeta,
-    /// gap<i>, kc<i>, friction<i>, cubic<i> or cubic.
-    #[arg(long)]
+    /// Free parameters, comma-separated: spring labels as in the model
+    /// file (k3) or ranges (k1..k4), m<i> (mass of DOF i), zeta, and the
+    /// elements' gap<i>, kc<i>, friction<i>, cubic<i> or cubic, where i
+    /// counts the model file's elements of that kind from 1.
+    #[arg(long, value_name = "PARAMS")]
     free: String,
     /// Metric: generalized least squares or principal components.
     #[arg(long, value_enum, default_value = "gls")]
@@ -43,26 +47,29 @@ pub struct Args {
     /// Measured quantities to fit: disp, vel, accel (comma-separated).
     #[arg(long, default_value = "disp")]
     data: String,
-    /// Only these measured DOFs (default: every channel of the kinds).
-    #[arg(long)]
+    /// Only these measured DOFs, numbered from 1 (default: every channel
+    /// of the kinds).
+    #[arg(long, value_name = "DOFS")]
     dofs: Option<super::DofList>,
     /// Model order: full, or reduced to the measured DOFs.
     #[arg(long, value_enum, default_value = "none")]
     reduce: ReduceArg,
-    /// Optimizer.
-    #[arg(long, value_enum, default_value = "lm")]
+    /// Optimizer: lm (Levenberg–Marquardt), gn (Gauss–Newton), bfgs or
+    /// simplex (Nelder–Mead).
+    #[arg(long, value_enum, default_value = "lm", hide_possible_values = true)]
     optimizer: Optimizer,
-    /// Jacobian: forward sensitivities of the integrator (one simulation
-    /// per segment; full-order models, reduced ones fall back to fd) or
-    /// centered finite differences.
-    #[arg(long, value_enum, default_value = "sens")]
+    /// Jacobian: sens (forward sensitivities of the integrator, one
+    /// simulation per segment; reduced models fall back to fd) or fd
+    /// (centered finite differences).
+    #[arg(long, value_enum, default_value = "sens", hide_possible_values = true)]
     jacobian: JacobianMethod,
-    /// Weight α of the minimum-change term.
+    /// Weight α >= 0 of the minimum-change term.
     #[arg(long, default_value_t = 0.0)]
     alpha: f64,
-    /// Multiple shooting: segments of this many samples, started from the
-    /// record's true states (simulated records only). Default: one segment.
-    #[arg(long)]
+    /// Multiple shooting: segments of this many samples (>= 2), started
+    /// from the record's true states (simulated records only). Default:
+    /// one segment.
+    #[arg(long, value_name = "SAMPLES")]
     segment: Option<usize>,
     /// Initial displacement of every DOF, m (comma-separated); default: the
     /// record's true state at sample 0 if it has one, else zero.
@@ -71,21 +78,56 @@ pub struct Args {
     /// Initial velocity of every DOF, m/s (as --u0).
     #[arg(long, allow_hyphen_values = true)]
     v0: Option<String>,
-    /// Integration sub-steps per sample.
-    #[arg(long, default_value_t = 10)]
+    /// Integration sub-steps per sample, 1 to 1000.
+    #[arg(long, default_value_t = 10, value_name = "N")]
     substeps: usize,
-    /// Iteration limit of the optimizer.
-    #[arg(long)]
+    /// Iteration limit of the optimizer, 1 to 100000.
+    #[arg(long, value_name = "N")]
     max_iterations: Option<usize>,
-    /// Output directory (created; summary.json, report.md, figures).
+    /// Output directory (created with its parents, written whole at the
+    /// end: summary.json, report.md, figures).
     #[arg(short, long)]
     output: PathBuf,
+    /// Replace an output directory that already holds tacit output.
+    #[arg(long)]
+    force: bool,
+}
+
+/// Check the numeric options that need no record.
+fn validate(a: &Args) -> anyhow::Result<()> {
+    check::substeps(a.substeps)?;
+    check::in_range(
+        "--alpha",
+        a.alpha,
+        0.0,
+        1e12,
+        "weight of the minimum-change term",
+    )?;
+    if let Some(m) = a.max_iterations {
+        check::count("--max-iterations", m, 1, 100_000, "optimizer iterations")?;
+    }
+    Ok(())
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    validate(&a)?;
+    let staging = super::output::Staging::begin(&a.output, a.force)?;
     let model = Model::from_file(&a.model)?;
-    let rec = record::read(&a.record)?;
+    let rec = super::read_record(&a.record)?;
     rec.validate(Some(model.ndof()))?;
+    if let Some(len) = a.segment {
+        check::count(
+            "--segment",
+            len,
+            2,
+            rec.len(),
+            "samples per segment, at most the record's length",
+        )?;
+    }
+    check::memory(
+        check::integration_bytes(model.ndof(), model.contacts.len(), a.substeps, rec.len()) * 8.0,
+        "the updating of this record",
+    )?;
     let problem = build_problem(&a, &model, &rec)?;
     problem.validate()?;
     let mut settings = FitSettings::with(a.optimizer);
@@ -97,23 +139,29 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let result = update::fit(&problem, &settings)?;
     let before = update::predict(&problem, &problem.x_start()).ok();
     let after = update::predict(&problem, &result.x).ok();
-    tacit::io::ensure_dir(&a.output)?;
-    tacit::io::write_json(&a.output.join("summary.json"), &result)?;
-    tacit::io::write_string(&a.output.join("report.md"), &report(&a, &problem, &result))?;
-    let t = rec.times();
-    let mut written = vec!["summary.json".to_string(), "report.md".to_string()];
-    for (stem, pred, title) in [
-        ("update_before", &before, "before updating"),
-        ("update_after", &after, "after updating"),
-    ] {
-        if let Some(pred) = pred {
-            let fig = update::figures::responses(&problem, &t, pred, &format!("Responses {title}"));
-            plot::save(&fig, &a.output.join(stem))?;
-            written.push(format!("{stem}.png/.svg"));
+    let dir = staging.dir().to_path_buf();
+    let files = || -> anyhow::Result<Vec<String>> {
+        tacit::io::write_json(&dir.join("summary.json"), &result)?;
+        tacit::io::write_string(&dir.join("report.md"), &report(&a, &problem, &result))?;
+        let t = rec.times();
+        let mut written = vec!["summary.json".to_string(), "report.md".to_string()];
+        for (stem, pred, title) in [
+            ("update_before", &before, "before updating"),
+            ("update_after", &after, "after updating"),
+        ] {
+            if let Some(pred) = pred {
+                let fig =
+                    update::figures::responses(&problem, &t, pred, &format!("Responses {title}"));
+                plot::save(&fig, &dir.join(stem))?;
+                written.push(format!("{stem}.png/.svg"));
+            }
         }
-    }
-    print_summary(&result);
-    println!("wrote {} in {}", written.join(", "), a.output.display());
+        Ok(written)
+    };
+    let written = files().map_err(|e| staging.user_message(e))?;
+    staging.commit()?;
+    print_summary(&result)?;
+    outln!("wrote {} in {}", written.join(", "), a.output.display());
     Ok(())
 }
 
@@ -198,9 +246,9 @@ fn initial_state(
     }
 }
 
-fn print_summary(r: &FitResult) {
+fn print_summary(r: &FitResult) -> anyhow::Result<()> {
     for p in &r.parameters {
-        println!(
+        outln!(
             "{:>10}: {:>12.6e} -> {:>12.6e} ({:+.2} %){}",
             p.name,
             p.nominal,
@@ -209,22 +257,29 @@ fn print_summary(r: &FitResult) {
             if p.at_bound { " at bound" } else { "" }
         );
     }
-    println!(
-        "termination: {:?}; {} iterations, {} simulations, {:.2} s",
-        r.termination, r.iterations, r.simulations, r.elapsed_s
+    outln!(
+        "termination: {}; {} iterations, {} simulations, {:.2} s",
+        termination_words(&r.termination),
+        r.iterations,
+        r.simulations,
+        r.elapsed_s
     );
-    println!("jacobian: {}", jacobian_line(r));
+    outln!("jacobian: {}", jacobian_line(r));
     if let Some(id) = &r.identifiability {
-        println!("identifiability: {}", id.verdict);
+        outln!("identifiability: {}", id.verdict);
     }
+    Ok(())
 }
 
 /// Method, counts and time of the Jacobians, and why the method differs
 /// from the requested one.
 fn jacobian_line(r: &FitResult) -> String {
     let mut s = format!(
-        "{:?}, {} Jacobians ({} simulations with sensitivities), {:.2} s",
-        r.jacobian, r.jacobians, r.sensitivity_simulations, r.jacobian_s
+        "{}, {} Jacobians ({} simulations with sensitivities), {:.2} s",
+        jacobian_words(r.jacobian),
+        r.jacobians,
+        r.sensitivity_simulations,
+        r.jacobian_s
     );
     if let Some(note) = &r.jacobian_note {
         s.push_str(&format!(" ({note})"));
@@ -264,8 +319,9 @@ fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
         ));
     }
     s.push_str(&format!(
-        "\nTermination: {:?}. Iterations {}, cost evaluations {}, simulations {}, failed trials {}, {:.2} s.\n\n",
-        r.termination, r.iterations, r.evaluations, r.simulations, r.failed_trials, r.elapsed_s
+        "\nTermination: {}. Iterations {}, cost evaluations {}, simulations {}, failed trials {}, {:.2} s.\n\n",
+        termination_words(&r.termination),
+        r.iterations, r.evaluations, r.simulations, r.failed_trials, r.elapsed_s
     ));
     s.push_str(&format!("Jacobian: {}.\n\n", jacobian_line(r)));
     s.push_str("| channel | error before | error after |\n|---|---|---|\n");
@@ -300,4 +356,26 @@ fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
     }
     s.push_str("\nFigures: update_before.png, update_after.png (test solid, model dashed).\n");
     s
+}
+
+/// How the optimizer stopped, in words.
+fn termination_words(t: &update::Termination) -> String {
+    use update::Termination as T;
+    match t {
+        T::Converged { criterion } => format!("converged ({criterion} test)"),
+        T::IterationLimit => "stopped at the iteration limit (--max-iterations)".into(),
+        T::EvaluationLimit => "stopped at the limit of cost evaluations".into(),
+        T::Stalled { reason } => format!("stalled: {reason}"),
+        T::StartFailed { failure } => {
+            format!("the model could not be simulated at the start: {failure}")
+        }
+    }
+}
+
+/// The Jacobian method, in words.
+fn jacobian_words(j: JacobianMethod) -> &'static str {
+    match j {
+        JacobianMethod::Sensitivity => "forward sensitivities",
+        JacobianMethod::CentralDifference => "centered finite differences",
+    }
 }

@@ -1,7 +1,7 @@
 //! Simulated modal tests of a model, and identification of their modes:
 //! the test data of the paper's §2–4 built from the LANL 8-DOF testbed.
 //!
-//! The Los Alamos test plan (CONTEXT §2): random force at mass 1,
+//! The Los Alamos test plan (docs/theory.md, facts T1–T2): random force at mass 1,
 //! accelerometers on all 8 masses, records of 8 s and 4096 samples at
 //! 512 Hz, five records per configuration; the masses slide on a rod, so
 //! there is Coulomb friction. [`ModalTest::like_the_paper`] simulates that

@@ -24,6 +24,9 @@ pub struct Meta {
     pub sensors: Vec<usize>,
     /// tacit version.
     pub tacit_version: String,
+    /// Warnings of the record checks (units, dead, clipped or spiky
+    /// channels, offsets, drift), each naming the file and the channel.
+    pub warnings: Vec<String>,
 }
 
 #[derive(Serialize)]
@@ -65,6 +68,18 @@ pub fn write(
     Ok(out)
 }
 
+/// The record checks' warnings, before the results they may spoil.
+fn record_warnings(s: &mut String, warnings: &[String]) {
+    if warnings.is_empty() {
+        return;
+    }
+    let _ = writeln!(s, "## Warnings about the records\n");
+    for w in warnings {
+        let _ = writeln!(s, "- {w}");
+    }
+    let _ = writeln!(s);
+}
+
 fn pct(x: Option<f64>) -> String {
     x.map_or("failed".into(), |v| format!("{:.2} %", 100.0 * v))
 }
@@ -83,6 +98,7 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
         meta.sensors
     );
     let _ = writeln!(s, "**Result: {}.**\n", d.verdict);
+    record_warnings(&mut s, &meta.warnings);
     let _ = writeln!(s, "## Errors\n");
     let _ = writeln!(
         s,

@@ -9,7 +9,7 @@
 //! subject to the exact sampled Newmark model with the measured input
 //! ([`crate::linear::SampledModel`], force linear between samples in the
 //! dynamics *and* in the output equation). It is stable by construction,
-//! where the sequential window scheme is not (CONTEXT §3 fact 1).
+//! where the sequential window scheme is not (docs/theory.md, fact R1).
 //!
 //! - [`smoother`]: the Riccati sweep (equivalently the Rauch–Tung–Striebel
 //!   smoother on the state `[x; w]`), time linear in N, steady-state gains

@@ -10,7 +10,7 @@
 //!    y_k = C_y x_k + D_y (g_k + B_u w_k). $$
 //!
 //! The force carries the same interpolation in the dynamics and in the
-//! output equation (the remedy of CONTEXT §3 fact 7). The smoother's state
+//! output equation (the remedy of docs/theory.md, fact R7). The smoother's state
 //! is `s_k = [x_k; w_k]`; the "control" of step `k` is `w_{k+1}`:
 //! `s_{k+1} = F s_k + G w_{k+1} + c_k` with `F = [A, B_0 B_u; 0, 0]`,
 //! `G = [B_1 B_u; I]`, `c_k = [B_0 g_k + B_1 g_{k+1}; 0]`.

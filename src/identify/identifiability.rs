@@ -10,7 +10,7 @@
 //!   its right singular vectors above the threshold are the **visible**
 //!   force combinations, the others (the null space) are invisible and are
 //!   set by the regularization alone. With a reduction onto m DOFs the rank
-//!   is at most m: only `Tᵀ f` can be seen (CONTEXT §3 fact 2);
+//!   is at most m: only `Tᵀ f` can be seen (docs/theory.md, fact R2);
 //! - the method's own window operator `H_θ` restricted to the force
 //!   unknowns.
 //!

@@ -7,7 +7,7 @@
 //!
 //! - [`Method::Paper`]: the published sequential scheme ([`paper`]), with
 //!   the closed-loop spectral radius of its recursion computed before
-//!   running and a warning when it is ≥ 1 (CONTEXT §3 fact 1);
+//!   running and a warning when it is ≥ 1 (docs/theory.md, fact R1);
 //! - [`Method::Mhe`] (default): moving-horizon estimation ([`mhe`]), which
 //!   re-estimates each window's start state and stays bounded.
 //!

@@ -21,7 +21,7 @@
 //! `c = [x_s; g_{w−1}]` is linear; the spectral radius of `F`
 //! ([`super::window::OperatorInfo::spectral_radius`]) decides whether
 //! errors (model error, noise, round-off) grow from window to window.
-//! CONTEXT §3 fact 1: with SEREP on DOFs 1, 5, 6 and α ≤ 1 it exceeds 1 and
+//! docs/theory.md, fact R1: with SEREP on DOFs 1, 5, 6 and α ≤ 1 it exceeds 1 and
 //! the estimate diverges over a whole record.
 
 use super::run::Plan;

@@ -1,7 +1,7 @@
 //! The identification problem (record + model + sensors) and the sampled,
 //! possibly reduced, linear system the windows work on.
 //!
-//! With a reduction `u ≈ T u_a` onto the sensor DOFs (CONTEXT §5) the
+//! With a reduction `u ≈ T u_a` onto the sensor DOFs (docs/theory.md, Definitions) the
 //! reduced model is `T^T M T ü_a + T^T C T u̇_a + T^T K T u_a = T^T (f_ext − f)`,
 //! where `f` is the internal force (left-hand-side convention of
 //! [`crate::model`]: `M ü + C u̇ + K u + f = f_ext`). Without reduction

@@ -38,7 +38,7 @@ pub fn read(path: &Path) -> Result<Record> {
     let time = table.column("time").ok_or_else(|| {
         err("no time column: the header must hold `time` and channel columns such as force_1, accel_2".into())
     })?;
-    let (t0, fs) = time_base(time).map_err(err)?;
+    let (t0, fs) = time_base_with(time, table.time_resolution).map_err(err)?;
     let mut rec = Record {
         t0,
         fs,
@@ -126,7 +126,7 @@ pub fn read_truth(path: &Path) -> Result<(Vec<f64>, Truth)> {
         .column("time")
         .ok_or_else(|| err("no time column".into()))?
         .to_vec();
-    time_base(&time).map_err(err)?;
+    time_base_with(&time, table.time_resolution).map_err(err)?;
     let mut by_kind: HashMap<&str, Vec<(usize, Vec<f64>)>> = HashMap::new();
     for (name, data) in table.names.iter().zip(table.cols) {
         if name != "time" {
@@ -206,6 +206,12 @@ fn parse_dof(s: &str) -> Option<usize> {
 /// Check a time column: finite, strictly increasing, at least 2 samples and
 /// on a uniform grid. Returns `(t0, fs)`; errors name the sample.
 pub(crate) fn time_base(t: &[f64]) -> Msg<(f64, f64)> {
+    time_base_with(t, 0.0)
+}
+
+/// [`time_base`] with stamps known only to `resolution` seconds (half a
+/// unit of the last printed decimal).
+pub(crate) fn time_base_with(t: &[f64], resolution: f64) -> Msg<(f64, f64)> {
     check_finite(t, "time")?;
     if t.len() < 2 {
         return Err(format!(
@@ -224,11 +230,19 @@ pub(crate) fn time_base(t: &[f64]) -> Msg<(f64, f64)> {
     }
     let n = t.len();
     let dt = (t[n - 1] - t[0]) / (n - 1) as f64;
+    if resolution > 0.25 * dt {
+        return Err(format!(
+            "time: the stamps are printed to {} s, too coarse for a step of {dt} s (print more decimals)",
+            2.0 * resolution
+        ));
+    }
     for (k, &tk) in t.iter().enumerate() {
         let expected = t[0] + k as f64 * dt;
-        if (tk - expected).abs() > TIME_RTOL * dt + 1e-10 * tk.abs() {
+        // a stamp's own rounding and that of the two ends defining the grid
+        let tol = (TIME_RTOL * dt + 1e-10 * tk.abs()).max(2.0 * resolution);
+        if (tk - expected).abs() > tol {
             return Err(format!(
-                "time: sample {k} is not on a uniform grid: {tk} s, expected {expected} s (mean step {dt} s, tolerance {TIME_RTOL}·step)"
+                "time: sample {k} is not on a uniform grid: {tk} s, expected {expected} s (mean step {dt} s, tolerance {tol:.3e} s)"
             ));
         }
     }
@@ -287,6 +301,34 @@ pub(crate) fn check_truth(t: &Truth, n: usize) -> Msg<()> {
 struct Table {
     names: Vec<String>,
     cols: Vec<Vec<f64>>,
+    /// How finely the time column is known, s ([`time_resolution`]).
+    time_resolution: f64,
+}
+
+/// Decimals of a number's mantissa as printed and its exponent:
+/// `0.001953` → (6, 0), `1.953125e-3` → (6, -3), `12` → (0, 0).
+fn printed_digits(field: &str) -> (usize, i32) {
+    let (mantissa, exp) = match field.find(['e', 'E']) {
+        Some(i) => (&field[..i], field[i + 1..].parse::<i32>().unwrap_or(0)),
+        None => (field, 0),
+    };
+    (mantissa.split_once('.').map_or(0, |(_, f)| f.len()), exp)
+}
+
+/// How finely a time column is known: a column printed with a fixed
+/// count `d > 0` of decimals (as `%.6f` or `%.6e` write it) is known to
+/// half a unit of its last decimal, `0.5·10^(e−d)` at the largest
+/// exponent `e`; a column printed in shortest form (varying counts) or as
+/// integers is taken as exact (0).
+fn time_resolution(digits: &[(usize, i32)]) -> f64 {
+    let Some(&(d, _)) = digits.first() else {
+        return 0.0;
+    };
+    if d == 0 || digits.iter().any(|&(di, _)| di != d) {
+        return 0.0;
+    }
+    let e = digits.iter().map(|&(_, e)| e).max().unwrap_or(0);
+    0.5 * 10f64.powi(e - d as i32)
 }
 
 impl Table {
@@ -320,6 +362,8 @@ fn read_table(path: &Path, check_name: impl Fn(&str) -> Msg<()>) -> Result<Table
     let mut cols: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
     let mut row = csv::StringRecord::new();
     let mut k = 0usize;
+    let time_col = names.iter().position(|n| n == "time");
+    let mut time_digits = vec![];
     loop {
         match rdr.read_record(&mut row) {
             Ok(true) => {}
@@ -337,12 +381,19 @@ fn read_table(path: &Path, check_name: impl Fn(&str) -> Msg<()>) -> Result<Table
         for ((field, col), name) in row.iter().zip(&mut cols).zip(&names) {
             col.push(parse_value(field, name, k, line).map_err(err)?);
         }
+        if let Some(field) = time_col.and_then(|i| row.get(i)) {
+            time_digits.push(printed_digits(field));
+        }
         k += 1;
     }
     match k {
         0 => Err(err("no data rows (header only)".into())),
         1 => Err(err("only 1 sample: at least 2 are needed".into())),
-        _ => Ok(Table { names, cols }),
+        _ => Ok(Table {
+            names,
+            cols,
+            time_resolution: time_resolution(&time_digits),
+        }),
     }
 }
 
@@ -406,15 +457,6 @@ fn write_table(
 mod tests {
     use super::*;
 
-    const REF: &str = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/data/reference/lanl8dof-contact-ref.csv"
-    );
-    const REF_TRUTH: &str = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/data/reference/lanl8dof-contact-ref-truth.csv"
-    );
-
     fn sample_record() -> Record {
         let n = 50;
         let f: Vec<f64> = (0..n).map(|k| (k as f64 * 0.37).sin() * 3.1).collect();
@@ -475,7 +517,10 @@ mod tests {
 
     #[test]
     fn reads_reference_record() {
-        let rec = read(Path::new(REF)).unwrap();
+        let Some(path) = crate::record::shared_data("reference/lanl8dof-contact-ref.csv") else {
+            return;
+        };
+        let rec = read(&path).unwrap();
         assert_eq!(rec.len(), 4096);
         assert!((rec.fs - 512.0).abs() < 1e-9, "fs = {}", rec.fs);
         assert_eq!(rec.t0, 0.0);
@@ -495,7 +540,11 @@ mod tests {
 
     #[test]
     fn reads_reference_truth() {
-        let (time, truth) = read_truth(Path::new(REF_TRUTH)).unwrap();
+        let Some(path) = crate::record::shared_data("reference/lanl8dof-contact-ref-truth.csv")
+        else {
+            return;
+        };
+        let (time, truth) = read_truth(&path).unwrap();
         assert_eq!(time.len(), 4096);
         assert!((time[1] - 1.953125e-3).abs() < 1e-15);
         assert_eq!(truth.u.len(), 8);
@@ -631,5 +680,43 @@ mod tests {
         let (t0, fs) = time_base(&t).unwrap();
         assert_eq!(t0, 0.0);
         assert!((fs - 1000.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn six_decimal_stamps_are_accepted_and_coarser_ones_named() {
+        // 8 s at 512 Hz printed with %.6f (rounding up to 5e-7 s = 2.6e-4 step)
+        let mut text = String::from("time,force_1\n");
+        for k in 0..4096 {
+            text.push_str(&format!("{:.6},1\n", k as f64 / 512.0));
+        }
+        let rec = read_text(&text).unwrap();
+        assert!((rec.fs - 512.0).abs() < 1e-3, "{}", rec.fs);
+        // a real jump of 2e-5 s is still found
+        let mut bad = String::from("time,force_1\n");
+        for k in 0..64 {
+            let t = k as f64 / 512.0 + if k == 40 { 2e-5 } else { 0.0 };
+            bad.push_str(&format!("{t:.6},1\n"));
+        }
+        let e = err_text(&bad);
+        assert!(
+            e.contains("time: sample 40 is not on a uniform grid"),
+            "{e}"
+        );
+        // two decimals cannot resolve a 512 Hz step
+        let e = err_text("time,force_1\n0.00,1\n0.00,1\n");
+        assert!(e.contains("not increasing"), "{e}");
+        let mut coarse = String::from("time,force_1\n");
+        for k in 0..10 {
+            coarse.push_str(&format!("{:.2},1\n", k as f64 / 64.0));
+        }
+        let e = err_text(&coarse);
+        assert!(e.contains("too coarse"), "{e}");
+        let r = |fields: &[&str]| {
+            time_resolution(&fields.iter().map(|f| printed_digits(f)).collect::<Vec<_>>())
+        };
+        assert!((r(&["0.000000", "0.001953"]) / 5e-7 - 1.0).abs() < 1e-12);
+        assert!((r(&["1.953125e-3", "3.906250e-3"]) / 5e-10 - 1.0).abs() < 1e-12);
+        assert_eq!(r(&["0", "0.1", "0.25"]), 0.0, "shortest form is exact");
+        assert_eq!(r(&["0", "1", "2"]), 0.0, "integers are exact");
     }
 }

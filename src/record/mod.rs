@@ -11,9 +11,11 @@ use crate::error::{Result, TacitError};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+pub mod checks;
 pub mod csvio;
 pub mod hdf5io;
 pub mod matio;
+pub mod units;
 
 /// What a channel measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
@@ -307,20 +309,27 @@ pub struct MatMapping {
     pub remove_mean: bool,
 }
 
-/// Read a record (HDF5 or CSV; `.mat` needs [`read_mat`]) and validate it.
+/// Read a record (HDF5 or CSV; `.mat` needs [`read_mat`]), convert its
+/// channels to SI by their `unit` and validate it.
 pub fn read(path: &Path) -> Result<Record> {
-    let rec = match Format::from_path(path)? {
+    read_with_conversions(path).map(|(rec, _)| rec)
+}
+
+/// [`read`], also returning the unit conversions made.
+pub fn read_with_conversions(path: &Path) -> Result<(Record, Vec<units::Conversion>)> {
+    let mut rec = match Format::from_path(path)? {
         Format::Hdf5 => hdf5io::read(path)?,
         Format::Csv => csvio::read(path)?,
         Format::Mat => {
             return Err(TacitError::record(
                 path,
-                "a .mat file needs a channel mapping and a sample rate (--mat-map, --fs)",
+                "a .mat file needs a channel mapping and a sample rate (--mat-map, --mat-fs)",
             ))
         }
     };
+    let conversions = units::to_si(&mut rec)?;
     rec.validate(None)?;
-    Ok(rec)
+    Ok((rec, conversions))
 }
 
 /// Read a MATLAB v5 record with a mapping.
@@ -340,6 +349,32 @@ pub fn write(rec: &Record, path: &Path) -> Result<()> {
         Format::Csv => csvio::write(rec, tmp),
         Format::Mat => Err(TacitError::record(path, "writing .mat is not supported")),
     })
+}
+
+/// A file of the shared data set that sits beside a checkout
+/// (`<checkout>/../shared/data/<rel>`), for tests that read measured or
+/// reference data the repository does not ship. `None`, with a message
+/// on stderr, when it is absent; a panic instead when the environment
+/// variable `TACIT_REQUIRE_SHARED` is `1` (CI sets it).
+#[doc(hidden)]
+pub fn shared_data(rel: &str) -> Option<PathBuf> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(rel);
+    if path.exists() {
+        return Some(path);
+    }
+    if std::env::var("TACIT_REQUIRE_SHARED").as_deref() == Ok("1") {
+        panic!(
+            "{} is absent and TACIT_REQUIRE_SHARED=1: the shared data set must sit beside the checkout",
+            path.display()
+        );
+    }
+    eprintln!(
+        "skipped: {} is absent (the shared data set beside the checkout; set TACIT_REQUIRE_SHARED=1 to make this a failure)",
+        path.display()
+    );
+    None
 }
 
 /// Path of the record for messages.

@@ -1,5 +1,5 @@
 //! Model reduction onto a set of kept DOFs (the sensors): `u ≈ T u_a`,
-//! `M_a = Tᵀ M T`, `K_a = Tᵀ K T`, `f_a = Tᵀ f` (CONTEXT §5).
+//! `M_a = Tᵀ M T`, `K_a = Tᵀ K T`, `f_a = Tᵀ f` (docs/theory.md, Definitions).
 //!
 //! - SEREP (O'Callahan 1989): `T = Φ Φ_a⁺` with Φ the lowest `m` modes
 //!   (m = number of kept DOFs) and Φ_a its rows at the kept DOFs; the

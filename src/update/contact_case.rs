@@ -1,5 +1,5 @@
-//! The multiple-shooting check of the updating issue (CONTEXT §3, facts
-//! 4–6): the gap and the stiffness of the 5→6 bumper of
+//! The multiple-shooting check of the updating issue (docs/theory.md, facts
+//! R4–R6): the gap and the stiffness of the 5→6 bumper of
 //! `data/lanl8dof-contact.toml` (the model file holds the truth) from a
 //! 4096-sample record with 1 % noise — accelerations at DOFs 1, 5, 6, seed
 //! 7, simulated at [`SUBSTEPS`] sub-steps — fitted on the whole record

@@ -4,7 +4,7 @@
 //! from its own start state `(u0, v0)` at sample `start` (full-order DOFs).
 //! One segment over the whole record is the classical open-loop fit; many
 //! short segments keep a chaotic or impacting response close to the test
-//! (CONTEXT §3, fact 4): the simulation error of each segment then measures
+//! (docs/theory.md, fact R4): the simulation error of each segment then measures
 //! the model, not the accumulated divergence of two trajectories.
 
 use crate::error::{Result, TacitError};
