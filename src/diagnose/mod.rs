@@ -181,6 +181,7 @@ pub fn auto_substeps(
             w2 = w2.max(3.0 * c.k3.abs() * dmax * dmax * s);
         }
     }
+    w2 = w2.max(effects::stiffest_added(model, states));
     let need = (w2.sqrt() / (omega_h * fs)).ceil() as usize;
     need.clamp(base.max(1), max.max(base))
 }
@@ -1373,7 +1374,10 @@ fn companion_gain(
     for (xi, p) in x.iter_mut().zip(&problem.parameters).rev().take(extra) {
         // a contact is switched off by its stiffness; its gap stays where
         // the trace put it
-        if !matches!(p.target, crate::update::Target::ContactGap(_)) {
+        if !matches!(
+            p.target,
+            crate::update::Target::ContactGap(_) | crate::update::Target::ClearanceGap(_)
+        ) {
             *xi = p.to_x(zero);
         }
     }

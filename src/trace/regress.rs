@@ -541,7 +541,7 @@ fn same_effect(a: &Candidate, b: &Candidate) -> bool {
 
 /// Index of the strength among an effect's parameters.
 fn strength_index(kind: EffectKind) -> usize {
-    usize::from(kind == EffectKind::Contact)
+    usize::from(kind.has_gap())
 }
 
 fn strength(e: &RankedEffect) -> f64 {
@@ -557,10 +557,13 @@ fn set_strength(e: &mut RankedEffect, th: f64, se: f64) {
 /// Name of the strength parameter in reports.
 pub fn strength_name(kind: EffectKind) -> &'static str {
     match kind {
-        EffectKind::Contact | EffectKind::GroundSpring => "stiffness",
-        EffectKind::Friction => "level",
+        EffectKind::Contact | EffectKind::GroundSpring | EffectKind::Clearance => "stiffness",
+        EffectKind::Friction | EffectKind::RelativeFriction => "level",
         EffectKind::Cubic => "k3",
         EffectKind::Stiffness | EffectKind::Damping => "delta",
+        EffectKind::Quadratic => "k2",
+        EffectKind::QuadraticDamping => "c2",
+        EffectKind::CubicDamping => "c3",
     }
 }
 
@@ -568,7 +571,13 @@ pub fn strength_name(kind: EffectKind) -> &'static str {
 fn positive_only(kind: EffectKind) -> bool {
     matches!(
         kind,
-        EffectKind::Contact | EffectKind::Friction | EffectKind::GroundSpring
+        EffectKind::Contact
+            | EffectKind::Friction
+            | EffectKind::GroundSpring
+            | EffectKind::Clearance
+            | EffectKind::RelativeFriction
+            | EffectKind::QuadraticDamping
+            | EffectKind::CubicDamping
     )
 }
 
@@ -623,10 +632,7 @@ fn column(
     let y = match cand.direction(sm.n) {
         Some(dir) => {
             let phi: Vec<f64> = match (cand.kind, node_deltas) {
-                (EffectKind::Contact, Some(d)) => {
-                    let g = cand.gap.unwrap_or(0.0);
-                    d.iter().map(|x| -(x - g).max(0.0)).collect()
-                }
+                (k, Some(d)) if k.has_gap() => d.iter().map(|&x| -cand.gap_law(x)).collect(),
                 _ => cand.shape(hires, sm.n).iter().map(|x| -x).collect(),
             };
             node_response(ctx, NodeForce::Along(&dir, &phi))
@@ -681,7 +687,8 @@ fn evaluate(
 }
 
 /// Scan the gap of a contact candidate (coarse grid over the upper half of
-/// the relative displacement, then golden-section refinement); returns the
+/// the relative displacement — of its magnitude for a clearance — then
+/// golden-section refinement); returns the
 /// best candidate, its evaluation and a standard error of the gap from the
 /// curvature of the residual.
 fn scan_gap(
@@ -692,7 +699,11 @@ fn scan_gap(
     sims: &mut usize,
 ) -> Option<(Candidate, Eval, f64)> {
     let states = ctx.input.states;
-    let mut sorted: Vec<f64> = (0..states.ncols()).map(|k| cand.delta(states, k)).collect();
+    let two_sided = cand.kind == EffectKind::Clearance;
+    let mut sorted: Vec<f64> = (0..states.ncols())
+        .map(|k| cand.delta(states, k))
+        .map(|d| if two_sided { d.abs() } else { d })
+        .collect();
     sorted.sort_by(f64::total_cmp);
     let quant = |f: f64| sorted[((sorted.len() - 1) as f64 * f) as usize];
     let (lo, hi) = (quant(0.5).max(0.0), quant(0.999));
@@ -776,7 +787,7 @@ fn score(
     r: &DVector<f64>,
     sims: &mut usize,
 ) -> Option<Scored> {
-    let (cand, ev, gap_se) = if cand.kind == EffectKind::Contact {
+    let (cand, ev, gap_se) = if cand.kind.has_gap() {
         let (c, e, se) = scan_gap(cand, ctx, sel, r, sims)?;
         (c, e, Some(se))
     } else {
