@@ -154,7 +154,10 @@ fn add_element(
                 dofs,
                 k2: val("k2"),
             });
-            (vec![Target::QuadraticK2(model.quadratics.len() - 1)], vec!["k2"])
+            (
+                vec![Target::QuadraticK2(model.quadratics.len() - 1)],
+                vec!["k2"],
+            )
         }
         EffectKind::QuadraticDamping => {
             model.quadratic_dampers.push(QuadraticDamper {
@@ -169,7 +172,10 @@ fn add_element(
                 dofs,
                 c3: val("c3"),
             });
-            (vec![Target::DamperC3(model.cubic_dampers.len() - 1)], vec!["c3"])
+            (
+                vec![Target::DamperC3(model.cubic_dampers.len() - 1)],
+                vec!["c3"],
+            )
         }
         EffectKind::Clearance => {
             model.clearances.push(Clearance {
@@ -220,6 +226,29 @@ pub fn stiffest_added(model: &Model, states: Option<&nalgebra::DMatrix<f64>>) ->
         }
     }
     w2
+}
+
+/// The clearance on the pair of a fitted cubic spring `best`, at its
+/// traced values, when the trace ranked it and it lowers the information
+/// criterion (the trace puts the cubic first when both pay,
+/// `crate::trace`'s `smooth_first`; the loop fits this one when the
+/// cubic's fit leaves the error far from the noise).
+pub fn clearance_alternative(
+    best: &RankedEffect,
+    ranking: &[RankedEffect],
+) -> Option<RankedEffect> {
+    if best.candidate.dofs.len() != 2 {
+        return None;
+    }
+    let pair = crate::trace::regress::sorted_pair(&best.candidate);
+    ranking
+        .iter()
+        .find(|e| {
+            e.candidate.kind == EffectKind::Clearance
+                && crate::trace::regress::sorted_pair(&e.candidate) == pair
+                && e.bic_change < 0.0
+        })
+        .cloned()
 }
 
 /// Free parameters of an added effect for the time-domain fit, at the

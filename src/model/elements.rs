@@ -295,7 +295,10 @@ pub fn compiled_index(model: &super::Model, list: ElementList, index: usize) -> 
         (ElementList::Quadratic, model.quadratics.len()),
         (ElementList::QuadraticDamper, model.quadratic_dampers.len()),
         (ElementList::CubicDamper, model.cubic_dampers.len()),
-        (ElementList::RelativeFriction, model.relative_frictions.len()),
+        (
+            ElementList::RelativeFriction,
+            model.relative_frictions.len(),
+        ),
         (ElementList::Clearance, 2 * model.clearances.len()),
     ];
     let before: usize = sizes
@@ -755,15 +758,15 @@ mod tests {
                 (Element::QuadraticDamper { i, j, c2 }, _) => {
                     Element::QuadraticDamper { i, j, c2: c2 + dq }
                 }
-                (Element::CubicDamper { i, j, c3 }, _) => Element::CubicDamper { i, j, c3: c3 + dq },
-                (Element::RelativeFriction { i, j, level, vreg }, _) => {
-                    Element::RelativeFriction {
-                        i,
-                        j,
-                        level: level + dq,
-                        vreg,
-                    }
+                (Element::CubicDamper { i, j, c3 }, _) => {
+                    Element::CubicDamper { i, j, c3: c3 + dq }
                 }
+                (Element::RelativeFriction { i, j, level, vreg }, _) => Element::RelativeFriction {
+                    i,
+                    j,
+                    level: level + dq,
+                    vreg,
+                },
             }
         };
         let cases = [

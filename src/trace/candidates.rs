@@ -81,6 +81,27 @@ impl EffectKind {
         .find(|k| k.name() == name)
     }
 
+    /// The best paying candidate acting along the located force
+    /// directions is moved ahead of better-scoring ones ([`super::trace`])
+    /// when it is of this kind: the contact, friction, cubic, stiffness,
+    /// ground-spring and damping kinds. A quadratic spring, damper,
+    /// clearance or friction between DOFs that is the best along them
+    /// stays where its score puts it (and so does the rest): with the
+    /// preference, a friction of 9 mN between DOFs 1 and 2 was taken
+    /// ahead of the 0.5 N friction on every mass, and a quadratic damper
+    /// to ground at 3 ahead of the damper 2–3 it lay on.
+    pub fn preferred_when_located(self) -> bool {
+        matches!(
+            self,
+            EffectKind::Contact
+                | EffectKind::Friction
+                | EffectKind::Cubic
+                | EffectKind::Stiffness
+                | EffectKind::GroundSpring
+                | EffectKind::Damping
+        )
+    }
+
     /// The strength multiplies a law with a gap (contact, clearance): the
     /// gap is scanned and reported first.
     pub fn has_gap(self) -> bool {

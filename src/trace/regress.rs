@@ -463,14 +463,18 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
         let pays =
             |e: &RankedEffect| e.bic_change < 0.0 && e.residual_explained >= settings.min_gain;
         if let Some(dirs) = input.located.filter(|d| d.ncols() > 0) {
+            // the best paying candidate along them; moved first when its
+            // kind takes the preference
             if let Some(i) = scored
                 .iter()
                 .position(|s| pays(&s.effect) && acts_along(&s.effect.candidate, dirs))
+                .filter(|&i| scored[i].effect.candidate.kind.preferred_when_located())
             {
                 let s = scored.remove(i);
                 scored.insert(0, s);
             }
         }
+        smooth_first(&mut scored, &pays);
         if round == 0 {
             ranking = scored.iter().map(|s| s.effect.clone()).collect();
         }
@@ -515,6 +519,39 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
         simulations: sims,
         hidden,
     }
+}
+
+/// A clearance ahead of the cubic spring on the same pair gives its place
+/// to the cubic when the cubic pays: both are odd stiffening laws, and on
+/// the linear model's reconstructed states the regression does not tell
+/// them apart (measured: on a clearance record the cubic removed 34.8 %,
+/// the clearance 33.8 %; on a cubic record the clearance came first).
+/// The cubic has one parameter less; the loop fits the clearance when the
+/// cubic's fit leaves the error far from the noise
+/// (`crate::diagnose`'s alternative of a fitted effect).
+fn smooth_first(scored: &mut Vec<Scored>, pays: &dyn Fn(&RankedEffect) -> bool) {
+    let Some(first) = scored.first() else {
+        return;
+    };
+    if first.effect.candidate.kind != EffectKind::Clearance {
+        return;
+    }
+    let pair = sorted_pair(&first.effect.candidate);
+    if let Some(i) = scored.iter().position(|s| {
+        s.effect.candidate.kind == EffectKind::Cubic
+            && sorted_pair(&s.effect.candidate) == pair
+            && pays(&s.effect)
+    }) {
+        let s = scored.remove(i);
+        scored.insert(0, s);
+    }
+}
+
+/// The candidate's DOFs in ascending order.
+pub fn sorted_pair(c: &Candidate) -> Vec<usize> {
+    let mut d = c.dofs.clone();
+    d.sort_unstable();
+    d
 }
 
 /// The candidate's force lies in the span of the columns of `dirs`.

@@ -21,7 +21,15 @@ fn chain(masses: &[f64], springs: &[(&[usize], f64)]) -> Model {
 
 /// Run `model` at `fs` with `substeps` under a constant force `f` (one
 /// value per DOF) for `ns` samples from `(u0, v0)`.
-fn run(model: &Model, fs: f64, substeps: usize, f: &[f64], ns: usize, u0: &[f64], v0: &[f64]) -> Simulation {
+fn run(
+    model: &Model,
+    fs: f64,
+    substeps: usize,
+    f: &[f64],
+    ns: usize,
+    u0: &[f64],
+    v0: &[f64],
+) -> Simulation {
     let settings = SimSettings {
         substeps,
         ..Default::default()
@@ -60,10 +68,7 @@ fn cubic_spring_to_ground_static_deflection_and_energy() {
     // m = 0.5 kg, k = 5e4 N/m, k3 = 2e11 N/m³ to ground at DOF 1
     let (m, k, k3) = (0.5, 5e4, 2e11);
     let mut model = chain(&[m], &[(&[1], k)]);
-    model.cubics = vec![crate::model::Cubic {
-        dofs: vec![1],
-        k3,
-    }];
+    model.cubics = vec![crate::model::Cubic { dofs: vec![1], k3 }];
     // undamped free vibration from 1 mm: E = m v²/2 + k u²/2 + k3 u⁴/4
     let sim = run(&model, 2000.0, 20, &[0.0], 2000, &[1e-3], &[0.0]);
     let energy = |i: usize| {
@@ -71,7 +76,9 @@ fn cubic_spring_to_ground_static_deflection_and_energy() {
         0.5 * m * v * v + 0.5 * k * u * u + 0.25 * k3 * u.powi(4)
     };
     let e0 = energy(0);
-    let drift = (0..sim.len()).map(|i| (energy(i) / e0 - 1.0).abs()).fold(0.0, f64::max);
+    let drift = (0..sim.len())
+        .map(|i| (energy(i) / e0 - 1.0).abs())
+        .fold(0.0, f64::max);
     assert!(drift < 1e-4, "energy drift {drift}");
     // statically loaded (Rayleigh damping to settle): k u + k3 u³ = F
     let u_star: f64 = 1.2e-3;
@@ -91,10 +98,7 @@ fn cubic_spring_to_ground_static_deflection_and_energy() {
 fn quadratic_spring_deflects_asymmetrically_and_conserves_energy() {
     let (m, k, k2) = (0.5, 5e4, 1e7);
     let mut model = chain(&[m], &[(&[1], k)]);
-    model.quadratics = vec![Quadratic {
-        dofs: vec![1],
-        k2,
-    }];
+    model.quadratics = vec![Quadratic { dofs: vec![1], k2 }];
     model.damping = Damping::Rayleigh {
         alpha: 400.0,
         beta: 0.0,
@@ -104,7 +108,10 @@ fn quadratic_spring_deflects_asymmetrically_and_conserves_energy() {
         let f = k * u_star + k2 * u_star * u_star;
         let sim = run(&model, 1000.0, 10, &[f], 1000, &[0.0], &[0.0]);
         let u_end = sim.u[(0, sim.len() - 1)];
-        assert!((u_end / u_star - 1.0).abs() < 1e-6, "{u_end} vs {u_star} under {f} N");
+        assert!(
+            (u_end / u_star - 1.0).abs() < 1e-6,
+            "{u_end} vs {u_star} under {f} N"
+        );
     }
     // undamped: E = m v²/2 + k u²/2 + k2 u³/3 (u stays above −k/k2 = −5 mm)
     model.damping = Damping::None;
@@ -114,7 +121,9 @@ fn quadratic_spring_deflects_asymmetrically_and_conserves_energy() {
         0.5 * m * v * v + 0.5 * k * u * u + k2 * u.powi(3) / 3.0
     };
     let e0 = energy(0);
-    let drift = (0..sim.len()).map(|i| (energy(i) / e0 - 1.0).abs()).fold(0.0, f64::max);
+    let drift = (0..sim.len())
+        .map(|i| (energy(i) / e0 - 1.0).abs())
+        .fold(0.0, f64::max);
     assert!(drift < 1e-4, "energy drift {drift}");
     // the swing is asymmetric: the stiffer side (u > 0) is reached less far
     let u: Vec<f64> = sim.u.row(0).iter().copied().collect();
@@ -128,10 +137,7 @@ fn quadratic_damping_decays_as_one_over_one_plus_a_t() {
     // A(t) = A0 / (1 + a t), a = 4 c2 ω A0 / (3π m)
     let (m, k, c2, a0) = (0.5, 5e4, 2.0, 2e-3);
     let mut model = chain(&[m], &[(&[1], k)]);
-    model.quadratic_dampers = vec![QuadraticDamper {
-        dofs: vec![1],
-        c2,
-    }];
+    model.quadratic_dampers = vec![QuadraticDamper { dofs: vec![1], c2 }];
     let fs = 4000.0;
     let sim = run(&model, fs, 10, &[0.0], 8000, &[a0], &[0.0]);
     let w = (k / m).sqrt();
@@ -153,10 +159,7 @@ fn cubic_damping_decays_as_the_averaged_law() {
     // m ü + k u + c3 u̇³ = 0: 1/A² = 1/A0² + (3 c3 ω² / (4 m)) t
     let (m, k, c3, a0) = (0.5, 5e4, 100.0, 2e-3);
     let mut model = chain(&[m], &[(&[1], k)]);
-    model.cubic_dampers = vec![CubicDamper {
-        dofs: vec![1],
-        c3,
-    }];
+    model.cubic_dampers = vec![CubicDamper { dofs: vec![1], c3 }];
     let fs = 4000.0;
     let sim = run(&model, fs, 10, &[0.0], 8000, &[a0], &[0.0]);
     let w2 = k / m;
@@ -192,7 +195,15 @@ fn dampers_between_two_dofs_act_on_the_relative_velocity() {
         newton_tol: 1e-14,
         ..Default::default()
     };
-    let sim = run_with(&model, 1000.0, settings, &[0.0, 0.0], 1000, &[0.0, 0.0], &[va, vb]);
+    let sim = run_with(
+        &model,
+        1000.0,
+        settings,
+        &[0.0, 0.0],
+        1000,
+        &[0.0, 0.0],
+        &[va, vb],
+    );
     let mu = m1 * m2 / (m1 + m2);
     let nu0 = va - vb;
     for kk in [10, 100, 999] {
@@ -252,7 +263,15 @@ fn clearance_static_force_on_both_sides() {
     };
     let k0: f64 = 4e4;
     for f in [20.0, -20.0, 5.0] {
-        let sim = run(&model, 1000.0, 10, &[f, 0.0], 1500, &[0.0, 0.0], &[0.0, 0.0]);
+        let sim = run(
+            &model,
+            1000.0,
+            10,
+            &[f, 0.0],
+            1500,
+            &[0.0, 0.0],
+            &[0.0, 0.0],
+        );
         let e = sim.len() - 1;
         let (u1, u2) = (sim.u[(0, e)], sim.u[(1, e)]);
         // f_c (1 + 2 k_c/k0) = k_c (|F|/k0 − g), when positive

@@ -458,13 +458,15 @@ fn clearance_model() {
     };
     let sim = case.run(&case.model, &case.u0, &case.v0);
     let beyond = |k: usize| (sim.u[(4, k)] - sim.u[(5, k)]).abs() > 2e-4;
-    let (pos, neg) = (0..sim.len()).filter(|&k| beyond(k)).fold((0, 0), |(p, n), k| {
-        if sim.u[(4, k)] > sim.u[(5, k)] {
-            (p + 1, n)
-        } else {
-            (p, n + 1)
-        }
-    });
+    let (pos, neg) = (0..sim.len())
+        .filter(|&k| beyond(k))
+        .fold((0, 0), |(p, n), k| {
+            if sim.u[(4, k)] > sim.u[(5, k)] {
+                (p + 1, n)
+            } else {
+                (p, n + 1)
+            }
+        });
     assert!(pos > 3 && neg > 3, "both sides must close: {pos} {neg}");
     let params = [P::ClGap(0), P::ClKc(0)];
     let w = case.worst(&some_state_directions(), &params, 1e-6);
