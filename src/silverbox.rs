@@ -164,6 +164,11 @@ fn one_dof(m: f64, d: f64, a: f64) -> Model {
         contacts: vec![],
         frictions: vec![],
         cubics: vec![],
+        quadratics: vec![],
+        quadratic_dampers: vec![],
+        cubic_dampers: vec![],
+        clearances: vec![],
+        relative_frictions: vec![],
     }
 }
 

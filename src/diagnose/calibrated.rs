@@ -236,7 +236,11 @@ fn sim_of(d: &Diagnosis) -> SimSettings {
 
 /// The free parameters of the refinement: the linear ones the calibration
 /// opens and every nonlinear element's.
-fn refinement_parameters(model: &Model, cal: &CalibrationSettings) -> Result<Vec<Parameter>> {
+fn refinement_parameters(
+    model: &Model,
+    added: &[super::effects::AddedEffect],
+    cal: &CalibrationSettings,
+) -> Result<Vec<Parameter>> {
     let mut out = vec![];
     for p in params::select(model, &cal.freedom) {
         let (target, lo, hi) = match p {
@@ -250,18 +254,15 @@ fn refinement_parameters(model: &Model, cal: &CalibrationSettings) -> Result<Vec
             out.push(Parameter::relative(model, target)?.with_relative_bounds(lo, hi));
         }
     }
-    let rel = |t: Target, lo: f64, hi: f64| -> Result<Parameter> {
-        Ok(Parameter::relative(model, t)?.with_relative_bounds(lo, hi))
-    };
-    for i in 0..model.contacts.len() {
-        out.push(rel(Target::ContactGap(i), -0.8, 2.0)?);
-        out.push(rel(Target::ContactStiffness(i), -0.98, 50.0)?);
-    }
-    for i in 0..model.frictions.len() {
-        out.push(rel(Target::FrictionLevel(i), -0.99, 10.0)?);
-    }
-    for i in 0..model.cubics.len() {
-        out.push(rel(Target::CubicK3(i), -0.95, 10.0)?);
+    // the effects' own parameters with their bounds; a stiffness or
+    // damping change is already a linear parameter
+    for e in added {
+        for p in effects::parameters(model, e)? {
+            let linear = matches!(p.target, Target::SpringStiffness(_) | Target::DampingRatio);
+            if !linear && !out.iter().any(|q| q.target == p.target) {
+                out.push(p);
+            }
+        }
     }
     Ok(out)
 }
@@ -311,7 +312,7 @@ fn refine(
     let cmp = &d.prepared.comparison;
     let start = segs.map_or_else(|| spread(&cmp.segments, cs.refine_segments), |s| s.to_vec());
     let mut problem = cmp.problem(&model, start, sim);
-    problem.parameters = refinement_parameters(&model, cal)?;
+    problem.parameters = refinement_parameters(&model, &d.added, cal)?;
     let x0 = vec![0.0; problem.parameters.len()];
     let fit = crate::update::FitSettings {
         max_iterations: cs.refine_iterations,
@@ -346,7 +347,7 @@ fn refine(
     let mut at = problem.clone();
     at.model = refined.clone();
     at.segments.clone_from(&jf.segments);
-    at.parameters = refinement_parameters(&refined, cal)?;
+    at.parameters = refinement_parameters(&refined, &d.added, cal)?;
     let std = joint::std_errors(&at, &vec![0.0; at.parameters.len()], level)
         .map(|v| v.into_iter().map(|s| s.is_finite().then_some(s)).collect())
         .unwrap_or_else(|| vec![None; at.parameters.len()]);

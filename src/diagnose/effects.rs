@@ -1,6 +1,9 @@
 //! Turning a traced candidate into a model element and free parameters.
 
-use crate::model::{Contact, Cubic, Damping, Friction, Model, Spring};
+use crate::model::{
+    Clearance, Contact, Cubic, CubicDamper, Damping, Friction, Model, Quadratic, QuadraticDamper,
+    RelativeFriction, Spring,
+};
 use crate::trace::{Candidate, EffectKind, RankedEffect};
 use crate::update::param::{Parameter, Target};
 use crate::Result;
@@ -16,7 +19,8 @@ pub struct AddedEffect {
     /// Parameter targets in the model, in report order.
     #[serde(skip)]
     pub targets: Vec<Target>,
-    /// Parameter names in the report (`gap`, `stiffness`, `level`, `k3`, `delta`).
+    /// Parameter names in the report (`gap`, `stiffness`, `level`, `k3`,
+    /// `k2`, `c2`, `c3`, `delta`).
     pub names: Vec<String>,
     /// Regression estimates from the trace step (start of the fit).
     pub traced: Vec<f64>,
@@ -104,6 +108,11 @@ pub fn add(model: &mut Model, r: &RankedEffect) -> AddedEffect {
                 0.0,
             )
         }
+        EffectKind::Quadratic
+        | EffectKind::QuadraticDamping
+        | EffectKind::CubicDamping
+        | EffectKind::Clearance
+        | EffectKind::RelativeFriction => add_element(model, c, &val),
         EffectKind::Damping => {
             let z0 = match &model.damping {
                 Damping::Modal { ratio: Some(z), .. } => *z,
@@ -130,6 +139,118 @@ pub fn add(model: &mut Model, r: &RankedEffect) -> AddedEffect {
     }
 }
 
+/// Add the element of a quadratic spring, nonlinear damper, clearance or
+/// friction between two DOFs at the traced values `val(name)`; its
+/// targets, parameter names, traced values and nominal (0).
+fn add_element(
+    model: &mut Model,
+    c: &Candidate,
+    val: &dyn Fn(&str) -> f64,
+) -> (Vec<Target>, Vec<&'static str>, Vec<f64>, f64) {
+    let dofs: Vec<usize> = c.dofs.iter().map(|&d| d + 1).collect();
+    let (targets, names) = match c.kind {
+        EffectKind::Quadratic => {
+            model.quadratics.push(Quadratic {
+                dofs,
+                k2: val("k2"),
+            });
+            (
+                vec![Target::QuadraticK2(model.quadratics.len() - 1)],
+                vec!["k2"],
+            )
+        }
+        EffectKind::QuadraticDamping => {
+            model.quadratic_dampers.push(QuadraticDamper {
+                dofs,
+                c2: val("c2"),
+            });
+            let i = model.quadratic_dampers.len() - 1;
+            (vec![Target::DamperC2(i)], vec!["c2"])
+        }
+        EffectKind::CubicDamping => {
+            model.cubic_dampers.push(CubicDamper {
+                dofs,
+                c3: val("c3"),
+            });
+            (
+                vec![Target::DamperC3(model.cubic_dampers.len() - 1)],
+                vec!["c3"],
+            )
+        }
+        EffectKind::Clearance => {
+            model.clearances.push(Clearance {
+                dofs,
+                gap: val("gap").max(0.0),
+                stiffness: val("stiffness"),
+            });
+            let i = model.clearances.len() - 1;
+            (
+                vec![Target::ClearanceGap(i), Target::ClearanceStiffness(i)],
+                vec!["gap", "stiffness"],
+            )
+        }
+        _ => {
+            model.relative_frictions.push(RelativeFriction {
+                dofs,
+                level: val("level"),
+                velocity: c.vreg,
+            });
+            let i = model.relative_frictions.len() - 1;
+            (vec![Target::RelativeFrictionLevel(i)], vec!["level"])
+        }
+    };
+    let traced = names.iter().map(|n| val(n)).collect();
+    (targets, names, traced, 0.0)
+}
+
+/// The largest `k/m` of the clearances (their penalty stiffness) and, on
+/// the reconstructed `states` (2n × N) when given, of the quadratic
+/// springs (their tangent `2 |k_2| δ_max`), with `1/m` summed over the
+/// element's DOFs: the squared frequency the sub-steps must resolve
+/// ([`super::auto_substeps`]).
+pub fn stiffest_added(model: &Model, states: Option<&nalgebra::DMatrix<f64>>) -> f64 {
+    let inv_m = |dofs: &[usize]| -> f64 { dofs.iter().map(|&d| 1.0 / model.masses[d - 1]).sum() };
+    let mut w2: f64 = 0.0;
+    for c in &model.clearances {
+        w2 = w2.max(c.stiffness * inv_m(&c.dofs));
+    }
+    if let Some(x) = states {
+        for q in &model.quadratics {
+            let rel = |k: usize| match q.dofs.as_slice() {
+                [i, j] => x[(i - 1, k)] - x[(j - 1, k)],
+                [i] => x[(i - 1, k)],
+                _ => 0.0,
+            };
+            let dmax = (0..x.ncols()).map(|k| rel(k).abs()).fold(0.0, f64::max);
+            w2 = w2.max(2.0 * q.k2.abs() * dmax * inv_m(&q.dofs));
+        }
+    }
+    w2
+}
+
+/// The clearance on the pair of a fitted cubic spring `best`, at its
+/// traced values, when the trace ranked it and it lowers the information
+/// criterion (the trace puts the cubic first when both pay,
+/// `crate::trace`'s `smooth_first`; the loop fits this one when the
+/// cubic's fit leaves the error far from the noise).
+pub fn clearance_alternative(
+    best: &RankedEffect,
+    ranking: &[RankedEffect],
+) -> Option<RankedEffect> {
+    if best.candidate.dofs.len() != 2 {
+        return None;
+    }
+    let pair = crate::trace::regress::sorted_pair(&best.candidate);
+    ranking
+        .iter()
+        .find(|e| {
+            e.candidate.kind == EffectKind::Clearance
+                && crate::trace::regress::sorted_pair(&e.candidate) == pair
+                && e.bic_change < 0.0
+        })
+        .cloned()
+}
+
 /// Free parameters of an added effect for the time-domain fit, at the
 /// model's current values, with physical bounds.
 pub fn parameters(model: &Model, e: &AddedEffect) -> Result<Vec<Parameter>> {
@@ -142,6 +263,11 @@ pub fn parameters(model: &Model, e: &AddedEffect) -> Result<Vec<Parameter>> {
                 Target::ContactStiffness(_) => p.with_relative_bounds(-0.98, 50.0),
                 Target::FrictionLevel(_) => p.with_relative_bounds(-0.99, 10.0),
                 Target::CubicK3(_) => p.with_relative_bounds(-0.95, 10.0),
+                Target::QuadraticK2(_) => p.with_relative_bounds(-0.95, 10.0),
+                Target::DamperC2(_) | Target::DamperC3(_) => p.with_relative_bounds(-0.95, 10.0),
+                Target::ClearanceGap(_) => p.with_relative_bounds(-0.8, 2.0),
+                Target::ClearanceStiffness(_) => p.with_relative_bounds(-0.98, 50.0),
+                Target::RelativeFrictionLevel(_) => p.with_relative_bounds(-0.99, 10.0),
                 Target::SpringStiffness(_) => p.with_relative_bounds(-0.9, 10.0),
                 _ => p,
             })
@@ -151,13 +277,13 @@ pub fn parameters(model: &Model, e: &AddedEffect) -> Result<Vec<Parameter>> {
 
 /// `model` with the effect `e` switched off (its other parameters and the
 /// other effects as they are): a stiffness or damping change back to its
-/// nominal value, a ground spring, friction level, cubic coefficient or
-/// contact stiffness to zero (a contact's gap stays).
+/// nominal value, a ground spring, friction level, spring or damper
+/// coefficient or contact (clearance) stiffness to zero (a gap stays).
 pub fn without(model: &Model, e: &AddedEffect) -> Model {
     let mut m = model.clone();
     for t in &e.targets {
         let off = match (e.candidate.kind, t) {
-            (_, Target::ContactGap(_)) => continue,
+            (_, Target::ContactGap(_) | Target::ClearanceGap(_)) => continue,
             (EffectKind::Stiffness | EffectKind::Damping, _) => e.nominal,
             _ => 0.0,
         };
@@ -190,6 +316,21 @@ pub fn remove(model: &Model, e: &AddedEffect) -> Model {
             (_, Target::CubicK3(i)) if i < m.cubics.len() => {
                 m.cubics.remove(i);
             }
+            (_, Target::QuadraticK2(i)) if i < m.quadratics.len() => {
+                m.quadratics.remove(i);
+            }
+            (_, Target::DamperC2(i)) if i < m.quadratic_dampers.len() => {
+                m.quadratic_dampers.remove(i);
+            }
+            (_, Target::DamperC3(i)) if i < m.cubic_dampers.len() => {
+                m.cubic_dampers.remove(i);
+            }
+            (_, Target::ClearanceStiffness(i)) if i < m.clearances.len() => {
+                m.clearances.remove(i);
+            }
+            (_, Target::RelativeFrictionLevel(i)) if i < m.relative_frictions.len() => {
+                m.relative_frictions.remove(i);
+            }
             _ => {}
         }
     }
@@ -203,7 +344,13 @@ fn index(t: &Target) -> usize {
         | Target::FrictionLevel(i)
         | Target::CubicK3(i)
         | Target::Mass(i)
-        | Target::ContactGap(i) => i,
+        | Target::ContactGap(i)
+        | Target::QuadraticK2(i)
+        | Target::DamperC2(i)
+        | Target::DamperC3(i)
+        | Target::ClearanceGap(i)
+        | Target::ClearanceStiffness(i)
+        | Target::RelativeFrictionLevel(i) => i,
         _ => 0,
     }
 }

@@ -182,6 +182,7 @@ pub fn auto_substeps(
             w2 = w2.max(3.0 * c.k3.abs() * dmax * dmax * s);
         }
     }
+    w2 = w2.max(effects::stiffest_added(model, states));
     let need = (w2.sqrt() / (omega_h * fs)).ceil() as usize;
     need.clamp(base.max(1), max.max(base))
 }
@@ -1005,12 +1006,13 @@ pub fn diagnose(
             sims += n2;
             let taken = err2.is_some_and(|e2| new_err.is_none_or(|e| e2 < e));
             let line = format!(
-                "{} fitted too, from k3 {:.3e} (the change's equivalent): {}{}",
+                "{} fitted too, from {}: {}{}",
                 alt.label,
                 alt.parameters
                     .iter()
-                    .find(|p| p.0 == "k3")
-                    .map_or(f64::NAN, |p| p.1),
+                    .map(|p| format!("{} {:.3e}", p.0, p.1))
+                    .collect::<Vec<_>>()
+                    .join(", "),
                 err2.map_or("failed".into(), |e| format!("{:.2} %", 100.0 * e)),
                 if taken { ", taken" } else { "" }
             );
@@ -1266,7 +1268,8 @@ fn rescore_prep(
     prepare_located(model, rec, sensors, settings, located).ok()
 }
 
-/// Gap and stiffness starts of a contact from a scan of the
+/// Gap and stiffness starts of a contact (of a clearance: `ci` indexes
+/// `model.clearances` and the gaps are taken on `|δ|`) from a scan of the
 /// multiple-shooting error with the nonlinear model (CONTEXT fact 6: the
 /// cost is rough in the gap): gaps at upper quantiles of the reconstructed
 /// relative displacement, stiffnesses at multiples of the stiffest spring
@@ -1283,16 +1286,23 @@ fn scan_contact(
 ) -> (Vec<(f64, f64)>, usize) {
     const KEEP: usize = 2;
     let fs = cmp.fs;
-    let c = &trial.contacts[ci];
-    let mut d: Vec<f64> = (0..states.ncols()).map(|k| cand.delta(states, k)).collect();
+    // a clearance: its gap on |δ|, its own entry
+    let two_sided = cand.kind == EffectKind::Clearance;
+    let dofs = if two_sided {
+        &trial.clearances[ci].dofs
+    } else {
+        &trial.contacts[ci].dofs
+    };
+    let mut d: Vec<f64> = (0..states.ncols())
+        .map(|k| cand.delta(states, k))
+        .map(|x| if two_sided { x.abs() } else { x })
+        .collect();
     d.sort_by(f64::total_cmp);
     let q = |f: f64| d[((d.len() - 1) as f64 * f) as usize].max(0.0);
     let kspring = trial
         .springs
         .iter()
-        .filter(|s| {
-            s.dofs.contains(&c.dofs[0]) || c.dofs.get(1).is_some_and(|j| s.dofs.contains(j))
-        })
+        .filter(|s| s.dofs.contains(&dofs[0]) || dofs.get(1).is_some_and(|j| s.dofs.contains(j)))
         .map(|s| s.stiffness)
         .fold(0.0, f64::max)
         .max(1.0);
@@ -1302,8 +1312,13 @@ fn scan_contact(
         for f in [0.8, 0.88, 0.93, 0.96, 0.98, 0.99, 0.995] {
             let g = q(f);
             let mut m = trial.clone();
-            m.contacts[ci].gap = g;
-            m.contacts[ci].stiffness = kc;
+            if two_sided {
+                m.clearances[ci].gap = g;
+                m.clearances[ci].stiffness = kc;
+            } else {
+                m.contacts[ci].gap = g;
+                m.contacts[ci].stiffness = kc;
+            }
             let sim = resolved(&m, fs, settings, states);
             evals += 1;
             if let Ok(y) = cmp.predict(&m, segments, sim) {
@@ -1388,7 +1403,10 @@ fn companion_gain(
     for (xi, p) in x.iter_mut().zip(&problem.parameters).rev().take(extra) {
         // a contact is switched off by its stiffness; its gap stays where
         // the trace put it
-        if !matches!(p.target, crate::update::Target::ContactGap(_)) {
+        if !matches!(
+            p.target,
+            crate::update::Target::ContactGap(_) | crate::update::Target::ClearanceGap(_)
+        ) {
             *xi = p.to_x(zero);
         }
     }
@@ -1534,6 +1552,29 @@ fn fit_effects(
             }
             let c = stiffest.cubics.len() - 1;
             stiffest.cubics[c].k3 = k3 * 1.6;
+        }
+    }
+    // a clearance: starts from the same scan, on |δ|
+    if let Some(last) = all
+        .last()
+        .filter(|l| l.candidate.kind == EffectKind::Clearance)
+    {
+        let ci = trial.clearances.len() - 1;
+        let t = Instant::now();
+        let (best, evals) =
+            scan_contact(trial, ci, &last.candidate, states, cmp, &segments, settings);
+        sims += evals * segments.len();
+        stages[0].1 += t.elapsed().as_secs_f64();
+        let (pg, pk) = (&problem.parameters[np - 2], &problem.parameters[np - 1]);
+        for (g, kc) in best {
+            let mut s = vec![0.0; np];
+            s[np - 2] = pg.to_x(g.clamp(pg.lower, pg.upper));
+            s[np - 1] = pk.to_x(kc.clamp(pk.lower, pk.upper));
+            if !starts.contains(&s) {
+                starts.push(s);
+                let c = &mut stiffest.clearances[ci];
+                c.stiffness = c.stiffness.max(kc);
+            }
         }
     }
     // a contact: starts from a scan of gap and stiffness (CONTEXT fact 6)
@@ -1708,8 +1749,8 @@ fn push_start(starts: &mut Vec<Vec<f64>>, params: &[crate::update::Parameter], v
 const GN_STRIDES: [f64; 3] = [1.0, 2.0, 3.0];
 
 /// A screened effect leaving the error above this multiple of the noise
-/// floor may be replaced by the cubic spring at its place
-/// ([`cubic_alternative`]).
+/// floor may be replaced by the cubic spring at its place, a cubic spring
+/// by the clearance ([`cubic_alternative`]).
 const ALTERNATIVE_FLOOR: f64 = 4.0;
 
 /// The cubic spring on the pair of a stiffness change of more than 50 %,
@@ -1723,6 +1764,9 @@ fn cubic_alternative(
     ranking: &[RankedEffect],
     states: &DMatrix<f64>,
 ) -> Option<RankedEffect> {
+    if best.candidate.kind == EffectKind::Cubic {
+        return effects::clearance_alternative(best, ranking);
+    }
     if best.candidate.kind != EffectKind::Stiffness || best.candidate.dofs.len() != 2 {
         return None;
     }

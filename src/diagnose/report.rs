@@ -441,13 +441,5 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
 }
 
 fn kind_of(name: &str) -> crate::trace::EffectKind {
-    use crate::trace::EffectKind::*;
-    match name {
-        "contact" => Contact,
-        "friction" => Friction,
-        "cubic" => Cubic,
-        "stiffness" => Stiffness,
-        "ground_spring" => GroundSpring,
-        _ => Damping,
-    }
+    crate::trace::EffectKind::from_name(name).unwrap_or(crate::trace::EffectKind::Damping)
 }

@@ -985,4 +985,6 @@ impl Work {
 }
 
 #[cfg(test)]
+mod element_tests;
+#[cfg(test)]
 mod tests;

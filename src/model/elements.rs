@@ -7,6 +7,18 @@
 //! - Coulomb friction at a DOF against ground (the rod), regularised:
 //!   `f_int = F tanh(v / v_r)`.
 //! - Cubic spring between two DOFs or to ground: `f = k_3 δ³`, `δ = u_i − u_j`.
+//! - Quadratic (asymmetric) spring between two DOFs or to ground:
+//!   `f = k_2 δ²` (the even law: stiffer on one side of the rest position,
+//!   softer on the other; `docs/formats.md` gives the reasons for this form).
+//! - Nonlinear dampers in the relative velocity `ν = u̇_i − u̇_j` (or `u̇_i`):
+//!   quadratic `f = c_2 ν|ν|`, cubic `f = c_3 ν³`.
+//! - Two-sided clearance (dead zone) between two DOFs or to ground:
+//!   `f = k_c (|δ| − gap) sign(δ)` when `|δ| > gap`, 0 inside. It is
+//!   compiled as two penalty contacts (i→j and j→i, the same gap and
+//!   stiffness), which is the same law, so the integrator's contact
+//!   handling (side checks, batched open samples, sensitivities) applies.
+//! - Coulomb friction between two DOFs (relative sliding), regularised as
+//!   the friction against ground: `f = F tanh(ν / v_r)`.
 
 use serde::{Deserialize, Serialize};
 
@@ -49,6 +61,62 @@ pub struct Cubic {
     pub k3: f64,
 }
 
+/// Quadratic (asymmetric) spring: `f = k_2 δ²`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Quadratic {
+    /// `[i, j]` or `[i]` (to ground).
+    pub dofs: Vec<usize>,
+    /// Quadratic coefficient, N/m² (any sign).
+    pub k2: f64,
+}
+
+/// Quadratic damper: `f = c_2 ν|ν|` in the relative velocity ν.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QuadraticDamper {
+    /// `[i, j]` or `[i]` (to ground).
+    pub dofs: Vec<usize>,
+    /// Coefficient, N s²/m² (>= 0).
+    pub c2: f64,
+}
+
+/// Cubic damper: `f = c_3 ν³` in the relative velocity ν.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CubicDamper {
+    /// `[i, j]` or `[i]` (to ground).
+    pub dofs: Vec<usize>,
+    /// Coefficient, N s³/m³ (>= 0).
+    pub c3: f64,
+}
+
+/// Two-sided clearance (dead zone): no force while `|δ| < gap`,
+/// `k_c (|δ| − gap) sign(δ)` beyond.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Clearance {
+    /// `[i, j]` or `[i]` (to ground, stops on both sides).
+    pub dofs: Vec<usize>,
+    /// Half-width of the dead zone, m (>= 0).
+    pub gap: f64,
+    /// Penalty stiffness beyond the gap, N/m (> 0).
+    pub stiffness: f64,
+}
+
+/// Regularised Coulomb friction between two DOFs (relative sliding).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RelativeFriction {
+    /// `[i, j]`: the friction force opposes `u̇_i − u̇_j`.
+    pub dofs: Vec<usize>,
+    /// Friction force level, N (>= 0).
+    pub level: f64,
+    /// Regularisation velocity, m/s (> 0; default 1e-3).
+    #[serde(default = "default_vreg")]
+    pub velocity: f64,
+}
+
 /// One nonlinear element in compiled, 0-based form for the integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Element {
@@ -81,6 +149,44 @@ pub enum Element {
         /// Coefficient, N/m³.
         k3: f64,
     },
+    /// Quadratic spring `k_2 δ²`.
+    Quadratic {
+        /// First DOF.
+        i: usize,
+        /// Second DOF.
+        j: Option<usize>,
+        /// Coefficient, N/m².
+        k2: f64,
+    },
+    /// Quadratic damper `c_2 ν|ν|`.
+    QuadraticDamper {
+        /// First DOF.
+        i: usize,
+        /// Second DOF.
+        j: Option<usize>,
+        /// Coefficient, N s²/m².
+        c2: f64,
+    },
+    /// Cubic damper `c_3 ν³`.
+    CubicDamper {
+        /// First DOF.
+        i: usize,
+        /// Second DOF.
+        j: Option<usize>,
+        /// Coefficient, N s³/m³.
+        c3: f64,
+    },
+    /// Friction between two DOFs, `F tanh((u̇_i − u̇_j)/v_r)`.
+    RelativeFriction {
+        /// First DOF.
+        i: usize,
+        /// Second DOF.
+        j: usize,
+        /// Level, N.
+        level: f64,
+        /// Regularisation velocity, m/s.
+        vreg: f64,
+    },
 }
 
 /// Gather the model's elements into compiled form.
@@ -108,7 +214,100 @@ pub fn compile(model: &super::Model) -> Vec<Element> {
             k3: c.k3,
         });
     }
+    let ends = |dofs: &[usize]| (dofs[0] - 1, dofs.get(1).map(|j| j - 1));
+    for q in &model.quadratics {
+        let (i, j) = ends(&q.dofs);
+        out.push(Element::Quadratic { i, j, k2: q.k2 });
+    }
+    for d in &model.quadratic_dampers {
+        let (i, j) = ends(&d.dofs);
+        out.push(Element::QuadraticDamper { i, j, c2: d.c2 });
+    }
+    for d in &model.cubic_dampers {
+        let (i, j) = ends(&d.dofs);
+        out.push(Element::CubicDamper { i, j, c3: d.c3 });
+    }
+    for f in &model.relative_frictions {
+        out.push(Element::RelativeFriction {
+            i: f.dofs[0] - 1,
+            j: f.dofs[1] - 1,
+            level: f.level,
+            vreg: f.velocity,
+        });
+    }
+    for c in &model.clearances {
+        out.extend(clearance_contacts(c));
+    }
     out
+}
+
+/// The two penalty contacts of a clearance between DOFs i and j: i→j and
+/// j→i with the clearance's gap and stiffness.
+fn clearance_contacts(c: &Clearance) -> [Element; 2] {
+    let (i, j) = (c.dofs[0] - 1, c.dofs[1] - 1);
+    let (gap, k) = (c.gap, c.stiffness);
+    [
+        Element::Contact {
+            i,
+            j: Some(j),
+            gap,
+            k,
+        },
+        Element::Contact {
+            i: j,
+            j: Some(i),
+            gap,
+            k,
+        },
+    ]
+}
+
+/// The lists of nonlinear elements of a model, in the order
+/// [`compile`] takes them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ElementList {
+    /// `model.contacts`.
+    Contact,
+    /// `model.frictions`.
+    Friction,
+    /// `model.cubics`.
+    Cubic,
+    /// `model.quadratics`.
+    Quadratic,
+    /// `model.quadratic_dampers`.
+    QuadraticDamper,
+    /// `model.cubic_dampers`.
+    CubicDamper,
+    /// `model.relative_frictions`.
+    RelativeFriction,
+    /// `model.clearances` (two compiled contacts each).
+    Clearance,
+}
+
+/// Index in [`compile`]`(model)` of the (first) element compiled from entry
+/// `index` of `list`; a clearance's two contacts are at this index and the
+/// next.
+pub fn compiled_index(model: &super::Model, list: ElementList, index: usize) -> usize {
+    let sizes = [
+        (ElementList::Contact, model.contacts.len()),
+        (ElementList::Friction, model.frictions.len()),
+        (ElementList::Cubic, model.cubics.len()),
+        (ElementList::Quadratic, model.quadratics.len()),
+        (ElementList::QuadraticDamper, model.quadratic_dampers.len()),
+        (ElementList::CubicDamper, model.cubic_dampers.len()),
+        (
+            ElementList::RelativeFriction,
+            model.relative_frictions.len(),
+        ),
+        (ElementList::Clearance, 2 * model.clearances.len()),
+    ];
+    let before: usize = sizes
+        .iter()
+        .take_while(|(l, _)| *l != list)
+        .map(|(_, n)| n)
+        .sum();
+    let per = if list == ElementList::Clearance { 2 } else { 1 };
+    before + per * index
 }
 
 /// tanh through one `exp_m1` (about 3× cheaper than libm's tanh here;
@@ -183,23 +382,81 @@ impl Element {
                 scatter(f, i, j, k3 * x * x * x);
                 3.0 * k3 * x * x
             }
+            Element::Quadratic { i, j, k2 } => {
+                let x = rel(u, i, j);
+                scatter(f, i, j, k2 * x * x);
+                2.0 * k2 * x
+            }
+            Element::QuadraticDamper { i, j, c2 } => {
+                let w = rel(v, i, j);
+                scatter(f, i, j, c2 * w * w.abs());
+                2.0 * c2 * w.abs()
+            }
+            Element::CubicDamper { i, j, c3 } => {
+                let w = rel(v, i, j);
+                scatter(f, i, j, c3 * w * w * w);
+                3.0 * c3 * w * w
+            }
+            Element::RelativeFriction { i, j, level, vreg } => {
+                let th = fast_tanh((v[i] - v[j]) / vreg);
+                scatter(f, i, Some(j), level * th);
+                level / vreg * (1.0 - th * th)
+            }
         }
     }
 
-    /// Add `c_u slope` (displacement laws) or `c_v slope` (friction) into the
-    /// column-major n×n matrix `t`; returns false when nothing was added.
+    /// Add `c_u slope` (displacement laws) or `c_v slope` (velocity laws:
+    /// friction, dampers) into the column-major n×n matrix `t`; returns
+    /// false when nothing was added.
     #[inline]
     pub fn add_slope(&self, slope: f64, cu: f64, cv: f64, t: &mut [f64], n: usize) -> bool {
         if slope == 0.0 {
             return false;
         }
         match *self {
-            Element::Contact { i, j, .. } | Element::Cubic { i, j, .. } => {
-                scatter_tangent(t, n, i, j, cu * slope)
-            }
+            Element::Contact { i, j, .. }
+            | Element::Cubic { i, j, .. }
+            | Element::Quadratic { i, j, .. } => scatter_tangent(t, n, i, j, cu * slope),
             Element::Friction { d, .. } => t[d * n + d] += cv * slope,
+            Element::QuadraticDamper { i, j, .. } | Element::CubicDamper { i, j, .. } => {
+                scatter_tangent(t, n, i, j, cv * slope)
+            }
+            Element::RelativeFriction { i, j, .. } => scatter_tangent(t, n, i, Some(j), cv * slope),
         }
         true
+    }
+
+    /// The DOFs the element acts on: `(i, j)`, `j = None` for ground.
+    pub fn ends(&self) -> (usize, Option<usize>) {
+        match *self {
+            Element::Contact { i, j, .. }
+            | Element::Cubic { i, j, .. }
+            | Element::Quadratic { i, j, .. }
+            | Element::QuadraticDamper { i, j, .. }
+            | Element::CubicDamper { i, j, .. } => (i, j),
+            Element::Friction { d, .. } => (d, None),
+            Element::RelativeFriction { i, j, .. } => (i, Some(j)),
+        }
+    }
+
+    /// The same element on DOFs renumbered by `map` (None when a DOF has
+    /// no new number).
+    pub fn renumbered(&self, map: impl Fn(usize) -> Option<usize>) -> Option<Element> {
+        let (i2, j2) = match self.ends() {
+            (i, Some(j)) => (map(i)?, Some(map(j)?)),
+            (i, None) => (map(i)?, None),
+        };
+        let mut e = *self;
+        match &mut e {
+            Element::Contact { i, j, .. }
+            | Element::Cubic { i, j, .. }
+            | Element::Quadratic { i, j, .. }
+            | Element::QuadraticDamper { i, j, .. }
+            | Element::CubicDamper { i, j, .. } => (*i, *j) = (i2, j2),
+            Element::Friction { d, .. } => *d = i2,
+            Element::RelativeFriction { i, j, .. } => (*i, *j) = (i2, j2?),
+        }
+        Some(e)
     }
 }
 
@@ -216,6 +473,12 @@ pub enum ElementParam {
     Level,
     /// Cubic coefficient, N/m³.
     K3,
+    /// Quadratic spring coefficient, N/m².
+    K2,
+    /// Quadratic damper coefficient, N s²/m².
+    C2,
+    /// Cubic damper coefficient, N s³/m³.
+    C3,
 }
 
 impl ElementParam {
@@ -226,8 +489,13 @@ impl ElementParam {
             (
                 ElementParam::Gap | ElementParam::Stiffness,
                 Element::Contact { .. }
-            ) | (ElementParam::Level, Element::Friction { .. })
-                | (ElementParam::K3, Element::Cubic { .. })
+            ) | (
+                ElementParam::Level,
+                Element::Friction { .. } | Element::RelativeFriction { .. }
+            ) | (ElementParam::K3, Element::Cubic { .. })
+                | (ElementParam::K2, Element::Quadratic { .. })
+                | (ElementParam::C2, Element::QuadraticDamper { .. })
+                | (ElementParam::C3, Element::CubicDamper { .. })
         )
     }
 }
@@ -239,7 +507,9 @@ impl Element {
     ///   (both scattered `+` on i, `−` on j); 0 when open (at `p = 0` the law
     ///   has a kink and the open side's 0 is returned);
     /// - friction: `∂f/∂F = tanh(v/v_r)` (the same `tanh` as the force);
-    /// - cubic: `∂f/∂k_3 = δ³`.
+    /// - cubic: `∂f/∂k_3 = δ³`; quadratic: `∂f/∂k_2 = δ²`;
+    /// - dampers: `∂f/∂c_2 = ν|ν|`, `∂f/∂c_3 = ν³`;
+    /// - friction between two DOFs: `∂f/∂F = tanh(ν/v_r)`.
     ///
     /// Returns false (and adds nothing) when the element has no such
     /// parameter.
@@ -287,13 +557,28 @@ impl Element {
                 let x = rel(u, i, j);
                 scatter(f, i, j, s * x * x * x);
             }
+            (Element::Quadratic { i, j, .. }, ElementParam::K2) => {
+                let x = rel(u, i, j);
+                scatter(f, i, j, s * x * x);
+            }
+            (Element::QuadraticDamper { i, j, .. }, ElementParam::C2) => {
+                let w = rel(v, i, j);
+                scatter(f, i, j, s * w * w.abs());
+            }
+            (Element::CubicDamper { i, j, .. }, ElementParam::C3) => {
+                let w = rel(v, i, j);
+                scatter(f, i, j, s * w * w * w);
+            }
+            (Element::RelativeFriction { i, j, vreg, .. }, ElementParam::Level) => {
+                scatter(f, i, Some(j), s * fast_tanh((v[i] - v[j]) / vreg));
+            }
             _ => return false,
         }
         true
     }
 
     /// `y += c_u slope ∂f/∂u · x_u` (displacement laws) or
-    /// `y += c_v slope ∂f/∂v · x_v` (friction): the product of the tangent
+    /// `y += c_v slope ∂f/∂v · x_v` (velocity laws): the product of the tangent
     /// that [`Element::add_slope`] assembles with vectors, without the
     /// matrix.
     #[inline]
@@ -308,10 +593,16 @@ impl Element {
             return;
         }
         match *self {
-            Element::Contact { i, j, .. } | Element::Cubic { i, j, .. } => {
-                scatter(y, i, j, cu * slope * rel(xu, i, j))
-            }
+            Element::Contact { i, j, .. }
+            | Element::Cubic { i, j, .. }
+            | Element::Quadratic { i, j, .. } => scatter(y, i, j, cu * slope * rel(xu, i, j)),
             Element::Friction { d, .. } => y[d] += cv * slope * xv[d],
+            Element::QuadraticDamper { i, j, .. } | Element::CubicDamper { i, j, .. } => {
+                scatter(y, i, j, cv * slope * rel(xv, i, j))
+            }
+            Element::RelativeFriction { i, j, .. } => {
+                scatter(y, i, Some(j), cv * slope * (xv[i] - xv[j]))
+            }
         }
     }
 }
@@ -329,9 +620,9 @@ mod tests {
     use super::*;
 
     /// Every kind of element, active, at one state of a 3-DOF system.
-    fn sample() -> ([Element; 4], [f64; 3], [f64; 3]) {
+    fn sample() -> (Vec<Element>, [f64; 3], [f64; 3]) {
         (
-            [
+            vec![
                 Element::Contact {
                     i: 0,
                     j: Some(1),
@@ -352,6 +643,42 @@ mod tests {
                     i: 0,
                     j: None,
                     k3: -3e8,
+                },
+                Element::Quadratic {
+                    i: 1,
+                    j: Some(2),
+                    k2: -4e6,
+                },
+                Element::Quadratic {
+                    i: 2,
+                    j: None,
+                    k2: 5e6,
+                },
+                Element::QuadraticDamper {
+                    i: 0,
+                    j: Some(2),
+                    c2: 30.0,
+                },
+                Element::QuadraticDamper {
+                    i: 1,
+                    j: None,
+                    c2: 20.0,
+                },
+                Element::CubicDamper {
+                    i: 2,
+                    j: Some(0),
+                    c3: 70.0,
+                },
+                Element::CubicDamper {
+                    i: 0,
+                    j: None,
+                    c3: 50.0,
+                },
+                Element::RelativeFriction {
+                    i: 1,
+                    j: 2,
+                    level: 0.4,
+                    vreg: 0.3,
                 },
             ],
             [3e-3, 1e-3, -2e-3],
@@ -389,13 +716,18 @@ mod tests {
             }
         }
         let tv = tangent(&els, &u, &v, 0.0, 1.0, n);
-        let (mut vp, mut vm) = (v, v);
-        vp[1] += 1e-7;
-        vm[1] -= 1e-7;
-        let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
-        internal_force(&els, &u, &vp, &mut fp);
-        internal_force(&els, &u, &vm, &mut fm);
-        approx::assert_relative_eq!(tv[n + 1], (fp[1] - fm[1]) / 2e-7, max_relative = 1e-5);
+        for c in 0..n {
+            let (mut vp, mut vm) = (v, v);
+            vp[c] += 1e-7;
+            vm[c] -= 1e-7;
+            let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
+            internal_force(&els, &u, &vp, &mut fp);
+            internal_force(&els, &u, &vm, &mut fm);
+            for r in 0..n {
+                let fd = (fp[r] - fm[r]) / 2e-7;
+                approx::assert_relative_eq!(tv[c * n + r], fd, max_relative = 1e-5, epsilon = 1e-6);
+            }
+        }
     }
 
     #[test]
@@ -422,6 +754,19 @@ mod tests {
                     vreg,
                 },
                 (Element::Cubic { i, j, k3 }, _) => Element::Cubic { i, j, k3: k3 + dq },
+                (Element::Quadratic { i, j, k2 }, _) => Element::Quadratic { i, j, k2: k2 + dq },
+                (Element::QuadraticDamper { i, j, c2 }, _) => {
+                    Element::QuadraticDamper { i, j, c2: c2 + dq }
+                }
+                (Element::CubicDamper { i, j, c3 }, _) => {
+                    Element::CubicDamper { i, j, c3: c3 + dq }
+                }
+                (Element::RelativeFriction { i, j, level, vreg }, _) => Element::RelativeFriction {
+                    i,
+                    j,
+                    level: level + dq,
+                    vreg,
+                },
             }
         };
         let cases = [
@@ -430,6 +775,13 @@ mod tests {
             (1, ElementParam::Level, 0.3),
             (2, ElementParam::K3, 1e9),
             (3, ElementParam::K3, 3e8),
+            (4, ElementParam::K2, 4e6),
+            (5, ElementParam::K2, 5e6),
+            (6, ElementParam::C2, 30.0),
+            (7, ElementParam::C2, 20.0),
+            (8, ElementParam::C3, 70.0),
+            (9, ElementParam::C3, 50.0),
+            (10, ElementParam::Level, 0.4),
         ];
         for (e, q, size) in cases {
             let mut d = vec![0.0; n];

@@ -16,7 +16,9 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-pub use elements::{Contact, Cubic, Friction};
+pub use elements::{
+    Clearance, Contact, Cubic, CubicDamper, Friction, Quadratic, QuadraticDamper, RelativeFriction,
+};
 
 /// A linear spring between two DOFs, or from a DOF to ground.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -99,6 +101,33 @@ pub struct Model {
     /// Cubic springs.
     #[serde(default, rename = "cubic", skip_serializing_if = "Vec::is_empty")]
     pub cubics: Vec<Cubic>,
+    /// Quadratic (asymmetric) springs.
+    #[serde(default, rename = "quadratic", skip_serializing_if = "Vec::is_empty")]
+    pub quadratics: Vec<Quadratic>,
+    /// Quadratic dampers.
+    #[serde(
+        default,
+        rename = "quadratic_damper",
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub quadratic_dampers: Vec<QuadraticDamper>,
+    /// Cubic dampers.
+    #[serde(
+        default,
+        rename = "cubic_damper",
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub cubic_dampers: Vec<CubicDamper>,
+    /// Two-sided clearances (dead zones).
+    #[serde(default, rename = "clearance", skip_serializing_if = "Vec::is_empty")]
+    pub clearances: Vec<Clearance>,
+    /// Coulomb friction between two DOFs.
+    #[serde(
+        default,
+        rename = "relative_friction",
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub relative_frictions: Vec<RelativeFriction>,
 }
 
 impl Model {
@@ -128,7 +157,14 @@ impl Model {
 
     /// True when the model has nonlinear elements.
     pub fn is_nonlinear(&self) -> bool {
-        !(self.contacts.is_empty() && self.frictions.is_empty() && self.cubics.is_empty())
+        !(self.contacts.is_empty()
+            && self.frictions.is_empty()
+            && self.cubics.is_empty()
+            && self.quadratics.is_empty()
+            && self.quadratic_dampers.is_empty()
+            && self.cubic_dampers.is_empty()
+            && self.clearances.is_empty()
+            && self.relative_frictions.is_empty())
     }
 
     /// A copy without nonlinear elements.
@@ -137,6 +173,11 @@ impl Model {
             contacts: vec![],
             frictions: vec![],
             cubics: vec![],
+            quadratics: vec![],
+            quadratic_dampers: vec![],
+            cubic_dampers: vec![],
+            clearances: vec![],
+            relative_frictions: vec![],
             ..self.clone()
         }
     }
@@ -233,6 +274,7 @@ impl Model {
                 return err(format!("cubic[{i}].k3 = {}: must be finite", c.k3));
             }
         }
+        self.validate_added_elements(src, &check_dofs)?;
         match &self.damping {
             Damping::None => {}
             Damping::Modal { ratio, ratios } => {
@@ -251,6 +293,63 @@ impl Model {
                         "damping: rayleigh alpha = {alpha}, beta = {beta}: must be >= 0"
                     ));
                 }
+            }
+        }
+        Ok(())
+    }
+
+    /// Check the quadratic springs, nonlinear dampers, clearances and
+    /// friction between DOFs (`check_dofs(key, dofs, allow_ground)` checks
+    /// the DOF lists).
+    fn validate_added_elements(
+        &self,
+        src: &str,
+        check_dofs: &dyn Fn(String, &[usize], bool) -> Result<()>,
+    ) -> Result<()> {
+        let err = |m: String| Err(TacitError::model(src, m));
+        for (i, q) in self.quadratics.iter().enumerate() {
+            check_dofs(format!("quadratic[{i}]"), &q.dofs, true)?;
+            if !q.k2.is_finite() {
+                return err(format!("quadratic[{i}].k2 = {}: must be finite", q.k2));
+            }
+        }
+        for (i, d) in self.quadratic_dampers.iter().enumerate() {
+            check_dofs(format!("quadratic_damper[{i}]"), &d.dofs, true)?;
+            if !(d.c2.is_finite() && d.c2 >= 0.0) {
+                return err(format!("quadratic_damper[{i}].c2 = {}: must be >= 0", d.c2));
+            }
+        }
+        for (i, d) in self.cubic_dampers.iter().enumerate() {
+            check_dofs(format!("cubic_damper[{i}]"), &d.dofs, true)?;
+            if !(d.c3.is_finite() && d.c3 >= 0.0) {
+                return err(format!("cubic_damper[{i}].c3 = {}: must be >= 0", d.c3));
+            }
+        }
+        for (i, c) in self.clearances.iter().enumerate() {
+            check_dofs(format!("clearance[{i}]"), &c.dofs, false)?;
+            if !(c.gap.is_finite() && c.gap >= 0.0) {
+                return err(format!("clearance[{i}].gap = {}: must be >= 0", c.gap));
+            }
+            if !(c.stiffness.is_finite() && c.stiffness > 0.0) {
+                return err(format!(
+                    "clearance[{i}].stiffness = {}: must be > 0",
+                    c.stiffness
+                ));
+            }
+        }
+        for (i, f) in self.relative_frictions.iter().enumerate() {
+            check_dofs(format!("relative_friction[{i}]"), &f.dofs, false)?;
+            if !(f.level.is_finite() && f.level >= 0.0) {
+                return err(format!(
+                    "relative_friction[{i}].level = {}: must be >= 0",
+                    f.level
+                ));
+            }
+            if !(f.velocity.is_finite() && f.velocity > 0.0) {
+                return err(format!(
+                    "relative_friction[{i}].velocity = {}: must be > 0",
+                    f.velocity
+                ));
             }
         }
         Ok(())

@@ -188,10 +188,7 @@ pub(super) fn compile(problem: &Problem, model: &Model) -> std::result::Result<C
 pub fn kept_dofs(problem: &Problem, model: &Model) -> Vec<usize> {
     let mut kept: Vec<usize> = problem.measured_dofs().iter().map(|d| d - 1).collect();
     for e in elements::compile(model) {
-        let (i, j) = match e {
-            Element::Contact { i, j, .. } | Element::Cubic { i, j, .. } => (i, j),
-            Element::Friction { d, .. } => (d, None),
-        };
+        let (i, j) = e.ends();
         kept.push(i);
         kept.extend(j);
     }
@@ -201,30 +198,7 @@ pub fn kept_dofs(problem: &Problem, model: &Model) -> Vec<usize> {
 }
 
 fn remap(e: Element, pos: &[Option<usize>]) -> Option<Element> {
-    let map_j = |j: Option<usize>| -> Option<Option<usize>> {
-        match j {
-            None => Some(None),
-            Some(j) => pos[j].map(Some),
-        }
-    };
-    Some(match e {
-        Element::Contact { i, j, gap, k } => Element::Contact {
-            i: pos[i]?,
-            j: map_j(j)?,
-            gap,
-            k,
-        },
-        Element::Cubic { i, j, k3 } => Element::Cubic {
-            i: pos[i]?,
-            j: map_j(j)?,
-            k3,
-        },
-        Element::Friction { d, level, vreg } => Element::Friction {
-            d: pos[d]?,
-            level,
-            vreg,
-        },
-    })
+    e.renumbered(|d| pos[d])
 }
 
 fn extract(problem: &Problem, sim: &Simulation, pos: &[Option<usize>]) -> SegmentResponse {

@@ -44,6 +44,18 @@ pub enum Target {
     FrictionLevel(usize),
     /// Coefficient of `model.cubics[i]`, N/m³.
     CubicK3(usize),
+    /// Coefficient of `model.quadratics[i]`, N/m².
+    QuadraticK2(usize),
+    /// Coefficient of `model.quadratic_dampers[i]`, N s²/m².
+    DamperC2(usize),
+    /// Coefficient of `model.cubic_dampers[i]`, N s³/m³.
+    DamperC3(usize),
+    /// Gap of `model.clearances[i]`, m.
+    ClearanceGap(usize),
+    /// Penalty stiffness of `model.clearances[i]`, N/m.
+    ClearanceStiffness(usize),
+    /// Force level of `model.relative_frictions[i]`, N.
+    RelativeFrictionLevel(usize),
 }
 
 impl Target {
@@ -122,6 +134,31 @@ impl Target {
                     .ok_or_else(|| missing("cubic", i, model.cubics.len()))?
                     .k3
             }
+            _ => return self.get_added(model),
+        })
+    }
+
+    /// [`Target::get`] for the quadratic springs, nonlinear dampers,
+    /// clearances and friction between DOFs.
+    fn get_added(&self, model: &Model) -> Result<f64> {
+        fn at<'a, T>(list: &'a [T], what: &str, i: usize) -> Result<&'a T> {
+            list.get(i).ok_or_else(|| {
+                TacitError::Setting(format!(
+                    "parameter {what}[{i}]: the model has {} {what} entries",
+                    list.len()
+                ))
+            })
+        }
+        Ok(match *self {
+            Target::QuadraticK2(i) => at(&model.quadratics, "quadratic", i)?.k2,
+            Target::DamperC2(i) => at(&model.quadratic_dampers, "quadratic_damper", i)?.c2,
+            Target::DamperC3(i) => at(&model.cubic_dampers, "cubic_damper", i)?.c3,
+            Target::ClearanceGap(i) => at(&model.clearances, "clearance", i)?.gap,
+            Target::ClearanceStiffness(i) => at(&model.clearances, "clearance", i)?.stiffness,
+            Target::RelativeFrictionLevel(i) => {
+                at(&model.relative_frictions, "relative_friction", i)?.level
+            }
+            _ => unreachable!("get_added is called for the added element targets only"),
         })
     }
 
@@ -166,22 +203,36 @@ impl Target {
             Target::ContactStiffness(i) => model.contacts[i].stiffness = value,
             Target::FrictionLevel(i) => model.frictions[i].level = value,
             Target::CubicK3(i) => model.cubics[i].k3 = value,
+            Target::QuadraticK2(i) => model.quadratics[i].k2 = value,
+            Target::DamperC2(i) => model.quadratic_dampers[i].c2 = value,
+            Target::DamperC3(i) => model.cubic_dampers[i].c3 = value,
+            Target::ClearanceGap(i) => model.clearances[i].gap = value,
+            Target::ClearanceStiffness(i) => model.clearances[i].stiffness = value,
+            Target::RelativeFrictionLevel(i) => model.relative_frictions[i].level = value,
         }
     }
 
     /// Physical lower limit of the quantity (a stiffness or mass must stay
-    /// positive, a gap, level or damping ratio non-negative); `None` for a
-    /// cubic coefficient, which may take either sign.
+    /// positive, a gap, level, damper coefficient or damping ratio
+    /// non-negative); `None` for a cubic or quadratic spring coefficient,
+    /// which may take either sign.
     pub fn physical_floor(&self) -> Option<f64> {
         match self {
-            Target::SpringStiffness(_) | Target::Mass(_) | Target::ContactStiffness(_) => Some(0.0),
+            Target::SpringStiffness(_)
+            | Target::Mass(_)
+            | Target::ContactStiffness(_)
+            | Target::ClearanceStiffness(_) => Some(0.0),
             Target::DampingRatio
             | Target::ModalRatio(_)
             | Target::RayleighAlpha
             | Target::RayleighBeta
             | Target::ContactGap(_)
-            | Target::FrictionLevel(_) => Some(0.0),
-            Target::CubicK3(_) => None,
+            | Target::FrictionLevel(_)
+            | Target::ClearanceGap(_)
+            | Target::RelativeFrictionLevel(_)
+            | Target::DamperC2(_)
+            | Target::DamperC3(_) => Some(0.0),
+            Target::CubicK3(_) | Target::QuadraticK2(_) => None,
         }
     }
 
@@ -189,12 +240,16 @@ impl Target {
     fn strictly_positive(&self) -> bool {
         matches!(
             self,
-            Target::SpringStiffness(_) | Target::Mass(_) | Target::ContactStiffness(_)
+            Target::SpringStiffness(_)
+                | Target::Mass(_)
+                | Target::ContactStiffness(_)
+                | Target::ClearanceStiffness(_)
         )
     }
 
     /// Default short name: `k3` (or the spring's label), `m2`, `zeta`,
-    /// `gap1`, `kc1`, `friction1`, `cubic1` (numbers from 1).
+    /// `gap1`, `kc1`, `friction1`, `cubic1`, `quadratic1`, `qdamper1`,
+    /// `cdamper1`, `cgap1`, `kcl1`, `rfriction1` (numbers from 1).
     pub fn default_name(&self, model: &Model) -> String {
         match *self {
             Target::SpringStiffness(i) => model
@@ -211,6 +266,12 @@ impl Target {
             Target::ContactStiffness(i) => format!("kc{}", i + 1),
             Target::FrictionLevel(i) => format!("friction{}", i + 1),
             Target::CubicK3(i) => format!("cubic{}", i + 1),
+            Target::QuadraticK2(i) => format!("quadratic{}", i + 1),
+            Target::DamperC2(i) => format!("qdamper{}", i + 1),
+            Target::DamperC3(i) => format!("cdamper{}", i + 1),
+            Target::ClearanceGap(i) => format!("cgap{}", i + 1),
+            Target::ClearanceStiffness(i) => format!("kcl{}", i + 1),
+            Target::RelativeFrictionLevel(i) => format!("rfriction{}", i + 1),
         }
     }
 }

@@ -28,7 +28,7 @@ use super::forward::{self, Failure, SegmentResponse};
 use super::param::{Parameter, Target};
 use super::problem::Problem;
 use crate::integrate::{ElementSeed, ParamSeed, Seeds};
-use crate::model::elements::ElementParam;
+use crate::model::elements::{self, ElementList, ElementParam};
 use crate::model::{Damping, Model};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -147,6 +147,7 @@ pub fn target_seed(
 ) -> std::result::Result<ParamSeed, String> {
     let n = model.ndof();
     let (nc, nf) = (model.contacts.len(), model.frictions.len());
+    let at = |list, i| elements::compiled_index(model, list, i);
     let element = |element, param| ParamSeed {
         elements: vec![ElementSeed {
             element,
@@ -199,6 +200,31 @@ pub fn target_seed(
         Target::ContactStiffness(i) => element(i, ElementParam::Stiffness),
         Target::FrictionLevel(i) => element(nc + i, ElementParam::Level),
         Target::CubicK3(i) => element(nc + nf + i, ElementParam::K3),
+        Target::QuadraticK2(i) => element(at(ElementList::Quadratic, i), ElementParam::K2),
+        Target::DamperC2(i) => element(at(ElementList::QuadraticDamper, i), ElementParam::C2),
+        Target::DamperC3(i) => element(at(ElementList::CubicDamper, i), ElementParam::C3),
+        Target::RelativeFrictionLevel(i) => {
+            element(at(ElementList::RelativeFriction, i), ElementParam::Level)
+        }
+        // a clearance is two contacts with the same gap and stiffness
+        Target::ClearanceGap(i) | Target::ClearanceStiffness(i) => {
+            let param = if matches!(target, Target::ClearanceGap(_)) {
+                ElementParam::Gap
+            } else {
+                ElementParam::Stiffness
+            };
+            let e = at(ElementList::Clearance, i);
+            ParamSeed {
+                elements: [e, e + 1]
+                    .map(|element| ElementSeed {
+                        element,
+                        param,
+                        scale: s,
+                    })
+                    .to_vec(),
+                ..Default::default()
+            }
+        }
     })
 }
 

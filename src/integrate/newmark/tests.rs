@@ -15,6 +15,11 @@ fn sdof(m: f64, k: f64) -> Model {
         contacts: vec![],
         frictions: vec![],
         cubics: vec![],
+        quadratics: vec![],
+        quadratic_dampers: vec![],
+        cubic_dampers: vec![],
+        clearances: vec![],
+        relative_frictions: vec![],
     }
 }
 
