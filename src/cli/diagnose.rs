@@ -22,22 +22,29 @@ pub struct Args {
     /// Sensor DOFs to use (default: every output channel of the record).
     #[arg(long)]
     sensors: Option<DofList>,
-    /// Segment length of the multiple-shooting error, s.
-    #[arg(long, default_value_t = 0.1)]
-    segment: f64,
-    /// Most effects to add.
-    #[arg(long, default_value_t = 3)]
-    max_effects: usize,
+    /// Settings of the diagnosis (TOML, or JSON: a settings object or a
+    /// report.json, whose settings are replayed); the options below
+    /// override it. Default: the library's defaults.
+    #[arg(long)]
+    settings: Option<PathBuf>,
+    /// Segment length of the multiple-shooting error, s
+    /// (`segments.seconds`).
+    #[arg(long)]
+    segment: Option<f64>,
+    /// Most effects to add (`screen.max_effects`).
+    #[arg(long)]
+    max_effects: Option<usize>,
     /// Sub-steps per sample of the identification and the trace; the
-    /// scored and fitted models use at least this and at least 40, more
-    /// for a stiff element.
-    #[arg(long, default_value_t = 10)]
-    substeps: usize,
+    /// scored and fitted models use at least this and at least
+    /// `substeps.min`, more for a stiff element (`substeps.base`).
+    #[arg(long)]
+    substeps: Option<usize>,
     /// Jacobian of the effect fits' race of starts: forward sensitivities
     /// of the integrator or centered finite differences (the joint fit of
-    /// parameters and start states always uses the sensitivities).
-    #[arg(long, value_enum, default_value = "sens")]
-    jacobian: tacit::update::JacobianMethod,
+    /// parameters and start states always uses the sensitivities;
+    /// `fit.jacobian`).
+    #[arg(long, value_enum)]
+    jacobian: Option<tacit::update::JacobianMethod>,
     /// Use the truth stored in a simulated record as the states (checks the
     /// later steps independently of the identification).
     #[arg(long, hide = true)]
@@ -49,6 +56,34 @@ pub struct Args {
     output: PathBuf,
 }
 
+/// The settings file (or the defaults) with the options on top, validated.
+fn settings(a: &Args) -> anyhow::Result<DiagnoseSettings> {
+    let mut s = match &a.settings {
+        Some(p) => DiagnoseSettings::from_file(p)?,
+        None => DiagnoseSettings::default(),
+    };
+    if let Some(v) = a.segment {
+        if !(v > 0.0) {
+            anyhow::bail!("--segment {v} must be > 0");
+        }
+        s.segments.seconds = v;
+    }
+    if let Some(v) = a.max_effects {
+        s.screen.max_effects = v;
+    }
+    if let Some(v) = a.substeps {
+        s.substeps.base = v;
+    }
+    if let Some(v) = a.jacobian {
+        s.fit.jacobian = v;
+    }
+    if a.truth_states {
+        s.states = diagnose::StatesSource::Truth;
+    }
+    s.validate()?;
+    Ok(s)
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
     let model = Model::from_file(&a.model)?;
     let rec = load_record(&a.record, &a.rec)?;
@@ -56,25 +91,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         Some(p) => Some(load_record(p, &a.rec)?),
         None => None,
     };
-    if !(a.segment > 0.0) {
-        anyhow::bail!("--segment {} must be > 0", a.segment);
-    }
-    let defaults = DiagnoseSettings::default();
-    let settings = DiagnoseSettings {
-        fit: tacit::update::FitSettings {
-            jacobian: a.jacobian,
-            ..defaults.fit
-        },
-        segment_seconds: a.segment,
-        max_effects: a.max_effects,
-        substeps: a.substeps,
-        states: if a.truth_states {
-            diagnose::StatesSource::Truth
-        } else {
-            diagnose::StatesSource::Lifted
-        },
-        ..defaults
-    };
+    let settings = settings(&a)?;
     let sensors = a.sensors.as_ref().map(|d| d.0.clone());
     let bar = if std::io::stderr().is_terminal() {
         let b = ProgressBar::new_spinner();
