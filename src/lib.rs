@@ -28,8 +28,11 @@
 //! - [`trace`]: the residual traced to candidate effects;
 //! - [`diagnose`]: the close-the-loop diagnosis, tacit's main job.
 //!
-//! Output and applications: [`plot`] (figures), [`io`] (atomic writes),
-//! [`diagnose::report`] (the diagnosis's files), [`silverbox`] (the
+//! Output: [`plot`] (figures), [`io`] (atomic writes), [`diagnose::report`]
+//! (the diagnosis's files).
+//!
+//! Applications and the paper's case set-ups, outside the core:
+//! [`cases`] (Table 4's cubic chain, the bumper shooting check, the
 //! Silverbox benchmark run end to end).
 //!
 //! # The diagnosis pipeline
@@ -64,12 +67,12 @@ pub mod signal;
 pub mod simulate;
 
 pub use error::{Result, TacitError};
+pub mod cases;
 pub mod correlate;
 pub mod diagnose;
 pub mod horizon;
 pub mod identify;
 pub mod linear;
 pub mod reduce;
-pub mod silverbox;
 pub mod trace;
 pub mod update;

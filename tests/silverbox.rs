@@ -2,7 +2,7 @@
 //! ../shared/data/silverbox/) through the close-the-loop diagnosis.
 
 use std::path::Path;
-use tacit::silverbox::{self, Settings};
+use tacit::cases::silverbox::{self, Settings};
 
 #[test]
 fn silverbox_loop_finds_the_cubic_and_beats_the_reference_fit() {

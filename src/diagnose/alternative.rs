@@ -6,71 +6,16 @@
 //! the sensors fix poorly can prefer the linear change).
 
 use super::effects::{self, AddedEffect};
-use super::round::{Context, State, Trial};
-use crate::error::Result;
 use crate::model::Model;
 use crate::trace::{EffectKind, RankedEffect};
 use nalgebra::DMatrix;
-use serde::Serialize;
-
-/// The cubic spring tried in place of a stiffness change.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct AlternativeTried {
-    /// The cubic spring's label.
-    pub label: String,
-    /// Its start, N/m³ (the change's equivalent).
-    pub k3: f64,
-    /// Its multiple-shooting error, fitted (None when it failed).
-    pub error: Option<f64>,
-    /// Whether it replaced the stiffness change.
-    pub taken: bool,
-    /// The stiffness change: label and error.
-    pub instead_of: (String, Option<f64>),
-}
-
-/// Try the cubic alternative of `trial` (module docs); returns the trial
-/// that scores better and what was tried, if anything.
-pub(super) fn try_cubic(
-    ctx: &Context<'_>,
-    st: &mut State,
-    trial: Trial,
-    ranking: &[RankedEffect],
-    progress: &dyn Fn(&str),
-) -> Result<(Trial, Option<AlternativeTried>)> {
-    let s = &ctx.settings.screen;
-    let floor = s.alternative_floor * ctx.settings.noise_floor();
-    let far = trial.scored.error.is_some_and(|e| e > floor);
-    let states = &ctx.prep.recon.states;
-    let (best, eff, fitted) = (&trial.best, &trial.effect, &trial.fit.model);
-    let alt = match cubic_alternative(best, eff, fitted, ranking, states, s.alternative_change) {
-        Some(alt) if far => alt,
-        _ => return Ok((trial, None)),
-    };
-    progress(&format!("fit {} (alternative)", alt.label));
-    let k3 = alt
-        .parameters
-        .iter()
-        .find(|p| p.0 == "k3")
-        .map_or(f64::NAN, |p| p.1);
-    let second = ctx.fit_scored(st, alt, None, None)?;
-    let (e1, e2) = (trial.scored.error, second.scored.error);
-    let taken = e2.is_some_and(|e2| e1.is_none_or(|e| e2 < e));
-    let tried = AlternativeTried {
-        label: second.best.label.clone(),
-        k3,
-        error: e2,
-        taken,
-        instead_of: (trial.best.label.clone(), e1),
-    };
-    Ok((if taken { second } else { trial }, Some(tried)))
-}
 
 /// The cubic spring on the pair of a stiffness change of more than
 /// `min_change` (relative),
 /// with the k3 whose equivalent linearization `3 k3 ⟨δ²⟩` (δ the
 /// reconstructed relative displacement) is the fitted change; None for any
 /// other effect or when the trace did not rank that cubic.
-fn cubic_alternative(
+pub(super) fn cubic_alternative(
     best: &RankedEffect,
     eff: &AddedEffect,
     fitted: &Model,

@@ -1,5 +1,5 @@
-//! Keep or withdraw a fitted effect, as a typed decision ([`Decision`];
-//! [`super::report`] puts it into words).
+//! Keep or withdraw a fitted effect, as a typed decision
+//! ([`super::Decision`]; [`super::report`] puts it into words).
 //!
 //! An effect is kept when, fitted, it removes at least
 //! [`ScreenSettings::min_improvement`] of the squared multiple-shooting
@@ -11,87 +11,10 @@
 //! beside it are kept if they alone lower the error by the screen's share
 //! (the joint refit left the earlier fit's local minimum).
 
-use super::round::{Context, Scored, State, Trial};
+use super::outcome::{BelowScreen, Decision, WithdrawReason};
+use super::state::{Context, Scored, State, Trial};
 use super::{effects, ScreenSettings};
 use crate::model::Model;
-use serde::Serialize;
-
-/// A candidate below the trace's screen that was considered anyway.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct BelowScreen {
-    /// Why the trace's screen proposed nothing (the trace's words).
-    pub trace: String,
-    /// Candidates the joint linearization predicted below the screen:
-    /// label and predicted fraction of the fit cost removed.
-    pub screened_out: Vec<(String, f64)>,
-    /// The screen: the fraction of the fit cost a candidate had to be
-    /// predicted to remove.
-    pub screen: f64,
-}
-
-/// Why a fitted effect was withdrawn.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum WithdrawReason {
-    /// Switched off in the fitted model the error is hardly higher: it
-    /// does not itself remove the share `need` of the squared error.
-    NotItself {
-        /// Error with it switched off.
-        without: Option<f64>,
-        /// Error with it.
-        with: Option<f64>,
-        /// Share of the squared error it had to remove.
-        need: f64,
-    },
-    /// Fitted, it does not remove the share `need` of the squared error.
-    TooLittle {
-        /// Share of the squared error it had to remove.
-        need: f64,
-        /// Error before it.
-        before: Option<f64>,
-        /// Error with it, fitted.
-        after: Option<f64>,
-    },
-}
-
-/// How a round of the loop ended.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(rename_all = "snake_case", tag = "outcome")]
-pub enum Decision {
-    /// The model explains the record up to noise: no effect sought.
-    AtNoise {
-        /// Multiple-shooting error.
-        error: f64,
-        /// The noise floor it is at or below.
-        floor: f64,
-    },
-    /// No candidate pays (the trace's words).
-    NothingPays {
-        /// Why the trace stopped.
-        reason: String,
-    },
-    /// Every candidate below the screen was predicted to gain too little.
-    ScreenedOut(BelowScreen),
-    /// The effect is kept.
-    Kept {
-        /// Error before it.
-        before: Option<f64>,
-        /// Error with it, fitted.
-        after: Option<f64>,
-        /// When it came in below the screen.
-        below: Option<BelowScreen>,
-    },
-    /// The effect is withdrawn.
-    Withdrawn {
-        /// Why.
-        reason: WithdrawReason,
-        /// When it came in below the screen.
-        below: Option<BelowScreen>,
-        /// The effects found, as refitted beside it, kept instead: error
-        /// before and after.
-        refit_kept: Option<(Option<f64>, Option<f64>)>,
-    },
-}
 
 /// The decision on a fitted trial, and the model the loop goes on with
 /// when the effect is withdrawn but the effects refitted beside it are

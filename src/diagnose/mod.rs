@@ -61,14 +61,16 @@ mod round;
 mod screen;
 pub mod settings;
 pub mod starts;
+mod state;
 mod substeps;
 mod uncertainty;
 mod validation;
 
-pub use alternative::AlternativeTried;
-pub use decide::{BelowScreen, Decision, WithdrawReason};
 pub use errors::{ChannelError, Comparison, ErrorSet, ErrorStatus, ShotError};
-pub use outcome::{Diagnosis, EffectReport, Round, Score, ToleratedFailure, Validation};
+pub use outcome::{
+    AlternativeTried, BelowScreen, Decision, Diagnosis, EffectReport, Round, Score,
+    ToleratedFailure, Validation, WithdrawReason,
+};
 pub use prepare::{
     prepare, prepare_located, quiet_segments, reconstruct, Prepared, Reconstruction,
 };
@@ -83,7 +85,8 @@ use crate::integrate::SimSettings;
 use crate::model::Model;
 use crate::record::Record;
 use nalgebra::DMatrix;
-use round::{add_time, Context, Next, State};
+use round::Next;
+use state::{add_time, Context, State};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -193,16 +196,7 @@ fn score_after(
         }
         None => (before.clone(), pred_before.clone()),
     };
-    let effects = uncertainty::report_effects(
-        &st.current,
-        &st.added,
-        cmp,
-        sim1,
-        st.fitted.as_ref(),
-        ctx.settings,
-        &mut st.simulations,
-        &mut ctx.tolerated.borrow_mut(),
-    );
+    let effects = uncertainty::report_effects(ctx, st, sim1);
     (after, pred_after, effects)
 }
 

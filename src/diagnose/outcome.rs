@@ -1,8 +1,6 @@
 //! What the diagnosis returns: the errors before and after, the effects
 //! found and how each round of the loop ended.
 
-use super::alternative::AlternativeTried;
-use super::decide::Decision;
 use super::errors::ErrorSet;
 use super::prepare::Prepared;
 use crate::model::Model;
@@ -143,4 +141,96 @@ pub struct Diagnosis {
     /// Segment predictions before and after (p × N).
     #[serde(skip)]
     pub predictions: (Option<DMatrix<f64>>, Option<DMatrix<f64>>),
+}
+
+/// A candidate below the trace's screen that was considered anyway.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BelowScreen {
+    /// Why the trace's screen proposed nothing (the trace's words).
+    pub trace: String,
+    /// Candidates the joint linearization predicted below the screen:
+    /// label and predicted fraction of the fit cost removed.
+    pub screened_out: Vec<(String, f64)>,
+    /// The screen: the fraction of the fit cost a candidate had to be
+    /// predicted to remove.
+    pub screen: f64,
+}
+
+/// Why a fitted effect was withdrawn.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WithdrawReason {
+    /// Switched off in the fitted model the error is hardly higher: it
+    /// does not itself remove the share `need` of the squared error.
+    NotItself {
+        /// Error with it switched off.
+        without: Option<f64>,
+        /// Error with it.
+        with: Option<f64>,
+        /// Share of the squared error it had to remove.
+        need: f64,
+    },
+    /// Fitted, it does not remove the share `need` of the squared error.
+    TooLittle {
+        /// Share of the squared error it had to remove.
+        need: f64,
+        /// Error before it.
+        before: Option<f64>,
+        /// Error with it, fitted.
+        after: Option<f64>,
+    },
+}
+
+/// How a round of the loop ended.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case", tag = "outcome")]
+pub enum Decision {
+    /// The model explains the record up to noise: no effect sought.
+    AtNoise {
+        /// Multiple-shooting error.
+        error: f64,
+        /// The noise floor it is at or below.
+        floor: f64,
+    },
+    /// No candidate pays (the trace's words).
+    NothingPays {
+        /// Why the trace stopped.
+        reason: String,
+    },
+    /// Every candidate below the screen was predicted to gain too little.
+    ScreenedOut(BelowScreen),
+    /// The effect is kept.
+    Kept {
+        /// Error before it.
+        before: Option<f64>,
+        /// Error with it, fitted.
+        after: Option<f64>,
+        /// When it came in below the screen.
+        below: Option<BelowScreen>,
+    },
+    /// The effect is withdrawn.
+    Withdrawn {
+        /// Why.
+        reason: WithdrawReason,
+        /// When it came in below the screen.
+        below: Option<BelowScreen>,
+        /// The effects found, as refitted beside it, kept instead: error
+        /// before and after.
+        refit_kept: Option<(Option<f64>, Option<f64>)>,
+    },
+}
+
+/// The cubic spring tried in place of a stiffness change.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AlternativeTried {
+    /// The cubic spring's label.
+    pub label: String,
+    /// Its start, N/m³ (the change's equivalent).
+    pub k3: f64,
+    /// Its multiple-shooting error, fitted (None when it failed).
+    pub error: Option<f64>,
+    /// Whether it replaced the stiffness change.
+    pub taken: bool,
+    /// The stiffness change: label and error.
+    pub instead_of: (String, Option<f64>),
 }

@@ -1,273 +1,87 @@
 //! One round of the loop: trace the residual to a candidate effect,
-//! screen it, fit it, decide whether it stays.
-//!
-//! [`Context`] holds what every round reads (the record prepared, the
-//! declared model, the settings); [`State`] what the rounds change (the
-//! current model and its error, the effects kept, the rounds' outcomes,
-//! the counts and timings).
+//! screen it, fit it (and the cubic alternative of a large stiffness
+//! change), decide whether it stays.
 
-use super::alternative;
-use super::decide::{self, Decision};
+use super::alternative::cubic_alternative;
+use super::decide;
 use super::effects::AddedEffect;
-use super::errors::{shot_simulations, Comparison, ErrorSet, ShotResult};
 use super::fit::{fit_effects, EffectFit};
-use super::outcome::{Round, Score, ToleratedFailure};
-use super::prepare::{rescore_prep, Prepared};
+use super::outcome::{AlternativeTried, Decision, Round, Score};
 use super::screen;
+use super::state::{add_time, add_to, Context, KeptEffect, State, Trial};
 use super::substeps::resolved;
-use super::DiagnoseSettings;
 use crate::error::Result;
-use crate::integrate::SimSettings;
 use crate::model::Model;
-use crate::record::Record;
 use crate::trace::{self, RankedEffect, TraceInput, TraceResult};
-use crate::update::shooting::Segment;
 use nalgebra::DMatrix;
-use std::cell::RefCell;
-use std::collections::BTreeMap;
 use std::time::Instant;
 
-/// Add the seconds since `t` to the timing `name`.
-pub(super) fn add_time(timings: &mut BTreeMap<String, f64>, name: &str, t: Instant) {
-    *timings.entry(name.into()).or_insert(0.0) += t.elapsed().as_secs_f64();
-}
-
-/// What every round reads.
-pub(super) struct Context<'a> {
-    /// The declared model.
-    pub declared: &'a Model,
-    /// The record diagnosed.
-    pub rec: &'a Record,
-    /// Sensor DOFs used (all outputs when None).
-    pub sensors: Option<&'a [usize]>,
-    /// Settings.
-    pub settings: &'a DiagnoseSettings,
-    /// The record prepared.
-    pub prep: &'a Prepared,
-    /// Output maps of the linear model on the channels.
-    pub cy: DMatrix<f64>,
-    /// Feed-through of the channels.
-    pub dy: DMatrix<f64>,
-    /// Measured channels (p × N).
-    pub measured: DMatrix<f64>,
-    /// Located force directions (n × q).
-    pub located: Option<DMatrix<f64>>,
-    /// Failures gone on past, each with its fallback.
-    pub tolerated: RefCell<Vec<ToleratedFailure>>,
-}
-
-/// A model's multiple shooting on the record.
-pub(super) struct Scored {
-    /// The model's own reconstruction, when it needs one
-    /// ([`rescore_prep`]).
-    pub own: Option<Prepared>,
-    /// The multiple shooting.
-    pub shot: ShotResult,
-    /// Its error on the record.
-    pub error: Option<f64>,
-}
-
-/// An effect added, fitted and scored.
-pub(super) struct Trial {
-    /// The candidate.
-    pub best: RankedEffect,
-    /// Its bookkeeping.
-    pub effect: AddedEffect,
-    /// The fit.
-    pub fit: EffectFit,
-    /// Simulation settings that resolve the fitted model.
-    pub sim: SimSettings,
-    /// The fitted model's multiple shooting.
-    pub scored: Scored,
-}
-
-/// An effect kept.
-pub(super) struct KeptEffect {
-    /// Its bookkeeping.
-    pub effect: AddedEffect,
-    /// How the trace ranked it.
-    pub ranked: RankedEffect,
-    /// How much it paid.
-    pub score: Score,
-}
-
-/// What the rounds change.
-pub(super) struct State {
-    /// The current model.
-    pub current: Model,
-    /// Its multiple-shooting error.
-    pub error: Option<f64>,
-    /// Its sub-steps.
-    pub substeps: usize,
-    /// Its multiple shooting, once an effect is kept.
-    pub scored: Option<(Option<Prepared>, ShotResult)>,
-    /// The fit segments with their fitted start states and the fit's
-    /// simulation settings.
-    pub fitted: Option<(Vec<Segment>, SimSettings)>,
-    /// Segment predictions of the current model for the trace (a
-    /// nonlinear model).
-    pub baseline: Option<DMatrix<f64>>,
-    /// Effects kept.
-    pub added: Vec<KeptEffect>,
-    /// The rounds so far.
-    pub rounds: Vec<Round>,
-    /// Best candidates of the first trace round.
-    pub ranking: Vec<RankedEffect>,
-    /// Nonlinear segment simulations.
-    pub simulations: usize,
-    /// Linear segment simulations of the trace.
-    pub trace_simulations: usize,
-    /// Stage timings, s.
-    pub timings: BTreeMap<String, f64>,
-}
-
-impl State {
-    /// The state before any round: the declared model scored.
-    pub fn new(
-        declared: &Model,
-        before: &ErrorSet,
-        pred_before: Option<&DMatrix<f64>>,
-        substeps: usize,
-        simulations: usize,
-        timings: BTreeMap<String, f64>,
-    ) -> State {
-        State {
-            current: declared.clone(),
-            error: before.relative_error,
-            substeps,
-            scored: None,
-            fitted: None,
-            baseline: pred_before.filter(|_| declared.is_nonlinear()).cloned(),
-            added: vec![],
-            rounds: vec![],
-            ranking: vec![],
-            simulations,
-            trace_simulations: 0,
-            timings,
-        }
+/// Fit the effects `all` on `trial`: a trial with a spring to ground
+/// is fitted from states reconstructed with its own linear part (as it
+/// is scored), not from the declared reconstruction corrected along
+/// the hidden trajectories.
+fn fit_trial(
+    ctx: &Context<'_>,
+    trial: &Model,
+    all: &[AddedEffect],
+    correction: Option<&DMatrix<f64>>,
+    predicted: Option<&[Vec<f64>]>,
+) -> Result<EffectFit> {
+    let fs = ctx.rec.fs;
+    match &ctx.own_prep(trial, ctx.rec) {
+        Some(o) => fit_effects(
+            trial,
+            all,
+            &o.comparison,
+            &o.recon.states,
+            None,
+            predicted,
+            fs,
+            ctx.settings,
+        ),
+        None => fit_effects(
+            trial,
+            all,
+            ctx.cmp(),
+            &ctx.prep.recon.states,
+            correction,
+            predicted,
+            fs,
+            ctx.settings,
+        ),
     }
 }
 
-impl<'a> Context<'a> {
-    /// The comparison data of the record.
-    pub fn cmp(&self) -> &'a Comparison {
-        &self.prep.comparison
+/// Add `best` to the current model, fit every added effect and score
+/// the fitted model.
+pub(super) fn fit_scored(
+    ctx: &Context<'_>,
+    st: &mut State,
+    best: RankedEffect,
+    correction: Option<&DMatrix<f64>>,
+    predicted: Option<&[Vec<f64>]>,
+) -> Result<Trial> {
+    let (model, effect, all) = add_to(st, &best);
+    let t = Instant::now();
+    let fit = fit_trial(ctx, &model, &all, correction, predicted)?;
+    st.simulations += fit.simulations;
+    add_time(&mut st.timings, "fit", t);
+    ctx.tolerated
+        .borrow_mut()
+        .extend(fit.failures.iter().cloned());
+    for (name, secs) in fit.stages {
+        *st.timings.entry(name.into()).or_insert(0.0) += secs;
     }
-
-    /// Record a failure the diagnosis goes on past.
-    pub fn tolerate(&self, step: &str, error: impl std::fmt::Display, fallback: &str) {
-        self.tolerated.borrow_mut().push(ToleratedFailure {
-            step: step.into(),
-            error: error.to_string(),
-            fallback: fallback.into(),
-        });
-    }
-
-    /// `model`'s own reconstruction of `rec` when it needs one
-    /// ([`rescore_prep`]; when it fails, the declared model's is used and
-    /// the failure is recorded).
-    pub fn own_prep(&self, model: &Model, rec: &Record) -> Option<Prepared> {
-        let located = self.prep.located.as_ref();
-        match rescore_prep(
-            self.declared,
-            model,
-            rec,
-            self.sensors,
-            self.settings,
-            located,
-        ) {
-            Ok(p) => p,
-            Err(e) => {
-                let step = "reconstruction with the model's spring to ground";
-                self.tolerate(step, e, "the declared model's reconstruction");
-                None
-            }
-        }
-    }
-
-    /// A model's multiple shooting (from its own reconstruction when it
-    /// needs one) and the simulations run; the error is on the record.
-    pub fn shoot(&self, model: &Model, sim: SimSettings) -> (Scored, usize) {
-        let own = self.own_prep(model, self.rec);
-        let own_cmp = own.as_ref().map_or(self.cmp(), |p| &p.comparison);
-        let shot = own_cmp.shoot(model, sim);
-        let n = shot_simulations(shot.as_ref().ok().and_then(|p| p.2.as_ref()), own_cmp);
-        let error = shot.as_ref().ok().map(|y| self.cmp().total_error(&y.0));
-        (Scored { own, shot, error }, n)
-    }
-
-    /// Fit the effects `all` on `trial`: a trial with a spring to ground
-    /// is fitted from states reconstructed with its own linear part (as it
-    /// is scored), not from the declared reconstruction corrected along
-    /// the hidden trajectories.
-    fn fit_trial(
-        &self,
-        trial: &Model,
-        all: &[AddedEffect],
-        correction: Option<&DMatrix<f64>>,
-        predicted: Option<&[Vec<f64>]>,
-    ) -> Result<EffectFit> {
-        let fs = self.rec.fs;
-        match &self.own_prep(trial, self.rec) {
-            Some(o) => fit_effects(
-                trial,
-                all,
-                &o.comparison,
-                &o.recon.states,
-                None,
-                predicted,
-                fs,
-                self.settings,
-            ),
-            None => fit_effects(
-                trial,
-                all,
-                self.cmp(),
-                &self.prep.recon.states,
-                correction,
-                predicted,
-                fs,
-                self.settings,
-            ),
-        }
-    }
-
-    /// Add `best` to the current model, fit every added effect and score
-    /// the fitted model.
-    pub fn fit_scored(
-        &self,
-        st: &mut State,
-        best: RankedEffect,
-        correction: Option<&DMatrix<f64>>,
-        predicted: Option<&[Vec<f64>]>,
-    ) -> Result<Trial> {
-        let (model, effect, all) = screen::add_to(st, &best);
-        let t = Instant::now();
-        let fit = self.fit_trial(&model, &all, correction, predicted)?;
-        st.simulations += fit.simulations;
-        add_time(&mut st.timings, "fit", t);
-        self.tolerated
-            .borrow_mut()
-            .extend(fit.failures.iter().cloned());
-        for (name, secs) in fit.stages {
-            *st.timings.entry(name.into()).or_insert(0.0) += secs;
-        }
-        let sim = resolved(
-            &fit.model,
-            self.rec.fs,
-            self.settings,
-            &self.prep.recon.states,
-        );
-        let (scored, n) = self.shoot(&fit.model, sim);
-        st.simulations += n;
-        Ok(Trial {
-            best,
-            effect,
-            fit,
-            sim,
-            scored,
-        })
-    }
+    let sim = resolved(&fit.model, ctx.rec.fs, ctx.settings, &ctx.prep.recon.states);
+    let (scored, n) = ctx.shoot(&fit.model, sim);
+    st.simulations += n;
+    Ok(Trial {
+        best,
+        effect,
+        fit,
+        sim,
+        scored,
+    })
 }
 
 /// Whether the loop goes on.
@@ -310,7 +124,8 @@ pub(super) fn run(
     };
     progress(&format!("fit {}", chosen.best.label));
     let correction = hidden_correction(&chosen.best, &tr, &ctx.prep.recon.states);
-    let trial = ctx.fit_scored(
+    let trial = fit_scored(
+        ctx,
         st,
         chosen.best,
         correction.as_ref(),
@@ -318,7 +133,7 @@ pub(super) fn run(
     )?;
     let fit_sims = trial.fit.simulations;
     let (trial, alternative) = if screened {
-        alternative::try_cubic(ctx, st, trial, &tr.ranking, progress)?
+        try_cubic(ctx, st, trial, &tr.ranking, progress)?
     } else {
         (trial, None)
     };
@@ -420,4 +235,42 @@ fn apply(st: &mut State, trial: Trial, judged: decide::Judged) -> Next {
         st.scored = Some((off_scored.own, off_scored.shot));
     }
     Next::Stop
+}
+
+/// Try the cubic spring in place of a large stiffness change
+/// ([`super::alternative`]); returns the trial
+/// that scores better and what was tried, if anything.
+pub(super) fn try_cubic(
+    ctx: &Context<'_>,
+    st: &mut State,
+    trial: Trial,
+    ranking: &[RankedEffect],
+    progress: &dyn Fn(&str),
+) -> Result<(Trial, Option<AlternativeTried>)> {
+    let s = &ctx.settings.screen;
+    let floor = s.alternative_floor * ctx.settings.noise_floor();
+    let far = trial.scored.error.is_some_and(|e| e > floor);
+    let states = &ctx.prep.recon.states;
+    let (best, eff, fitted) = (&trial.best, &trial.effect, &trial.fit.model);
+    let alt = match cubic_alternative(best, eff, fitted, ranking, states, s.alternative_change) {
+        Some(alt) if far => alt,
+        _ => return Ok((trial, None)),
+    };
+    progress(&format!("fit {} (alternative)", alt.label));
+    let k3 = alt
+        .parameters
+        .iter()
+        .find(|p| p.0 == "k3")
+        .map_or(f64::NAN, |p| p.1);
+    let second = fit_scored(ctx, st, alt, None, None)?;
+    let (e1, e2) = (trial.scored.error, second.scored.error);
+    let taken = e2.is_some_and(|e2| e1.is_none_or(|e| e2 < e));
+    let tried = AlternativeTried {
+        label: second.best.label.clone(),
+        k3,
+        error: e2,
+        taken,
+        instead_of: (trial.best.label.clone(), e1),
+    };
+    Ok((if taken { second } else { trial }, Some(tried)))
 }

@@ -11,12 +11,12 @@
 //! linearization at the current fit ([`joint::predicted_gain`]) predicts
 //! it removes enough of the fit cost.
 
-use super::decide::BelowScreen;
 use super::effects::{self, AddedEffect};
 use super::errors::Comparison;
 use super::joint;
+use super::outcome::BelowScreen;
 use super::prepare::grounded;
-use super::round::{add_time, Context, KeptEffect, State};
+use super::state::{add_time, add_to, Context, KeptEffect, State};
 use super::DiagnoseSettings;
 use crate::error::Result;
 use crate::integrate::SimSettings;
@@ -32,16 +32,6 @@ pub(super) struct Chosen {
     pub best: RankedEffect,
     /// Start values from the joint linearization's step (below the screen).
     pub predicted: Option<Vec<Vec<f64>>>,
-}
-
-/// The current model with `best` added, its bookkeeping, and every added
-/// effect with it last.
-pub(super) fn add_to(st: &State, best: &RankedEffect) -> (Model, AddedEffect, Vec<AddedEffect>) {
-    let mut trial = st.current.clone();
-    let eff = effects::add(&mut trial, best);
-    let mut all: Vec<AddedEffect> = st.added.iter().map(|a| a.effect.clone()).collect();
-    all.push(eff.clone());
-    (trial, eff, all)
 }
 
 /// The candidates of a round, in the order they are tried: the one the
@@ -150,6 +140,10 @@ fn companion_screen(err: Option<f64>, settings: &DiagnoseSettings) -> f64 {
     }
 }
 
+/// A predicted gain, the simulations spent and the parameter values at
+/// the strides of the linearization's step.
+type Predicted = (Option<f64>, usize, Option<Vec<Vec<f64>>>);
+
 /// The fraction of the fit cost a candidate below the screen (the last
 /// effect of `all` on `trial`, taken at no change: a spring at its declared
 /// stiffness, a nonlinear element at zero strength with its traced gap) is
@@ -165,7 +159,7 @@ fn companion_gain(
     cmp: &Comparison,
     (segs, sim): (&[Segment], SimSettings),
     strides: &[f64],
-) -> Result<(Option<f64>, usize, Option<Vec<Vec<f64>>>)> {
+) -> Result<Predicted> {
     let mut params = vec![];
     let mut extra = 0;
     for e in all {

@@ -4,7 +4,7 @@ use super::effects;
 use super::errors::Comparison;
 use super::fit::spread;
 use super::outcome::{EffectReport, ToleratedFailure};
-use super::round::KeptEffect;
+use super::state::{Context, KeptEffect, State};
 use super::{joint, DiagnoseSettings};
 use crate::integrate::SimSettings;
 use crate::model::Model;
@@ -19,15 +19,51 @@ use std::collections::BTreeMap;
 /// parameters), else from the parameter Jacobian with the reconstructed
 /// start states.
 pub(super) fn report_effects(
-    model: &Model,
-    added: &[KeptEffect],
-    cmp: &Comparison,
+    ctx: &Context<'_>,
+    st: &mut State,
+    sim: SimSettings,
+) -> Vec<EffectReport> {
+    let (model, added) = (&st.current, &st.added);
+    let fitted = st.fitted.as_ref();
+    let ses = standard_errors(ctx, (model, added), sim, fitted, &mut st.simulations);
+    added
+        .iter()
+        .enumerate()
+        .map(|(ei, k)| {
+            let (e, r, score) = (&k.effect, &k.ranked, &k.score);
+            let vals = effects::values(model, e);
+            let mut std_errors = BTreeMap::new();
+            for (pi, (name, _)) in vals.iter().enumerate() {
+                let se = ses.get(&(ei, pi)).copied().filter(|x| x.is_finite());
+                let se = match e.candidate.kind {
+                    EffectKind::Stiffness if e.nominal != 0.0 => se.map(|s| s / e.nominal),
+                    _ => se,
+                };
+                std_errors.insert(name.clone(), se);
+            }
+            EffectReport {
+                kind: e.candidate.kind,
+                dofs: e.candidate.dofs.iter().map(|d| d + 1).collect(),
+                label: e.label.clone(),
+                parameters: vals.into_iter().collect(),
+                std_errors,
+                traced: r.parameters.iter().cloned().collect(),
+                score: score.clone(),
+            }
+        })
+        .collect()
+}
+
+/// The standard error of each parameter, by (effect, parameter) index.
+fn standard_errors(
+    ctx: &Context<'_>,
+    (model, added): (&Model, &[KeptEffect]),
     sim: SimSettings,
     fitted: Option<&(Vec<Segment>, SimSettings)>,
-    settings: &DiagnoseSettings,
     sims: &mut usize,
-    tolerated: &mut Vec<ToleratedFailure>,
-) -> Vec<EffectReport> {
+) -> BTreeMap<(usize, usize), f64> {
+    let (cmp, settings): (&Comparison, &DiagnoseSettings) = (ctx.cmp(), ctx.settings);
+    let mut tolerated = ctx.tolerated.borrow_mut();
     let mut tolerate = |step: String, error: String, fallback: &str| {
         tolerated.push(ToleratedFailure {
             step,
@@ -104,30 +140,5 @@ pub(super) fn report_effects(
             }
         }
     }
-    added
-        .iter()
-        .enumerate()
-        .map(|(ei, k)| {
-            let (e, r, score) = (&k.effect, &k.ranked, &k.score);
-            let vals = effects::values(model, e);
-            let mut std_errors = BTreeMap::new();
-            for (pi, (name, _)) in vals.iter().enumerate() {
-                let se = ses.get(&(ei, pi)).copied().filter(|x| x.is_finite());
-                let se = match e.candidate.kind {
-                    EffectKind::Stiffness if e.nominal != 0.0 => se.map(|s| s / e.nominal),
-                    _ => se,
-                };
-                std_errors.insert(name.clone(), se);
-            }
-            EffectReport {
-                kind: e.candidate.kind,
-                dofs: e.candidate.dofs.iter().map(|d| d + 1).collect(),
-                label: e.label.clone(),
-                parameters: vals.into_iter().collect(),
-                std_errors,
-                traced: r.parameters.iter().cloned().collect(),
-                score: score.clone(),
-            }
-        })
-        .collect()
+    ses
 }
