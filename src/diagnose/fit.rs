@@ -10,6 +10,7 @@ use super::effects::{self, AddedEffect};
 use super::errors::Comparison;
 use super::outcome::ToleratedFailure;
 use super::polish::{noise_cost, polish, Polished};
+use super::settings::ZeroStarts;
 use super::substeps::resolved;
 use super::DiagnoseSettings;
 use crate::error::Result;
@@ -76,7 +77,12 @@ pub(super) fn fit_effects(
 ) -> Result<EffectFit> {
     let mut floored = trial.clone();
     for e in all {
-        floor_start(&mut floored, e, states, &cmp.force);
+        floor_start(
+            &mut floored,
+            e,
+            (states, &cmp.force),
+            &settings.fit.zero_starts,
+        );
     }
     let trial = &floored;
     let mut params = vec![];
@@ -423,10 +429,16 @@ fn scan_contact(
 /// A traced value of zero cannot be scaled relatively (a contact traced
 /// to switch on at zero gap, or with zero stiffness; a friction level or
 /// a spring of zero): such a value starts the fit at a small positive one
-/// instead — a gap of 5 % of the largest reconstructed relative
-/// displacement, 10× the stiffest spring at the pair, 0.1 % of the largest
-/// applied force, 0.1 % of the stiffest spring.
-fn floor_start(model: &mut Model, e: &AddedEffect, states: &DMatrix<f64>, force: &DMatrix<f64>) {
+/// instead ([`ZeroStarts`]: by default a gap of 5 % of the largest
+/// reconstructed relative displacement, 10× the stiffest spring at the
+/// pair, 0.1 % of the largest applied force, 0.1 % of the stiffest
+/// spring).
+fn floor_start(
+    model: &mut Model,
+    e: &AddedEffect,
+    (states, force): (&DMatrix<f64>, &DMatrix<f64>),
+    z: &ZeroStarts,
+) {
     let stiffest = |m: &Model, dofs: &[usize]| {
         m.springs
             .iter()
@@ -446,11 +458,11 @@ fn floor_start(model: &mut Model, e: &AddedEffect, states: &DMatrix<f64>, force:
                 let dmax = (0..states.ncols())
                     .map(|k| e.candidate.delta(states, k))
                     .fold(0.0, f64::max);
-                (0.05 * dmax).max(1e-9)
+                (z.gap * dmax).max(1e-9)
             }
-            Target::ContactStiffness(_) => 10.0 * stiffest(model, dofs),
-            Target::FrictionLevel(_) => (1e-3 * force.amax()).max(1e-9),
-            Target::SpringStiffness(_) => 1e-3 * stiffest(model, dofs),
+            Target::ContactStiffness(_) => z.contact_stiffness * stiffest(model, dofs),
+            Target::FrictionLevel(_) => (z.friction * force.amax()).max(1e-9),
+            Target::SpringStiffness(_) => z.spring * stiffest(model, dofs),
             _ => continue,
         };
         t.set(model, floor);

@@ -76,7 +76,7 @@ pub use prepare::{
 };
 pub use settings::{
     DiagnoseSettings, FitGroup, LiftedGroup, LocateSettings, NoiseSettings, ScreenSettings,
-    SegmentSettings, StartSettings, StatesSource, SubstepSettings, TraceGroup,
+    SegmentSettings, StartSettings, StatesSource, SubstepSettings, TraceGroup, ZeroStarts,
 };
 pub use substeps::auto_substeps;
 

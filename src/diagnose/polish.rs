@@ -122,7 +122,7 @@ pub(super) fn polish(
             break;
         }
         // a second start that stays well above the first is given up
-        if beat.is_some_and(|b| cost > 2.0 * b) {
+        if beat.is_some_and(|b| cost > s.give_up * b) {
             break;
         }
     }

@@ -362,6 +362,40 @@ pub struct FitGroup {
     /// reconstructed relative displacement (default 1.2; ≥ 1). Reason:
     /// beyond it the contact never closes.
     pub gap_upper: f64,
+    /// Where a parameter traced at zero (which cannot be scaled
+    /// relatively) starts instead.
+    pub zero_starts: ZeroStarts,
+}
+
+/// Starts of parameters traced at zero: a contact traced to switch on at
+/// zero gap or with zero stiffness, a friction level or a spring of zero.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ZeroStarts {
+    /// A contact's gap, as a fraction of the largest reconstructed
+    /// relative displacement (default 0.05; > 0). Reason: just inside the
+    /// motion, so the contact closes.
+    pub gap: f64,
+    /// A contact's stiffness, as a multiple of the stiffest spring at the
+    /// pair (default 10; > 0). Reason: the lower end of a bumper's range.
+    pub contact_stiffness: f64,
+    /// A friction level, as a fraction of the largest applied force
+    /// (default 1e-3; > 0). Reason: small, yet it scales.
+    pub friction: f64,
+    /// A spring's stiffness, as a fraction of the stiffest spring at its
+    /// DOFs (default 1e-3; > 0). Reason: small, yet it scales.
+    pub spring: f64,
+}
+
+impl Default for ZeroStarts {
+    fn default() -> Self {
+        ZeroStarts {
+            gap: 0.05,
+            contact_stiffness: 10.0,
+            friction: 1e-3,
+            spring: 1e-3,
+        }
+    }
 }
 
 impl Default for FitGroup {
@@ -379,6 +413,7 @@ impl Default for FitGroup {
             contact_stiffnesses: vec![10.0, 40.0],
             gap_quantiles: vec![0.8, 0.88, 0.93, 0.96, 0.98, 0.99, 0.995],
             gap_upper: 1.2,
+            zero_starts: ZeroStarts::default(),
         }
     }
 }
@@ -415,6 +450,10 @@ pub struct StartSettings {
     pub stall_steps: usize,
     /// See `stall_steps` (default 1e-3; [0, 1)).
     pub stall_gain: f64,
+    /// A second race start carried on is given up once its cost exceeds
+    /// this multiple of the first's (default 2; ≥ 1). Reason: it will not
+    /// catch up, and each alternation costs a joint fit.
+    pub give_up: f64,
 }
 
 impl Default for StartSettings {
@@ -428,6 +467,7 @@ impl Default for StartSettings {
             run_in_passes: 2,
             stall_steps: 3,
             stall_gain: 1e-3,
+            give_up: 2.0,
         }
     }
 }
@@ -632,6 +672,13 @@ impl DiagnoseSettings {
             "starts.stall_gain",
             st.stall_gain,
             "must be in [0, 1)",
+        )?;
+        let g = st.give_up;
+        rule(
+            g >= 1.0 && g.is_finite(),
+            "starts.give_up",
+            g,
+            "must be ≥ 1",
         )
     }
 
@@ -777,6 +824,27 @@ impl DiagnoseSettings {
             "fit.gap_upper",
             f.gap_upper,
             "must be ≥ 1",
+        )?;
+        let z = &f.zero_starts;
+        rule(positive(z.gap), "fit.zero_starts.gap", z.gap, "must be > 0")?;
+        let k = z.contact_stiffness;
+        rule(
+            positive(k),
+            "fit.zero_starts.contact_stiffness",
+            k,
+            "must be > 0",
+        )?;
+        rule(
+            positive(z.friction),
+            "fit.zero_starts.friction",
+            z.friction,
+            "must be > 0",
+        )?;
+        rule(
+            positive(z.spring),
+            "fit.zero_starts.spring",
+            z.spring,
+            "must be > 0",
         )
     }
 
@@ -898,6 +966,17 @@ mod tests {
             ("starts.settled", |s| s.starts.settled = -0.5),
             ("starts.stall_steps", |s| s.starts.stall_steps = 0),
             ("starts.stall_gain", |s| s.starts.stall_gain = 2.0),
+            ("starts.give_up", |s| s.starts.give_up = 0.5),
+            ("fit.zero_starts.gap", |s| s.fit.zero_starts.gap = 0.0),
+            ("fit.zero_starts.contact_stiffness", |s| {
+                s.fit.zero_starts.contact_stiffness = -1.0
+            }),
+            ("fit.zero_starts.friction", |s| {
+                s.fit.zero_starts.friction = 0.0
+            }),
+            ("fit.zero_starts.spring", |s| {
+                s.fit.zero_starts.spring = f64::NAN
+            }),
             ("horizon: lambda", |s| s.horizon.lambda = 0.0),
         ];
         for (field, brk) in cases {
