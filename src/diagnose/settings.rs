@@ -561,6 +561,69 @@ impl DiagnoseSettings {
 
     /// Check every rule; the error names the field, its value and the rule.
     pub fn validate(&self) -> Result<()> {
+        self.validate_basics()?;
+        self.validate_lifted()?;
+        self.horizon.validate().map_err(|e| match e {
+            TacitError::Setting(m) => TacitError::Setting(format!("diagnose settings: {m}")),
+            e => e,
+        })?;
+        let t = &self.trace;
+        rule(
+            fraction(t.min_gain),
+            "trace.min_gain",
+            t.min_gain,
+            "must be in [0, 1)",
+        )?;
+        rule(
+            positive(t.friction_vreg),
+            "trace.friction_vreg",
+            t.friction_vreg,
+            "must be > 0",
+        )?;
+        rule(t.gap_grid >= 2, "trace.gap_grid", t.gap_grid, "must be ≥ 2")?;
+        self.validate_screen()?;
+        self.validate_fit()?;
+        let st = &self.starts;
+        rule(
+            fraction(st.alternation_gain),
+            "starts.alternation_gain",
+            st.alternation_gain,
+            "must be in [0, 1)",
+        )?;
+        rule(
+            st.outlier > 1.0 && st.outlier.is_finite(),
+            "starts.outlier",
+            st.outlier,
+            "must be > 1",
+        )?;
+        rule(
+            fraction(st.settled),
+            "starts.settled",
+            st.settled,
+            "must be in [0, 1)",
+        )?;
+        rule(
+            st.stall_steps >= 1,
+            "starts.stall_steps",
+            st.stall_steps,
+            "must be ≥ 1",
+        )?;
+        rule(
+            fraction(st.stall_gain),
+            "starts.stall_gain",
+            st.stall_gain,
+            "must be in [0, 1)",
+        )?;
+        let g = st.give_up;
+        rule(
+            g >= 1.0 && g.is_finite(),
+            "starts.give_up",
+            g,
+            "must be ≥ 1",
+        )
+    }
+
+    fn validate_basics(&self) -> Result<()> {
         let n = &self.noise;
         rule(
             n.level > 0.0 && n.level < 1.0,
@@ -620,65 +683,6 @@ impl DiagnoseSettings {
             "locate.noise_stop",
             l.noise_stop,
             "must be > 0",
-        )?;
-        self.validate_lifted()?;
-        self.horizon.validate().map_err(|e| match e {
-            TacitError::Setting(m) => TacitError::Setting(format!("diagnose settings: {m}")),
-            e => e,
-        })?;
-        let t = &self.trace;
-        rule(
-            fraction(t.min_gain),
-            "trace.min_gain",
-            t.min_gain,
-            "must be in [0, 1)",
-        )?;
-        rule(
-            positive(t.friction_vreg),
-            "trace.friction_vreg",
-            t.friction_vreg,
-            "must be > 0",
-        )?;
-        rule(t.gap_grid >= 2, "trace.gap_grid", t.gap_grid, "must be ≥ 2")?;
-        self.validate_screen()?;
-        self.validate_fit()?;
-        let st = &self.starts;
-        rule(
-            fraction(st.alternation_gain),
-            "starts.alternation_gain",
-            st.alternation_gain,
-            "must be in [0, 1)",
-        )?;
-        rule(
-            st.outlier > 1.0 && st.outlier.is_finite(),
-            "starts.outlier",
-            st.outlier,
-            "must be > 1",
-        )?;
-        rule(
-            fraction(st.settled),
-            "starts.settled",
-            st.settled,
-            "must be in [0, 1)",
-        )?;
-        rule(
-            st.stall_steps >= 1,
-            "starts.stall_steps",
-            st.stall_steps,
-            "must be ≥ 1",
-        )?;
-        rule(
-            fraction(st.stall_gain),
-            "starts.stall_gain",
-            st.stall_gain,
-            "must be in [0, 1)",
-        )?;
-        let g = st.give_up;
-        rule(
-            g >= 1.0 && g.is_finite(),
-            "starts.give_up",
-            g,
-            "must be ≥ 1",
         )
     }
 
