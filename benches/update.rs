@@ -4,7 +4,7 @@
 //! - one Table 4 column end to end (`PCD, FM, D`: the full-order column;
 //!   the reduced columns fall back to finite differences, so both settings
 //!   run the same code there), noise-free, from the nominal model;
-//! - the multiple-shooting contact fit of [`update::contact_case`] (gap
+//! - the multiple-shooting contact fit of [`tacit::cases::contact_case`] (gap
 //!   and stiffness of the 5→6 bumper of lanl8dof, 4096 samples, 1 % noise,
 //!   accelerations at DOFs 1, 5, 6, 80 segments of 0.1 s from the true
 //!   states, 40 sub-steps), started 30 % off (gap +30 %, stiffness −30 %).
@@ -16,7 +16,8 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
-use tacit::update::{self, contact_case, table4, FitResult, FitSettings, JacobianMethod};
+use tacit::cases::{contact_case, table4};
+use tacit::update::{self, FitResult, FitSettings, JacobianMethod};
 
 fn describe(label: &str, r: &FitResult) {
     let pct: Vec<String> = r

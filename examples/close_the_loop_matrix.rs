@@ -4,6 +4,9 @@
 //! declared linear model and validated on a second record.
 //!
 //! `cargo run --release --example close_the_loop_matrix [-- --quick] [--only TEXT]`
+//!
+//! With `TACIT_MATRIX_JSON=DIR` set, each diagnosis is also written whole
+//! to `DIR/case-K.json` (K counts the rows), for comparing runs.
 
 use tacit::diagnose::{diagnose, DiagnoseSettings};
 use tacit::integrate::SimSettings;
@@ -101,6 +104,8 @@ fn main() {
         .and_then(|i| args.get(i + 1).cloned());
     println!("| record | sensors | truth | found | parameters | relative_error before → after | validation before → after | time |");
     println!("|---|---|---|---|---|---|---|---|");
+    let dump = std::env::var_os("TACIT_MATRIX_JSON").map(std::path::PathBuf::from);
+    let mut row = 0;
     for (name, truth, truth_text) in cases() {
         if only.as_ref().is_some_and(|o| !name.contains(o.as_str())) {
             continue;
@@ -134,6 +139,12 @@ fn main() {
                     continue;
                 }
             };
+            row += 1;
+            if let Some(dir) = &dump {
+                std::fs::create_dir_all(dir).unwrap();
+                let json = serde_json::to_string_pretty(&d).unwrap();
+                std::fs::write(dir.join(format!("case-{row}.json")), json).unwrap();
+            }
             let pct = |x: Option<f64>| x.map_or("failed".into(), |v| format!("{:.1} %", 100.0 * v));
             let params: Vec<String> = d
                 .effects
@@ -144,7 +155,7 @@ fn main() {
                         .iter()
                         .map(|(k, v)| format!("{k} {v:.4e}"))
                         .collect();
-                    format!("{} {:?}: {}", e.kind, e.dofs, p.join(", "))
+                    format!("{} {:?}: {}", e.kind.name(), e.dofs, p.join(", "))
                 })
                 .collect();
             let v = d.validation.as_ref().unwrap();

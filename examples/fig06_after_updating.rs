@@ -6,7 +6,8 @@
 //! Run: `cargo run --release --example fig06_after_updating`
 
 use std::path::Path;
-use tacit::update::{self, table4, FitSettings};
+use tacit::cases::table4;
+use tacit::update::{self, FitSettings};
 
 fn main() -> tacit::Result<()> {
     let case = table4::case(0.0, 11)?;

@@ -318,7 +318,7 @@ fn main() {
                         .iter()
                         .map(|(k, v)| format!("{k} {v:.4e}"))
                         .collect();
-                    format!("{} {:?}: {}", e.kind, e.dofs, p.join(", "))
+                    format!("{} {:?}: {}", e.kind.name(), e.dofs, p.join(", "))
                 })
                 .collect();
             let sig: Vec<String> = d

@@ -8,7 +8,7 @@
 //! `cargo run --release --example silverbox_close_the_loop`
 
 use std::path::Path;
-use tacit::silverbox;
+use tacit::cases::silverbox;
 
 fn main() -> anyhow::Result<()> {
     let path = Path::new(concat!(

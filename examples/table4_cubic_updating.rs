@@ -8,7 +8,8 @@
 //! Run: `cargo run --release --example table4_cubic_updating`
 //! (optional argument: the seed of the noise, default 11).
 
-use tacit::update::{self, table4, FitResult, FitSettings, Optimizer};
+use tacit::cases::table4;
+use tacit::update::{self, FitResult, FitSettings, Optimizer};
 
 const ROWS: [&str; 5] = ["k1", "k2", "k3", "k4", "cubic"];
 

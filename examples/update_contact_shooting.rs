@@ -10,7 +10,8 @@
 //!
 //! Run: `cargo run --release --example update_contact_shooting`
 
-use tacit::update::{self, contact_case, FitSettings};
+use tacit::cases::contact_case;
+use tacit::update::{self, FitSettings};
 
 fn main() -> tacit::Result<()> {
     let case = contact_case::case([0.3, -0.3])?;

@@ -83,7 +83,10 @@ mod tests {
         assert!(e.starts_with(&target.display().to_string()), "{e}");
         assert!(!e.contains(".report.md."), "{e}");
         let e = write_atomic(&target, |tmp| {
-            Err(TacitError::record(tmp, format!("cannot write {}", tmp.display())))
+            Err(TacitError::record(
+                tmp,
+                format!("cannot write {}", tmp.display()),
+            ))
         })
         .unwrap_err()
         .to_string();

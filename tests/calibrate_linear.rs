@@ -103,7 +103,7 @@ fn a_linear_record_calibrates_the_part_the_bumper_hides() {
     let c = d
         .effects
         .iter()
-        .find(|e| e.kind == "contact")
+        .find(|e| e.kind.name() == "contact")
         .expect("contact found");
     assert_eq!(c.dofs, vec![5, 6]);
     assert!(

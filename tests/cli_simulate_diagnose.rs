@@ -203,3 +203,105 @@ fn diagnose_writes_the_report_on_a_linear_record() {
     assert_eq!(j["effects"].as_array().unwrap().len(), 0);
     assert!(out.join("report.md").exists() && out.join("residual.png").exists());
 }
+
+/// report.json without its timings (the only field that may differ
+/// between two runs of the same diagnosis).
+fn report(dir: &std::path::Path) -> serde_json::Value {
+    let mut j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    j.as_object_mut().unwrap().remove("timings");
+    j
+}
+
+/// A settings file is read and written whole into report.json and
+/// settings.toml; the diagnosis replayed from either gives the same
+/// report, field for field (timings aside).
+#[test]
+fn a_settings_file_and_the_report_replay_the_diagnosis() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("contact.h5");
+    let o = tacit(&[
+        "simulate",
+        "--model",
+        "data/lanl8dof-contact.toml",
+        "--samples",
+        "2048",
+        "--noise",
+        "0.01",
+        "--seed",
+        "7",
+        "-o",
+        rec.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let file = dir.path().join("s.toml");
+    std::fs::write(
+        &file,
+        "[screen]\nmax_effects = 2\n[segments]\nfit_segments = 12\n[fit]\nrace_iterations = 5\n",
+    )
+    .unwrap();
+    let run = |settings: &std::path::Path, out: &str| {
+        let out = dir.path().join(out);
+        let o = tacit(&[
+            "diagnose",
+            "--model",
+            "data/lanl8dof.toml",
+            "--record",
+            rec.to_str().unwrap(),
+            "--settings",
+            settings.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", text(&o));
+        out
+    };
+    let first = run(&file, "first");
+    let j = report(&first);
+    assert_eq!(j["settings"]["screen"]["max_effects"], 2);
+    assert_eq!(j["settings"]["segments"]["fit_segments"], 12);
+    assert_eq!(j["settings"]["fit"]["race_iterations"], 5);
+    // the defaults of the fields the file left out
+    assert_eq!(j["settings"]["noise"]["level"], 0.01);
+    assert!(
+        !j["effects"].as_array().unwrap().is_empty(),
+        "{}",
+        j["verdict"]
+    );
+    let from_json = run(&first.join("report.json"), "from_json");
+    assert_eq!(report(&from_json), j);
+    let from_toml = run(&first.join("settings.toml"), "from_toml");
+    assert_eq!(report(&from_toml), j);
+}
+
+/// An invalid settings file is refused with the field and the rule, and
+/// nothing is written.
+#[test]
+fn an_invalid_settings_file_names_the_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("bad.toml");
+    let out = dir.path().join("out");
+    for (text_, field) in [
+        ("[segments]\nfit_segments = 0\n", "segments.fit_segments"),
+        ("[substeps]\nomega_h = 0.0\n", "substeps.omega_h"),
+        ("[noise]\nlevel = -0.01\n", "noise.level"),
+        ("[screen]\nmax_efects = 2\n", "max_efects"),
+    ] {
+        std::fs::write(&file, text_).unwrap();
+        let o = tacit(&[
+            "diagnose",
+            "--model",
+            "data/lanl8dof.toml",
+            "--record",
+            "data/lanl8dof-bumper.h5",
+            "--settings",
+            file.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(!o.status.success(), "{text_} accepted");
+        let msg = text(&o);
+        assert!(msg.contains(field) && msg.contains("bad.toml"), "{msg}");
+        assert!(!out.exists(), "{text_}: output written");
+    }
+}

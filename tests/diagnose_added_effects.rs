@@ -67,7 +67,10 @@ fn run(truth: &Model, seed: u64) -> Diagnosis {
     for r in &d.rounds {
         eprintln!(
             "  round {:?} kept {}: {} | fit: {:?}",
-            r.proposed, r.kept, r.note, r.fit
+            r.proposed,
+            r.kept(),
+            tacit::diagnose::report::note(&r.decision),
+            r.fit
         );
     }
     d
@@ -78,7 +81,7 @@ fn run(truth: &Model, seed: u64) -> Diagnosis {
 fn check(d: &Diagnosis, kind: &str, dofs: &[usize], truth: &[(&str, f64)]) {
     assert_eq!(d.effects.len(), 1, "{}", d.verdict);
     let e = &d.effects[0];
-    assert_eq!(e.kind, kind, "{}", d.verdict);
+    assert_eq!(e.kind.name(), kind, "{}", d.verdict);
     assert_eq!(e.dofs, dofs, "{}", d.verdict);
     for (name, t) in truth {
         let x = e.parameters[*name];

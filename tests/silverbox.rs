@@ -2,7 +2,7 @@
 //! Schoukens, ECC 2013, read from the shared data set beside the checkout)
 //! through the close-the-loop diagnosis.
 
-use tacit::silverbox::{self, Settings};
+use tacit::cases::silverbox::{self, Settings};
 
 #[test]
 fn silverbox_loop_finds_the_cubic_and_beats_the_reference_fit() {

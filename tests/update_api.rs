@@ -2,11 +2,12 @@
 //! failed simulations as status.
 
 use approx::assert_relative_eq;
+use tacit::cases::table4;
 use tacit::integrate::SimSettings;
 use tacit::model::Model;
 use tacit::record::Quantity;
 use tacit::update::{
-    self, cost::Evaluator, optimize, parse_free, table4, FitSettings, Parameter, Problem, Target,
+    self, cost::Evaluator, optimize, parse_free, FitSettings, Parameter, Problem, Target,
     Termination,
 };
 
@@ -287,7 +288,7 @@ fn reduced_problems_fall_back_to_finite_differences_and_say_so() {
 
 #[test]
 fn contact_jacobian_follows_the_computed_trajectory_at_the_default_newton_tolerance() {
-    // the bumper fit of update::contact_case (80 segments of 0.1 s, 40
+    // the bumper fit of cases::contact_case (80 segments of 0.1 s, 40
     // sub-steps, default Newton tolerance 1e-10) on a grid of points around
     // the truth. Newton once accepted iterates within the tolerance across
     // the contact's switch from the side of its matrix; the computed
@@ -297,7 +298,9 @@ fn contact_jacobian_follows_the_computed_trajectory_at_the_default_newton_tolera
     // now steps on to the point's own side: no such sub-step remains, and
     // the derivatives follow the differences everywhere on the grid.
     use tacit::integrate::{Integrator, Seeds};
-    let p = update::contact_case::case([0.0, 0.0]).unwrap().shooting;
+    let p = tacit::cases::contact_case::case([0.0, 0.0])
+        .unwrap()
+        .shooting;
     // sub-steps across the switch, over all segments, at x
     let across_at = |x: &[f64]| -> usize {
         let model = p.model_at(x);

@@ -2,7 +2,7 @@
 //! fails with a clear message and writes nothing.
 
 use std::process::Command;
-use tacit::update::table4;
+use tacit::cases::table4;
 
 fn record_file(dir: &std::path::Path) -> std::path::PathBuf {
     let case = table4::case(0.0, 1).unwrap();

@@ -1,7 +1,8 @@
 //! Table 4 of Hemez & Doebling (§6.1) as tests: each optimizer on the
 //! paper's problem, every column on noise-free data, determinism.
 
-use tacit::update::{self, table4, FitSettings, Optimizer, Termination};
+use tacit::cases::table4;
+use tacit::update::{self, FitSettings, Optimizer, Termination};
 
 /// k3 within 0.5 points of −15 % and the cubic within 0.5 of +25 %.
 fn assert_recovers(label: &str, pct: &[f64]) {

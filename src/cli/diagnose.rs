@@ -23,22 +23,29 @@ pub struct Args {
     /// Sensor DOFs to use (default: every output channel of the record).
     #[arg(long)]
     sensors: Option<DofList>,
-    /// Segment length of the multiple-shooting error, s.
-    #[arg(long, default_value_t = 0.1)]
-    segment: f64,
-    /// Most effects to add.
-    #[arg(long, default_value_t = 3)]
-    max_effects: usize,
+    /// Settings of the diagnosis (TOML, or JSON: a settings object or a
+    /// report.json, whose settings are replayed); the options below
+    /// override it. Default: the library's defaults.
+    #[arg(long)]
+    settings: Option<PathBuf>,
+    /// Segment length of the multiple-shooting error, s
+    /// (`segments.seconds`).
+    #[arg(long)]
+    segment: Option<f64>,
+    /// Most effects to add (`screen.max_effects`).
+    #[arg(long)]
+    max_effects: Option<usize>,
     /// Sub-steps per sample of the identification and the trace; the
-    /// scored and fitted models use at least this and at least 40, more
-    /// for a stiff element.
-    #[arg(long, default_value_t = 10)]
-    substeps: usize,
+    /// scored and fitted models use at least this and at least
+    /// `substeps.min`, more for a stiff element (`substeps.base`).
+    #[arg(long)]
+    substeps: Option<usize>,
     /// Jacobian of the effect fits' race of starts: sens (forward
-    /// sensitivities of the integrator) or fd (centered finite differences; the joint fit of
-    /// parameters and start states always uses the sensitivities).
-    #[arg(long, value_enum, default_value = "sens", hide_possible_values = true)]
-    jacobian: tacit::update::JacobianMethod,
+    /// sensitivities of the integrator) or fd (centered finite
+    /// differences); the joint fit of parameters and start states always
+    /// uses the sensitivities (`fit.jacobian`).
+    #[arg(long, value_enum, hide_possible_values = true)]
+    jacobian: Option<tacit::update::JacobianMethod>,
     /// Use the truth stored in a simulated record as the states (checks the
     /// later steps independently of the identification).
     #[arg(long, hide = true)]
@@ -63,8 +70,38 @@ pub struct Args {
     force: bool,
 }
 
+/// The settings file (or the defaults) with the options on top, validated.
+fn settings(a: &Args) -> anyhow::Result<DiagnoseSettings> {
+    let mut s = match &a.settings {
+        Some(p) => DiagnoseSettings::from_file(p)?,
+        None => DiagnoseSettings::default(),
+    };
+    if let Some(v) = a.segment {
+        s.segments.seconds = v;
+    }
+    if let Some(v) = a.max_effects {
+        s.screen.max_effects = v;
+    }
+    if let Some(v) = a.substeps {
+        s.substeps.base = v;
+    }
+    if let Some(v) = a.jacobian {
+        s.fit.jacobian = v;
+    }
+    if a.truth_states {
+        s.states = diagnose::StatesSource::Truth;
+    }
+    Ok(s)
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
-    super::check::diagnose_options(a.segment, a.max_effects, a.substeps)?;
+    let settings = settings(&a)?;
+    super::check::diagnose_options(
+        settings.segments.seconds,
+        settings.screen.max_effects,
+        settings.substeps.base,
+    )?;
+    settings.validate()?;
     let staging = super::output::Staging::begin(&a.output, a.force)?;
     let model = Model::from_file(&a.model)?;
     let rec = load_record(&a.record, &a.rec)?;
@@ -72,32 +109,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         Some(p) => Some(load_record(p, &a.rec)?),
         None => None,
     };
-    super::check::segment_in_record(a.segment, rec.fs, rec.len())?;
     let chosen = a.sensors.as_ref().map(|d| d.0.as_slice());
     let mut warnings = super::records::check(&rec, &model, chosen)?;
     if let Some(v) = &val {
         warnings.extend(super::records::check(v, &model, chosen)?);
     }
+    super::check::segment_in_record(settings.segments.seconds, rec.fs, rec.len())?;
     super::check::memory(
-        super::check::diagnose_bytes(model.ndof(), a.substeps, rec.len()),
+        super::check::diagnose_bytes(model.ndof(), settings.substeps.base, rec.len()),
         "the diagnosis of this record",
     )?;
-    let defaults = DiagnoseSettings::default();
-    let settings = DiagnoseSettings {
-        fit: tacit::update::FitSettings {
-            jacobian: a.jacobian,
-            ..defaults.fit
-        },
-        segment_seconds: a.segment,
-        max_effects: a.max_effects,
-        substeps: a.substeps,
-        states: if a.truth_states {
-            diagnose::StatesSource::Truth
-        } else {
-            diagnose::StatesSource::Lifted
-        },
-        ..defaults
-    };
     let sensors = a.sensors.as_ref().map(|d| d.0.clone());
     let bar = if std::io::stderr().is_terminal() {
         let b = ProgressBar::new_spinner();

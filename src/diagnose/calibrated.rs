@@ -316,12 +316,19 @@ fn refine(
     let x0 = vec![0.0; problem.parameters.len()];
     let fit = crate::update::FitSettings {
         max_iterations: cs.refine_iterations,
-        ..settings.fit
+        ..settings.fit_settings()
     };
-    let Some(jf) = joint::fit(&problem, &x0, &fit) else {
-        return Ok(Refined::NotKept(
-            "not refined: a simulation or its derivatives failed at the start".into(),
-        ));
+    let jf = match joint::fit(
+        &problem,
+        &x0,
+        &fit,
+        joint::Stall {
+            steps: settings.starts.stall_steps,
+            gain: settings.starts.stall_gain,
+        },
+    ) {
+        Ok(jf) => jf,
+        Err(e) => return Ok(Refined::NotKept(format!("not refined: {e}"))),
     };
     let refined = problem.model_at(&jf.x);
     let (after, pred) = cmp.errors(&refined, sim);
@@ -343,7 +350,7 @@ fn refine(
         return Ok(Refined::NotKept(format!("{note}; not kept")));
     }
     // standard errors at the refined point, the residual level measured
-    let level = after.relative_error.unwrap_or(settings.fit.noise_level);
+    let level = after.relative_error.unwrap_or(settings.noise.level);
     let mut at = problem.clone();
     at.model = refined.clone();
     at.segments.clone_from(&jf.segments);

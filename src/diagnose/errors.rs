@@ -1,14 +1,14 @@
 //! The two errors of a model against a record: multiple-shooting
-//! prediction error over short segments from estimated start states
-//! (`relative_error`, the headline) and open-loop simulation error over the
-//! whole record (`simulation_error`).
+//! prediction error over short segments from start states refined for the
+//! model ([`super::starts`]; `relative_error`, the headline) and open-loop
+//! simulation error over the whole record (`simulation_error`).
 
+pub use super::comparison::{segment_residual, Comparison, ShotError};
 use super::starts::StartFit;
 use crate::integrate::SimSettings;
 use crate::model::Model;
-use crate::update::problem::{Metric, Observation, Problem};
 use crate::update::shooting::Segment;
-use nalgebra::{DMatrix, DMatrixView, DVector};
+use nalgebra::DMatrix;
 use serde::Serialize;
 
 /// Errors of one channel.
@@ -32,106 +32,77 @@ pub struct ErrorSet {
     pub simulation_error: Option<f64>,
     /// Per channel.
     pub per_channel: Vec<ChannelError>,
-    /// "ok", or what failed.
-    pub status: String,
+    /// What failed, if anything (written `"ok"` or the failures joined by
+    /// `; ` in report.json).
+    pub status: ErrorStatus,
     /// The start-state refinement of the multiple-shooting error (None
     /// when off or when the segments could not be simulated).
-    pub starts: Option<super::starts::StartFit>,
+    pub starts: Option<StartFit>,
 }
 
-/// Weighted residual `w_c (y_c − ŷ_c)` of one segment from its predicted
-/// channels `y` (observation × sample of the segment), rows sample-major
-/// (`k p + c`); `None` when a prediction is not finite.
-pub fn segment_residual(
-    observations: &[Observation],
-    seg: &Segment,
-    y: DMatrixView<'_, f64>,
-) -> Option<DVector<f64>> {
-    let p = observations.len();
-    let mut r = DVector::zeros(seg.len * p);
-    for k in 0..seg.len {
-        for (c, o) in observations.iter().enumerate() {
-            let v = y[(c, k)];
-            if !v.is_finite() {
-                return None;
-            }
-            r[k * p + c] = o.weight * (o.data[seg.start + k] - v);
+/// The failures behind an [`ErrorSet`]'s missing errors.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ErrorStatus {
+    /// Why the multiple shooting failed.
+    pub multiple_shooting: Option<ShotError>,
+    /// Why the open-loop run failed.
+    pub open_loop: Option<ShotError>,
+}
+
+impl ErrorStatus {
+    /// Nothing failed.
+    pub fn is_ok(&self) -> bool {
+        self.multiple_shooting.is_none() && self.open_loop.is_none()
+    }
+}
+
+impl std::fmt::Display for ErrorStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut parts = vec![];
+        if let Some(e) = &self.multiple_shooting {
+            parts.push(format!("multiple shooting: {e}"));
+        }
+        if let Some(e) = &self.open_loop {
+            parts.push(format!("open-loop simulation: {e}"));
+        }
+        if parts.is_empty() {
+            write!(f, "ok")
+        } else {
+            write!(f, "{}", parts.join("; "))
         }
     }
-    Some(r)
+}
+
+impl Serialize for ErrorStatus {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
 }
 
 /// Multiple-shooting predictions (p × N), the segments with the start
 /// states used, and the refinement that produced them.
 pub type Shot = (DMatrix<f64>, Vec<Segment>, Option<StartFit>);
 
-/// The data a model is compared with.
-#[derive(Debug, Clone)]
-pub struct Comparison {
-    /// Sample rate, Hz.
-    pub fs: f64,
-    /// External force (n × N).
-    pub force: DMatrix<f64>,
-    /// Observed channels.
-    pub observations: Vec<Observation>,
-    /// Segments with start states (multiple shooting).
-    pub segments: Vec<Segment>,
-    /// The open-loop segment (whole record from the estimated start).
-    pub whole: Segment,
-    /// Gauss–Newton iterations of the segment start-state refinement
-    /// ([`super::starts`]; 0 = the reconstructed start states as they are).
-    pub start_iterations: usize,
-}
+/// A model's multiple shooting, or why it failed.
+pub type ShotResult = std::result::Result<Shot, ShotError>;
 
 impl Comparison {
-    /// An updating problem with no free parameter on the given segments.
-    pub fn problem(&self, model: &Model, segments: Vec<Segment>, sim: SimSettings) -> Problem {
-        Problem {
-            model: model.clone(),
-            fs: self.fs,
-            force: self.force.clone(),
-            observations: self.observations.clone(),
-            parameters: vec![],
-            segments,
-            reduction: None,
-            metric: Metric::Gls,
-            alpha: 0.0,
-            sim,
-        }
-    }
-
-    /// Predicted channels (p × N) over the segments; Err names the failure.
-    pub fn predict(
-        &self,
-        model: &Model,
-        segments: &[Segment],
-        sim: SimSettings,
-    ) -> std::result::Result<DMatrix<f64>, String> {
-        let p = self.problem(model, segments.to_vec(), sim);
-        let rows = crate::update::predict(&p, &[]).map_err(|e| e.to_string())?;
-        let ns = self.force.ncols();
-        Ok(DMatrix::from_fn(rows.len(), ns, |c, k| rows[c][k]))
-    }
-
     /// Multiple-shooting predictions of `model` (p × N) with the start
     /// states refined for it ([`super::starts::refine`], when
-    /// `start_iterations > 0`), the segments used and the refinement; Err
+    /// `starts.iterations > 0`), the segments used and the refinement; Err
     /// names a failed simulation.
-    pub fn shoot(&self, model: &Model, sim: SimSettings) -> std::result::Result<Shot, String> {
-        if self.start_iterations == 0 {
+    pub fn shoot(&self, model: &Model, sim: SimSettings) -> ShotResult {
+        if self.starts.iterations == 0 {
             let y = self.predict(model, &self.segments, sim)?;
             return Ok((y, self.segments.clone(), None));
         }
         let (segs, y, fit) =
-            super::starts::refine(self, model, sim, &self.segments, self.start_iterations);
+            super::starts::refine(self, model, sim, &self.segments, self.starts.iterations);
         if let Some(k) = (0..y.ncols()).find(|&k| y.column(k).iter().any(|v| v.is_nan())) {
-            let s = segs
+            let segment = segs
                 .iter()
-                .position(|s| k >= s.start && k < s.start + s.len)
-                .map_or("?".into(), |i| i.to_string());
-            return Err(format!(
-                "segment {s} (sample {k}) could not be simulated from its start state"
-            ));
+                .position(|s| k >= s.start && k < s.start + s.len);
+            return Err(ShotError::Segment { segment, sample: k });
         }
         Ok((y, segs, Some(fit)))
     }
@@ -148,9 +119,9 @@ impl Comparison {
         &self,
         model: &Model,
         sim: SimSettings,
-        shot: std::result::Result<Shot, String>,
+        shot: ShotResult,
     ) -> (ErrorSet, Option<DMatrix<f64>>) {
-        let mut status = vec![];
+        let mut status = ErrorStatus::default();
         let mut starts = None;
         let seg = match shot {
             Ok((y, _, fit)) => {
@@ -158,14 +129,14 @@ impl Comparison {
                 Some(y)
             }
             Err(e) => {
-                status.push(format!("multiple shooting: {e}"));
+                status.multiple_shooting = Some(e);
                 None
             }
         };
         let whole = match self.predict(model, std::slice::from_ref(&self.whole), sim) {
             Ok(y) => Some(y),
             Err(e) => {
-                status.push(format!("open-loop simulation: {e}"));
+                status.open_loop = Some(e);
                 None
             }
         };
@@ -184,50 +155,21 @@ impl Comparison {
             relative_error: seg.as_ref().map(|y| self.total_error(y)),
             simulation_error: whole.as_ref().map(|y| self.total_error(y)),
             per_channel,
-            status: if status.is_empty() {
-                "ok".into()
-            } else {
-                status.join("; ")
-            },
+            status,
             starts,
         };
         (set, seg)
     }
+}
 
-    fn sums(&self, y: &DMatrix<f64>, c: usize) -> (f64, f64) {
-        let d = &self.observations[c].data;
-        let (mut num, mut den) = (0.0, 0.0);
-        for (k, m) in d.iter().enumerate() {
-            let v = y[(c, k)];
-            if v.is_finite() {
-                num += (v - m) * (v - m);
-                den += m * m;
-            }
-        }
-        (num, den)
-    }
+/// Segment simulations spent by [`Comparison::shoot`]: the start-state
+/// refinement's, or one per segment.
+pub(super) fn shot_simulations(starts: Option<&StartFit>, cmp: &Comparison) -> usize {
+    starts.map_or(cmp.segments.len(), |f| f.simulations)
+}
 
-    /// Relative error of one channel (samples covered by the segments).
-    pub fn channel_error(&self, y: &DMatrix<f64>, c: usize) -> f64 {
-        let (num, den) = self.sums(y, c);
-        crate::metrics::ratio(num, den)
-    }
-
-    /// Relative error over all channels.
-    pub fn total_error(&self, y: &DMatrix<f64>) -> f64 {
-        let (mut num, mut den) = (0.0, 0.0);
-        for c in 0..self.observations.len() {
-            let (a, b) = self.sums(y, c);
-            num += a;
-            den += b;
-        }
-        crate::metrics::ratio(num, den)
-    }
-
-    /// Measured channels as a p × N matrix.
-    pub fn measured(&self) -> DMatrix<f64> {
-        DMatrix::from_fn(self.observations.len(), self.force.ncols(), |c, k| {
-            self.observations[c].data[k]
-        })
-    }
+/// Segment simulations spent by [`Comparison::errors`]: the multiple
+/// shooting and the open-loop run.
+pub(super) fn error_simulations(set: &ErrorSet, cmp: &Comparison) -> usize {
+    shot_simulations(set.starts.as_ref(), cmp) + 1
 }

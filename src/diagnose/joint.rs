@@ -32,7 +32,7 @@
 //! `f_tol` (at least 1e-4), when λ exceeds 1e6 (stalled: the cost
 //! is rough at the sub-step scale), or at the iteration limit.
 
-use super::errors::segment_residual;
+use super::comparison::segment_residual;
 use crate::update::optimize::FitSettings;
 use crate::update::{forward, sensitivity, Problem, Segment};
 use nalgebra::{DMatrix, DVector};
@@ -53,7 +53,70 @@ pub struct JointFit {
     /// Segment simulations run (with or without sensitivities).
     pub simulations: usize,
     /// Why it stopped.
-    pub termination: String,
+    pub termination: JointTermination,
+}
+
+/// Why a joint fit stopped.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JointTermination {
+    /// The iteration limit.
+    IterationLimit,
+    /// An accepted step with light damping gained less than the tolerance.
+    Converged,
+    /// Accepted steps in a row each gained less than a fraction of the
+    /// cost ([`Stall`]).
+    Stalled(Stall),
+    /// The damping grew past 1e6: steps vanish (the cost is rough at this
+    /// scale or the derivatives unreliable).
+    StepsVanish,
+    /// A simulation or its derivatives failed at the current point.
+    SimulationFailed,
+}
+
+impl std::fmt::Display for JointTermination {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            JointTermination::IterationLimit => write!(f, "iteration limit"),
+            JointTermination::Converged => write!(f, "converged (cost)"),
+            JointTermination::Stalled(s) => write!(
+                f,
+                "stalled: {} accepted steps in a row each lowered the cost by less than {:.1} %",
+                s.steps,
+                100.0 * s.gain
+            ),
+            JointTermination::StepsVanish => write!(
+                f,
+                "stalled: steps vanish (the cost is rough at this scale or the derivatives unreliable)"
+            ),
+            JointTermination::SimulationFailed => write!(
+                f,
+                "a simulation or its derivatives failed at the current point"
+            ),
+        }
+    }
+}
+
+/// Why a joint fit could not start.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum JointError {
+    /// The problem is reduced (the joint fit is for full-order problems).
+    #[error("the problem is reduced; the joint fit needs a full-order one")]
+    Reduced,
+    /// The start has the wrong length.
+    #[error("{given} start values for {expected} parameters")]
+    StartLength {
+        /// Parameters of the problem.
+        expected: usize,
+        /// Values given.
+        given: usize,
+    },
+    /// The linear part of the model could not be sampled (no state scale).
+    #[error("the linear part of the model could not be sampled")]
+    StateScale,
+    /// A segment could not be simulated at the start.
+    #[error("a segment could not be simulated at the start")]
+    StartFailed,
 }
 
 /// One segment linearized: residual, state and parameter Jacobians
@@ -173,20 +236,35 @@ fn step(lins: &[Lin], lambda: f64) -> Option<(DVector<f64>, Vec<DVector<f64>>)> 
     Some((dx, ds))
 }
 
-/// Accepted steps each lowering the cost by less than [`STALL_GAIN`] (a
-/// fraction of it) after which [`fit`] stops.
-pub const STALL_STEPS: usize = 3;
-
-/// See [`STALL_STEPS`].
-pub const STALL_GAIN: f64 = 1e-3;
+/// [`fit`] stops after `steps` accepted steps in a row each lowering the
+/// cost by less than the fraction `gain` of it
+/// ([`super::settings::StartSettings::stall_steps`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Stall {
+    /// Steps in a row.
+    pub steps: usize,
+    /// Fraction of the cost.
+    pub gain: f64,
+}
 
 /// Fit `problem`'s parameters (from `x0`) and its segments' start states
 /// together (module docs). Full-order GLS problems only.
-pub fn fit(problem: &Problem, x0: &[f64], settings: &FitSettings) -> Option<JointFit> {
-    if problem.reduction.is_some() || problem.parameters.len() != x0.len() {
-        return None;
+pub fn fit(
+    problem: &Problem,
+    x0: &[f64],
+    settings: &FitSettings,
+    stall: Stall,
+) -> Result<JointFit, JointError> {
+    if problem.reduction.is_some() {
+        return Err(JointError::Reduced);
     }
-    let scale = state_scale(problem)?;
+    if problem.parameters.len() != x0.len() {
+        return Err(JointError::StartLength {
+            expected: problem.parameters.len(),
+            given: x0.len(),
+        });
+    }
+    let scale = state_scale(problem).ok_or(JointError::StateScale)?;
     let n = problem.model.ndof();
     let (lo, hi) = problem.x_bounds();
     let nseg = problem.segments.len();
@@ -194,23 +272,22 @@ pub fn fit(problem: &Problem, x0: &[f64], settings: &FitSettings) -> Option<Join
     let mut cur = problem.clone();
     let mut x = x0.to_vec();
     let mut sims = nseg;
-    let mut segment_costs = costs_of(residuals(&cur, &x)?);
+    let mut segment_costs = costs_of(residuals(&cur, &x).ok_or(JointError::StartFailed)?);
     let mut cost: f64 = segment_costs.iter().sum();
     let cost0 = cost;
     let mut lambda = settings.lm_lambda.max(1e-6);
     let mut iterations = 0;
-    let mut termination = "iteration limit".to_string();
+    let mut termination = JointTermination::IterationLimit;
     let mut slow = 0;
     'outer: while iterations < settings.max_iterations {
         sims += nseg;
         let Some(lins) = linearize(&cur, &x, &scale) else {
-            termination = "a simulation or its derivatives failed at the current point".into();
+            termination = JointTermination::SimulationFailed;
             break;
         };
         loop {
             if lambda > 1e6 {
-                termination =
-                    "stalled: steps vanish (the cost is rough at this scale or the derivatives unreliable)".into();
+                termination = JointTermination::StepsVanish;
                 break 'outer;
             }
             let Some((dx, ds)) = step(&lins, lambda) else {
@@ -246,18 +323,15 @@ pub fn fit(problem: &Problem, x0: &[f64], settings: &FitSettings) -> Option<Join
                     // a small gain under heavy damping is a short step,
                     // not a minimum
                     if gain < settings.f_tol.max(1e-4) && lambda <= 1e-2 {
-                        termination = "converged (cost)".into();
+                        termination = JointTermination::Converged;
                         break 'outer;
                     }
                     // but a run of them is the cost's roughness (contact
                     // switches within the segments) holding the steps
                     // short: what is left there is below the noise
-                    slow = if gain < STALL_GAIN { slow + 1 } else { 0 };
-                    if slow >= STALL_STEPS {
-                        termination = format!(
-                            "stalled: {STALL_STEPS} accepted steps in a row each lowered the cost by less than {:.1} %",
-                            100.0 * STALL_GAIN
-                        );
+                    slow = if gain < stall.gain { slow + 1 } else { 0 };
+                    if slow >= stall.steps {
+                        termination = JointTermination::Stalled(stall);
                         break 'outer;
                     }
                     continue 'outer;
@@ -269,7 +343,7 @@ pub fn fit(problem: &Problem, x0: &[f64], settings: &FitSettings) -> Option<Join
             }
         }
     }
-    Some(JointFit {
+    Ok(JointFit {
         segment_costs,
         x,
         segments: cur.segments,
@@ -385,6 +459,11 @@ mod tests {
     use crate::record::Quantity;
     use crate::update::{Metric, Observation, Parameter, Target};
 
+    const STALL: Stall = Stall {
+        steps: 3,
+        gain: 1e-3,
+    };
+
     /// Two masses, a spring to ground, a spring between them and a cubic
     /// spring from mass 2 to ground; accelerations at both.
     fn truth() -> Model {
@@ -468,7 +547,7 @@ mod tests {
             max_iterations: 40,
             ..Default::default()
         };
-        let fit = fit(&p, &[0.0], &settings).unwrap();
+        let fit = fit(&p, &[0.0], &settings, STALL).unwrap();
         let k3 = p.model_at(&fit.x).cubics[0].k3;
         approx::assert_relative_eq!(k3, 4.0e8, max_relative = 1e-4);
         assert!(fit.cost.1 < 1e-8 * fit.cost.0, "{:?}", fit.cost);
@@ -494,7 +573,7 @@ mod tests {
                 max_iterations: 40,
                 ..Default::default()
             };
-            let f = fit(&p, &[0.0], &settings).unwrap();
+            let f = fit(&p, &[0.0], &settings, STALL).unwrap();
             p.segments = f.segments;
             p.parameters
                 .push(Parameter::relative(model, Target::SpringStiffness(1)).unwrap());
@@ -543,7 +622,7 @@ mod tests {
                 o.data.iter_mut().for_each(|v| *v += 0.01 * rms * gauss());
             }
             p.parameters = vec![Parameter::relative(&t, Target::CubicK3(0)).unwrap()];
-            let f = fit(&p, &[0.0], &settings).unwrap();
+            let f = fit(&p, &[0.0], &settings, STALL).unwrap();
             fitted.push(p.model_at(&f.x).cubics[0].k3);
             p.segments = f.segments;
             predicted = std_errors(&p, &f.x, 0.01).unwrap()[0];

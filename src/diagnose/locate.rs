@@ -18,12 +18,13 @@
 //! the noise level. A force spread over many DOFs (friction on every mass)
 //! has no dominant direction: the selection is then empty and the
 //! reconstruction keeps a force at every DOF. The selection stops when
-//! the residual is within 1.5 × the assumed noise (a further direction
+//! the residual is within `noise_stop` (1.5) × the assumed noise (a further direction
 //! would only fit noise) and takes at most one direction per two
 //! channels (with accelerometers at 1, 2, 3 a pair 2–3 and a force at 2
 //! fitted the noise of channel 2: 0.65 → 0.16).
 
 use super::lifted::{self, LiftedSettings};
+use super::settings::LocateSettings;
 use crate::error::Result;
 use crate::linear::SampledModel;
 use crate::model::Model;
@@ -72,7 +73,7 @@ pub struct LocateStep {
     /// Whether the best addition was dominant and taken.
     pub taken: bool,
     /// When the best was not dominant: the direction added together with
-    /// it (the best of the next [`PAIR_TRIALS`]), the pair's weighted
+    /// it (the best of the next [`LocateSettings::pair_trials`]), the pair's weighted
     /// residual RMS, and whether the pair was taken (two effects at two
     /// places).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -160,17 +161,8 @@ pub fn directions(model: &Model) -> Vec<Direction> {
     out
 }
 
-/// Weighted residual RMS (1 = the assumed noise) at which the selection
-/// stops adding directions.
-pub const NOISE_STOP: f64 = 1.5;
-
-/// Directions after the best one tried together with it when it does not
-/// dominate alone.
-pub const PAIR_TRIALS: usize = 4;
-
-/// Greedy forward selection of force directions (module docs); at most
-/// `max` directions, dominance `ratio` in (0, 1).
-#[allow(clippy::too_many_arguments)]
+/// Greedy forward selection of force directions (module docs): at most
+/// `search.max` directions, dominance `search.ratio` in (0, 1).
 pub fn locate(
     model: &Model,
     sm: &SampledModel,
@@ -178,9 +170,9 @@ pub fn locate(
     measured: &DMatrix<f64>,
     channels: &[(Quantity, usize)],
     settings: &LiftedSettings,
-    ratio: f64,
-    max: usize,
+    search: &LocateSettings,
 ) -> Result<Located> {
+    let (ratio, max) = (search.ratio, search.max);
     let n = sm.n;
     let quick = LiftedSettings {
         reweight_passes: 0,
@@ -201,7 +193,7 @@ pub fn locate(
     // states; and once the residual is at the noise level a further
     // direction only fits noise
     let max = max.min(channels.len() / 2).max(1);
-    while chosen.len() < max && (chosen.is_empty() || current > NOISE_STOP) {
+    while chosen.len() < max && (chosen.is_empty() || current > search.noise_stop) {
         // the trial directions are independent: in parallel, collected in
         // pool order
         let mut scored = pool
@@ -228,7 +220,7 @@ pub fn locate(
         // to ground at 8 was placed at DOFs 4 and 5)
         let mut pair = None;
         if !taken && chosen.is_empty() && wb <= ratio * current && max >= 2 {
-            let next = &scored[1..scored.len().min(1 + PAIR_TRIALS)];
+            let next = &scored[1..scored.len().min(1 + search.pair_trials)];
             // in parallel, collected in order: the lowest, the first of
             // equals
             let tried = next
@@ -307,8 +299,7 @@ mod tests {
             &y,
             &ch,
             &LiftedSettings::default(),
-            0.8,
-            3,
+            &LocateSettings::default(),
         )
         .unwrap()
     }

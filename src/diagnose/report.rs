@@ -1,12 +1,16 @@
-//! Files of a diagnosis: `report.json` (machines), `report.md` (people),
-//! `model-fitted.toml`, and figures (PNG + SVG).
+//! Files of a diagnosis: `report.json` (machines, with the settings),
+//! `report.md` (people), `settings.toml` (the settings, for
+//! `tacit diagnose --settings`), `model-fitted.toml`, and figures (PNG +
+//! SVG); and the words for the loop's typed decisions ([`note`],
+//! [`fit_note`]).
 
-use super::Diagnosis;
+use super::{BelowScreen, Decision, Diagnosis, Round, WithdrawReason};
 use crate::io::{ensure_dir, write_json, write_string};
 use crate::plot::{self, Figure, Panel, Series, SeriesStyle};
 use crate::Result;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use serde::ser::SerializeStruct;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -57,6 +61,9 @@ pub fn write(
         },
     )?;
     out.push(json);
+    let replay = dir.join("settings.toml");
+    write_string(&replay, &settings.to_toml_string()?)?;
+    out.push(replay);
     let toml = dir.join("model-fitted.toml");
     write_string(&toml, &d.model.to_toml_string())?;
     out.push(toml);
@@ -66,18 +73,6 @@ pub fn write(
     out.push(md);
     out.extend(figs);
     Ok(out)
-}
-
-/// The record checks' warnings, before the results they may spoil.
-fn record_warnings(s: &mut String, warnings: &[String]) {
-    if warnings.is_empty() {
-        return;
-    }
-    let _ = writeln!(s, "## Warnings about the records\n");
-    for w in warnings {
-        let _ = writeln!(s, "- {w}");
-    }
-    let _ = writeln!(s);
 }
 
 fn pct(x: Option<f64>) -> String {
@@ -99,6 +94,25 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
     );
     let _ = writeln!(s, "**Result: {}.**\n", d.verdict);
     record_warnings(&mut s, &meta.warnings);
+    errors_section(&mut s, d);
+    effects_section(&mut s, d);
+    loop_section(&mut s, d);
+    let _ = writeln!(s, "\n## Figures\n");
+    for f in figs
+        .iter()
+        .filter(|f| f.extension().is_some_and(|e| e == "png"))
+    {
+        let name = f
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let _ = writeln!(s, "![{name}]({name})");
+    }
+    s
+}
+
+/// The errors before and after, on the record and the validation record.
+fn errors_section(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(s, "## Errors\n");
     let _ = writeln!(
         s,
@@ -138,7 +152,7 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
         );
     }
     for (name, e) in [("before", &d.before), ("after", &d.after)] {
-        if e.status != "ok" {
+        if !e.status.is_ok() {
             let _ = writeln!(s, "\n*{name}: {}*", e.status);
         }
     }
@@ -166,6 +180,10 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
             pct(a.relative_error)
         );
     }
+}
+
+/// The effects found, with their fitted values.
+fn effects_section(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(s, "\n## Effects found\n");
     if d.effects.is_empty() {
         let _ = writeln!(s, "No missing effect found: no candidate removes enough of the residual to pay for its parameters.\n");
@@ -193,8 +211,12 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
             pct(e.score.error_after)
         );
     }
+}
+
+/// The rounds of the loop, the first trace's ranking, the cost.
+fn loop_section(s: &mut String, d: &Diagnosis) {
     if let Some(c) = &d.calibration {
-        linear_corrections(&mut s, c);
+        linear_corrections(s, c);
     }
     let _ = writeln!(s, "\n## How the loop went\n");
     for (i, r) in d.rounds.iter().enumerate() {
@@ -203,10 +225,8 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
             "{}. {} — {}{}",
             i + 1,
             r.proposed.clone().unwrap_or_else(|| "no candidate".into()),
-            r.note,
-            r.fit
-                .as_ref()
-                .map_or(String::new(), |f| format!(" (fit: {f})"))
+            note(&r.decision),
+            fit_note(r).map_or(String::new(), |f| format!(" (fit: {f})"))
         );
     }
     let _ = writeln!(s, "\nBest candidates of the first trace round:\n\n| candidate | residual removed | BIC change | parameters |\n|---|---|---|---|");
@@ -235,18 +255,18 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
         d.trace_simulations,
         d.timings.get("total").copied().unwrap_or(f64::NAN)
     );
-    let _ = writeln!(s, "\n## Figures\n");
-    for f in figs
-        .iter()
-        .filter(|f| f.extension().is_some_and(|e| e == "png"))
-    {
-        let name = f
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let _ = writeln!(s, "![{name}]({name})");
+}
+
+/// The record checks' warnings, before the results they may spoil.
+fn record_warnings(s: &mut String, warnings: &[String]) {
+    if warnings.is_empty() {
+        return;
     }
-    s
+    let _ = writeln!(s, "## Warnings about the records\n");
+    for w in warnings {
+        let _ = writeln!(s, "- {w}");
+    }
+    let _ = writeln!(s);
 }
 
 /// The linear corrections, apart from the effects.
@@ -363,7 +383,20 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
         Figure::new("Responses (segments), first 0.5 s", panels, 1),
         dir.join("responses"),
     ));
-    // identified force
+    jobs.extend(force_figures(dir, d, &t));
+    let saved = jobs
+        .par_iter()
+        .map(|(fig, path)| plot::save(fig, path))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(saved.into_iter().flatten().collect())
+}
+
+/// The identified force, and the restoring-force plots of the effects
+/// (of the best candidate when none was found).
+fn force_figures(dir: &Path, d: &Diagnosis, t: &[f64]) -> Vec<(Figure, PathBuf)> {
+    let prep = &d.prepared;
+    let ns = t.len();
+    let mut jobs = vec![];
     let f = &prep.recon.force;
     let n = f.nrows();
     let panels: Vec<Panel> = (0..n)
@@ -371,7 +404,7 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
             plot::time_panel(
                 &format!("DOF {}", i + 1),
                 "f_int [N]",
-                &t,
+                t,
                 vec![(format!("f{}", i + 1), row(f, i), SeriesStyle::Line)],
             )
         })
@@ -391,12 +424,7 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
     } else {
         d.effects
             .iter()
-            .map(|e| {
-                crate::trace::Candidate::new(
-                    kind_of(&e.kind),
-                    e.dofs.iter().map(|x| x - 1).collect(),
-                )
-            })
+            .map(|e| crate::trace::Candidate::new(e.kind, e.dofs.iter().map(|x| x - 1).collect()))
             .collect()
     };
     for (i, c) in cands.iter().enumerate() {
@@ -433,13 +461,144 @@ fn figures(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
             dir.join(format!("restoring_{}", i + 1)),
         ));
     }
-    let saved = jobs
-        .par_iter()
-        .map(|(fig, path)| plot::save(fig, path))
-        .collect::<Result<Vec<_>>>()?;
-    Ok(saved.into_iter().flatten().collect())
+    jobs
 }
 
-fn kind_of(name: &str) -> crate::trace::EffectKind {
-    crate::trace::EffectKind::from_name(name).unwrap_or(crate::trace::EffectKind::Damping)
+/// A percentage of an error, `NaN` when missing.
+fn p4(x: Option<f64>) -> String {
+    format!("{:.4}", x.unwrap_or(f64::NAN))
+}
+
+/// What a candidate below the screen adds to its round's note.
+fn below_note(b: &BelowScreen) -> String {
+    let pre = if b.screened_out.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; predicted below {:.0} %: {}",
+            100.0 * b.screen,
+            screened_out(b)
+        )
+    };
+    format!(
+        " (below the screen: {}{pre}; fitted because the joint linearization predicts it removes at least {:.0} % of the fit cost)",
+        b.trace,
+        100.0 * b.screen
+    )
+}
+
+/// The candidates the screen turned away, with their predicted gains.
+fn screened_out(b: &BelowScreen) -> String {
+    let s: Vec<String> = b
+        .screened_out
+        .iter()
+        .map(|(label, g)| format!("{label} {:.1} %", 100.0 * g))
+        .collect();
+    s.join(", ")
+}
+
+/// A round's decision in words.
+pub fn note(d: &Decision) -> String {
+    let why = |b: &Option<BelowScreen>| b.as_ref().map_or(String::new(), below_note);
+    match d {
+        Decision::AtNoise { error, floor } => format!(
+            "the model explains the record up to noise and integration error (multiple-shooting error {:.2} % ≤ {:.2} %)",
+            100.0 * error,
+            100.0 * floor
+        ),
+        Decision::NothingPays { reason } => reason.clone(),
+        Decision::ScreenedOut(b) => format!(
+            "not fitted: at the current fit, with the segment start states free, the candidates below the screen are predicted to remove {} of the fit cost (screen {:.0} %; below the screen: {})",
+            screened_out(b),
+            100.0 * b.screen,
+            b.trace
+        ),
+        Decision::Kept {
+            before,
+            after,
+            below,
+        } => format!(
+            "kept: multiple-shooting error {} → {}{}",
+            p4(*before),
+            p4(*after),
+            why(below)
+        ),
+        Decision::Withdrawn {
+            reason,
+            below,
+            refit_kept,
+        } => {
+            let mut s = match reason {
+                WithdrawReason::NotItself { without, with, need } => format!(
+                    "withdrawn: switched off in the fitted model, the error is {} against {} with it: it does not itself remove {:.0} % of the squared error{}",
+                    p4(*without),
+                    p4(*with),
+                    100.0 * need,
+                    why(below)
+                ),
+                WithdrawReason::TooLittle {
+                    need,
+                    before,
+                    after,
+                } => format!(
+                    "withdrawn: the fitted effect does not remove {:.0} % of the squared multiple-shooting error ({} → {}){}",
+                    100.0 * need,
+                    p4(*before),
+                    p4(*after),
+                    why(below)
+                ),
+            };
+            if let Some((a, w)) = refit_kept {
+                s = format!(
+                    "{s}; the effects found, as refitted beside it, are kept: multiple-shooting error {} → {}",
+                    p4(*a),
+                    p4(*w)
+                );
+            }
+            s
+        }
+    }
+}
+
+/// How a round's fit ended, with the cubic alternative when one was tried.
+pub fn fit_note(r: &Round) -> Option<String> {
+    let fit = r.fit.as_ref()?;
+    let Some(a) = &r.alternative else {
+        return Some(fit.clone());
+    };
+    let line = format!(
+        "{} fitted too, from {}: {}{}",
+        a.label,
+        a.start
+            .iter()
+            .map(|p| format!("{} {:.3e}", p.0, p.1))
+            .collect::<Vec<_>>()
+            .join(", "),
+        a.error
+            .map_or("failed".into(), |e| format!("{:.2} %", 100.0 * e)),
+        if a.taken { ", taken" } else { "" }
+    );
+    Some(if a.taken {
+        format!(
+            "{fit}; {line} instead of {} at {:.2} %",
+            a.instead_of.0,
+            100.0 * a.instead_of.1.unwrap_or(f64::NAN)
+        )
+    } else {
+        format!("{fit}; {line}")
+    })
+}
+
+impl Serialize for Round {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        let mut r = s.serialize_struct("Round", 7)?;
+        r.serialize_field("proposed", &self.proposed)?;
+        r.serialize_field("kept", &self.kept())?;
+        r.serialize_field("note", &note(&self.decision))?;
+        r.serialize_field("fit", &fit_note(self))?;
+        r.serialize_field("simulations", &self.simulations)?;
+        r.serialize_field("decision", &self.decision)?;
+        r.serialize_field("alternative", &self.alternative)?;
+        r.end()
+    }
 }

@@ -25,7 +25,7 @@
 //! scored the same way.
 //!
 //! For a nonlinear model a segment may start in the wrong basin (the wrong
-//! side of an impact; CONTEXT fact 6). From the second iteration a segment
+//! side of an impact; the cost is rough in a contact, docs/updating.md). From the second iteration a segment
 //! may take the state where the segment before ends (continuity); a
 //! segment left above 8× the median cost is run in from the refined
 //! segment before; and one still there is refined over a growing horizon
@@ -35,7 +35,7 @@
 //! sensors this brought the exact model's error from 14 % to 1.3 % (the
 //! noise), and the fitted model's from 26 % to 1.3 %.
 
-use super::errors::{segment_residual, Comparison};
+use super::comparison::{segment_residual, Comparison};
 use crate::integrate::{Integrator, Seeds, SimSettings};
 use crate::linear::SampledModel;
 use crate::model::Model;
@@ -286,10 +286,6 @@ fn carried(
     })
 }
 
-/// A segment whose Gauss–Newton step lowered its cost by less than this
-/// fraction takes no further step.
-const SETTLED: f64 = 1e-3;
-
 /// Refine the start states of `segments` for `model` (module docs).
 /// Returns the refined segments, their predictions (p × N, NaN outside the
 /// segments and where a simulation failed) and what was done.
@@ -309,12 +305,12 @@ pub fn refine(
     let mut res: Vec<Option<(DVector<f64>, f64)>> =
         segs.iter().map(|s| residual(cmp, s, &y)).collect();
     let mut tried = vec![false; segs.len()];
-    for _ in 0..RUN_IN_PASSES {
+    for _ in 0..cmp.starts.run_in_passes {
         let costs: Vec<f64> = res
             .iter()
             .map(|r| r.as_ref().map_or(f64::INFINITY, |r| r.1))
             .collect();
-        let picks: Vec<Pick> = outliers(&costs, &tried)
+        let picks: Vec<Pick> = outliers(&costs, &tried, cmp.starts.outlier)
             .into_iter()
             .filter(|&i| i > 0 && segs[i - 1].start + segs[i - 1].len == segs[i].start)
             .map(|i| {
@@ -342,7 +338,7 @@ pub fn refine(
         .iter()
         .map(|r| r.as_ref().map_or(f64::INFINITY, |r| r.1))
         .collect();
-    let picks: Vec<(usize, f64)> = outliers(&costs, &vec![false; segs.len()])
+    let picks: Vec<(usize, f64)> = outliers(&costs, &vec![false; segs.len()], cmp.starts.outlier)
         .into_iter()
         .map(|i| (i, costs[i]))
         .collect();
@@ -368,7 +364,7 @@ const GROW: [&[usize]; 2] = [&[4, 2], &[8, 4, 2]];
 /// quarter of the segment, then on the first half, then on all of it, each
 /// stage from the one before (and again from an eighth); the best is kept
 /// when it predicts the segment better than its cost now. An impact late
-/// in a segment makes its cost in the start state rough (CONTEXT fact 6);
+/// in a segment makes its cost in the start state rough (docs/updating.md, rough costs);
 /// over the first part, before the impact, it is nearly quadratic, and
 /// each longer stage starts close to its minimum. Returns the indices
 /// changed, their predictions (p × N) and the simulations run.
@@ -456,20 +452,16 @@ fn grow(
     (changed, y, sims)
 }
 
-/// A segment whose cost exceeds this multiple of the median is taken to
-/// be started in a wrong basin.
-pub const OUTLIER: f64 = 8.0;
-
-/// Segments whose cost exceeds [`OUTLIER`] times the median, not tried
-/// yet.
-pub fn outliers(costs: &[f64], tried: &[bool]) -> Vec<usize> {
+/// Segments whose cost exceeds `factor` times the median (taken to be
+/// started in a wrong basin; [`super::settings::StartSettings::outlier`]), not tried yet.
+pub fn outliers(costs: &[f64], tried: &[bool], factor: f64) -> Vec<usize> {
     let mut sorted: Vec<f64> = costs.to_vec();
     sorted.sort_by(f64::total_cmp);
     let Some(&median) = sorted.get(sorted.len() / 2) else {
         return vec![];
     };
     (0..costs.len())
-        .filter(|&i| !tried[i] && costs[i] > OUTLIER * median)
+        .filter(|&i| !tried[i] && costs[i] > factor * median)
         .collect()
 }
 
@@ -477,8 +469,71 @@ pub fn outliers(costs: &[f64], tried: &[bool]) -> Vec<usize> {
 /// now.
 pub type Pick = (usize, Segment, f64);
 
-/// Run-in passes over such segments in [`refine`].
-const RUN_IN_PASSES: usize = 2;
+/// The segments being refined, their predictions and residuals.
+struct Stepping<'a> {
+    cmp: &'a Comparison,
+    model: &'a Model,
+    sim: SimSettings,
+    segs: &'a mut Vec<Segment>,
+    y: &'a mut DMatrix<f64>,
+    res: &'a mut Vec<Option<(DVector<f64>, f64)>>,
+    sims: &'a mut usize,
+}
+
+impl Stepping<'_> {
+    /// Take the Gauss–Newton `steps` of segments `idx` (in that order),
+    /// halved up to four times while a step does not lower the segment's
+    /// cost; returns which segments improved (indexed by segment).
+    fn line_search(&mut self, idx: &[usize], steps: Vec<Option<DVector<f64>>>) -> Vec<bool> {
+        let n = self.model.ndof();
+        let mut step_of: Vec<Option<DVector<f64>>> = vec![None; self.segs.len()];
+        for (&i, d) in idx.iter().zip(steps) {
+            step_of[i] = d;
+        }
+        let mut pending: Vec<usize> = idx
+            .iter()
+            .copied()
+            .filter(|&i| step_of[i].is_some())
+            .collect();
+        let mut t = 1.0;
+        let mut improved = vec![false; self.segs.len()];
+        for _ in 0..5 {
+            if pending.is_empty() {
+                break;
+            }
+            let trial: Vec<Segment> = pending
+                .iter()
+                .map(|&i| {
+                    let d = step_of[i].as_ref().expect("pending segments have a step");
+                    let s = &self.segs[i];
+                    Segment {
+                        start: s.start,
+                        len: s.len,
+                        u0: (0..n).map(|q| s.u0[q] + t * d[q]).collect(),
+                        v0: (0..n).map(|q| s.v0[q] + t * d[n + q]).collect(),
+                    }
+                })
+                .collect();
+            let yt = predict_each(self.cmp, self.model, &trial, self.sim, self.sims);
+            let mut still = vec![];
+            for (ti, &i) in pending.iter().enumerate() {
+                let old = self.res[i].as_ref().map_or(f64::INFINITY, |r| r.1);
+                match residual(self.cmp, &trial[ti], &yt) {
+                    Some(r) if r.1 < old => {
+                        copy_segment(self.y, &yt, &trial[ti]);
+                        self.segs[i] = trial[ti].clone();
+                        self.res[i] = Some(r);
+                        improved[i] = true;
+                    }
+                    _ => still.push(i),
+                }
+            }
+            pending = still;
+            t *= 0.5;
+        }
+        improved
+    }
+}
 
 /// [`refine`] without the run-in passes (and without continuity starts
 /// when `continue_from` is false).
@@ -509,7 +564,6 @@ fn refine_local(
         };
         return (segs, y, fit);
     };
-    let n = model.ndof();
     // a linear model: the Jacobian is exact and one step solves the problem
     let mut exact = if model.is_nonlinear() {
         None
@@ -527,14 +581,14 @@ fn refine_local(
     let mut continued = 0;
     // segments still worth a step: one whose last step failed would take
     // the same step again, and one whose last step gained less than
-    // [`SETTLED`] of its cost has settled
+    // [`super::settings::StartSettings::settled`] of its cost has settled
     let mut active = vec![true; segs.len()];
     for it in 0..iterations {
         done += 1;
         // from the second iteration of a nonlinear model: a segment may
         // start instead from where the previous one ends (continuity),
         // when that predicts it better (a refinement stuck in a local
-        // minimum; CONTEXT fact 6)
+        // minimum; the cost is rough in a contact, docs/updating.md)
         if continue_from && exact.is_none() && it == 1 {
             let changed = continuity(cmp, model, sim, &mut segs, &mut y, &mut res, &mut sims);
             continued = changed.len();
@@ -547,73 +601,38 @@ fn refine_local(
             done -= 1;
             break;
         }
-        // steps
-        let mut steps: Vec<Option<DVector<f64>>> = vec![None; segs.len()];
-        match exact.as_mut() {
-            Some(jac) => {
-                for &i in &idx {
+        let steps = match exact.as_mut() {
+            Some(jac) => idx
+                .iter()
+                .map(|&i| {
                     let r = res[i].as_ref().map(|r| &r.0);
-                    steps[i] = r.and_then(|r| Some(jac.pinv(segs[i].len)? * r));
-                }
-            }
+                    r.and_then(|r| Some(jac.pinv(segs[i].len)? * r))
+                })
+                .collect(),
             None => {
                 let sub: Vec<Segment> = idx.iter().map(|&i| segs[i].clone()).collect();
                 let sub_res: Vec<_> = idx.iter().map(|&i| res[i].clone()).collect();
-                let got = sens_steps(cmp, model, sim, &sub, &sub_res, &scale, &mut sims);
-                for (&i, d) in idx.iter().zip(got) {
-                    steps[i] = d;
-                }
+                sens_steps(cmp, model, sim, &sub, &sub_res, &scale, &mut sims)
             }
-        }
+        };
         let before: Vec<f64> = res
             .iter()
             .map(|r| r.as_ref().map_or(f64::INFINITY, |r| r.1))
             .collect();
-        let mut pending: Vec<usize> = idx
-            .iter()
-            .copied()
-            .filter(|&i| steps[i].is_some())
-            .collect();
-        let mut t = 1.0;
-        let mut improved = vec![false; segs.len()];
-        for _ in 0..5 {
-            if pending.is_empty() {
-                break;
-            }
-            let trial: Vec<Segment> = pending
-                .iter()
-                .map(|&i| {
-                    let d = steps[i].as_ref().expect("pending segments have a step");
-                    let s = &segs[i];
-                    Segment {
-                        start: s.start,
-                        len: s.len,
-                        u0: (0..n).map(|q| s.u0[q] + t * d[q]).collect(),
-                        v0: (0..n).map(|q| s.v0[q] + t * d[n + q]).collect(),
-                    }
-                })
-                .collect();
-            let yt = predict_each(cmp, model, &trial, sim, &mut sims);
-            let mut still = vec![];
-            for (ti, &i) in pending.iter().enumerate() {
-                let old = res[i].as_ref().map_or(f64::INFINITY, |r| r.1);
-                match residual(cmp, &trial[ti], &yt) {
-                    Some(r) if r.1 < old => {
-                        copy_segment(&mut y, &yt, &trial[ti]);
-                        segs[i] = trial[ti].clone();
-                        res[i] = Some(r);
-                        improved[i] = true;
-                    }
-                    _ => still.push(i),
-                }
-            }
-            pending = still;
-            t *= 0.5;
-        }
+        let mut run = Stepping {
+            cmp,
+            model,
+            sim,
+            segs: &mut segs,
+            y: &mut y,
+            res: &mut res,
+            sims: &mut sims,
+        };
+        let improved = run.line_search(&idx, steps);
         stalled = idx.iter().filter(|&&i| !improved[i]).count();
         for &i in &idx {
             let after = res[i].as_ref().map_or(f64::INFINITY, |r| r.1);
-            active[i] = improved[i] && after < (1.0 - SETTLED) * before[i];
+            active[i] = improved[i] && after < (1.0 - cmp.starts.settled) * before[i];
         }
     }
     let cost1: f64 = res.iter().flatten().map(|r| r.1).sum();
@@ -635,7 +654,7 @@ fn refine_local(
 /// state there, refined in turn, replaces the segment's start when it
 /// predicts the segment better than its cost now (a start state stuck in
 /// a wrong basin — the wrong side of an impact — that the local refinement
-/// cannot leave; CONTEXT fact 6). Returns the indices changed and the
+/// cannot leave; the cost is rough in a contact, docs/updating.md). Returns the indices changed and the
 /// simulations run.
 pub fn run_in(
     cmp: &Comparison,

@@ -7,11 +7,11 @@
 //! tolerances of the Riccati sweep.
 
 use crate::error::{Result, TacitError};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The output weight `W = diag(1/σ_c²)`: the noise standard deviation
 /// assumed for each measured channel.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum ChannelNoise {
     /// σ_c = `fraction` × RMS of channel c (e.g. 0.01 for 1 % noise).
@@ -27,7 +27,7 @@ pub enum ChannelNoise {
 }
 
 /// The initial state `x_0 = [u_0; v_0]`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum InitialState {
     /// The record starts at rest: `x_0 = 0`, not estimated.
@@ -53,7 +53,7 @@ pub enum InitialState {
 }
 
 /// Noise level used by the discrepancy principle.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum NoiseLevel {
     /// The channel noise given by [`HorizonSettings::noise`] is the true
@@ -67,7 +67,7 @@ pub enum NoiseLevel {
 /// How the weights λ and μ are chosen. Automatic choices scale both by one
 /// factor `α` (`λ = α λ_0`, `μ = α μ_0`, with λ_0, μ_0 from the settings),
 /// searched on a logarithmic grid of `α` and refined.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum WeightSelection {
     /// Use λ and μ as given.
@@ -91,7 +91,7 @@ pub enum WeightSelection {
 /// Constraints that make the problem a quadratic program (solved with
 /// Clarabel over the whole horizon). Components are indexed like the
 /// columns of the unknown-force input matrix; DOFs are 0-based.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct ForceConstraints {
     /// `(component, lower, upper)` bounds in N; use ±∞ for one-sided
     /// bounds (a sign constraint is `(i, 0, ∞)` or `(i, −∞, 0)`).
@@ -112,7 +112,7 @@ impl ForceConstraints {
 }
 
 /// How the reported covariance is scaled.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum CovarianceScale {
     /// As the weights say: correct when `W` and `λ` are the true inverse
@@ -126,7 +126,8 @@ pub enum CovarianceScale {
 /// Settings of [`crate::horizon::identify`]. Every field has a documented
 /// default; call [`HorizonSettings::validate`] before use (the front door
 /// does).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct HorizonSettings {
     /// λ, weight of `Σ‖w_k‖²`, 1/N² (relative to `W`). Must be > 0: it is
     /// the prior that makes every force sample determined. Default 1e-2

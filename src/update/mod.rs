@@ -38,7 +38,6 @@
 //! # Ok(()) }
 //! ```
 
-pub mod contact_case;
 pub mod cost;
 pub mod figures;
 pub mod forward;
@@ -48,7 +47,6 @@ pub mod param;
 pub mod problem;
 pub mod sensitivity;
 pub mod shooting;
-pub mod table4;
 
 pub use forward::Failure;
 pub use identifiability::Identifiability;

@@ -39,7 +39,7 @@ pub enum Optimizer {
 }
 
 /// How the Jacobian of the residual is computed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum JacobianMethod {
     /// Forward sensitivities of the integrator

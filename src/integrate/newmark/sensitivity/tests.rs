@@ -327,7 +327,7 @@ fn cubic_model() {
     // the Table 4 system released from 10 mm, softening cubic added
     // between DOFs 2 and 3
     let mut model =
-        Model::from_toml_str(crate::update::table4::MODEL_TOML, "fourdof-cubic").unwrap();
+        Model::from_toml_str(crate::cases::table4::MODEL_TOML, "fourdof-cubic").unwrap();
     model.cubics.push(Cubic {
         dofs: vec![2, 3],
         k3: -2e8,

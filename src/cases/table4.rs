@@ -9,14 +9,14 @@
 //! and the model at the default 10, so the fit does not merely invert its
 //! own integrator.
 
-use super::param::{Parameter, Target};
-use super::problem::{Metric, Problem};
 use crate::error::Result;
 use crate::integrate::SimSettings;
 use crate::model::Model;
 use crate::record::{Quantity, Record};
 use crate::reduce::Method;
 use crate::simulate::{simulate_record, InputSpec, RecordSpec};
+use crate::update::param::{Parameter, Target};
+use crate::update::problem::{Metric, Problem};
 
 /// The model file, compiled in.
 pub const MODEL_TOML: &str = include_str!("../../data/fourdof-cubic.toml");

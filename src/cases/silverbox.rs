@@ -35,7 +35,7 @@ pub struct Settings {
     /// (state initialisation; the benchmark allows 50).
     pub skip: usize,
     /// Integration sub-steps per sample (default 40, the diagnosis's
-    /// least ([`crate::diagnose::MIN_SUBSTEPS`]), so that the linear fit and
+    /// least ([`crate::diagnose::SubstepSettings::min`]), so that the linear fit and
     /// the loop integrate alike; at 10 the Newmark period error at 70 Hz
     /// costs about 0.005 mV on the test segment).
     pub substeps: usize,
@@ -48,7 +48,7 @@ impl Default for Settings {
             estimation: (40650, 60650),
             test: (100, 40575),
             skip: 50,
-            substeps: crate::diagnose::MIN_SUBSTEPS,
+            substeps: crate::diagnose::SubstepSettings::default().min,
         }
     }
 }
@@ -240,7 +240,10 @@ pub fn run(path: &Path, s: &Settings, out: Option<&Path>) -> Result<SilverboxRes
     }
     let linear = output_error_fit(&one_dof(m, d, a), &est, s.substeps)?;
     let settings = DiagnoseSettings {
-        substeps: s.substeps,
+        substeps: diagnose::SubstepSettings {
+            base: s.substeps,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let diag = diagnose::diagnose(&linear, &est, Some(&test), None, &settings, &|_| {})?;

@@ -7,14 +7,14 @@
 //! true states. Shared by the example `update_contact_shooting`, the
 //! benchmark `update` and the tests.
 
-use super::param::{Parameter, Target};
-use super::problem::Problem;
-use super::shooting;
 use crate::error::Result;
 use crate::integrate::{SimSettings, Simulation};
 use crate::model::Model;
 use crate::record::{Quantity, Record};
 use crate::simulate::{simulate_record, RecordSpec};
+use crate::update::param::{Parameter, Target};
+use crate::update::problem::Problem;
+use crate::update::shooting;
 
 /// The model file, compiled in.
 pub const MODEL_TOML: &str = include_str!("../../data/lanl8dof-contact.toml");

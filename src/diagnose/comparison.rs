@@ -1,0 +1,148 @@
+//! The data a model is compared with: the record's observed channels,
+//! its input, and the segments of the multiple-shooting error with their
+//! reconstructed start states.
+
+use super::settings::StartSettings;
+use crate::integrate::SimSettings;
+use crate::model::Model;
+use crate::update::problem::{Metric, Observation, Problem};
+use crate::update::shooting::Segment;
+use nalgebra::{DMatrix, DMatrixView, DVector};
+
+/// Weighted residual `w_c (y_c − ŷ_c)` of one segment from its predicted
+/// channels `y` (observation × sample of the segment), rows sample-major
+/// (`k p + c`); `None` when a prediction is not finite.
+pub fn segment_residual(
+    observations: &[Observation],
+    seg: &Segment,
+    y: DMatrixView<'_, f64>,
+) -> Option<DVector<f64>> {
+    let p = observations.len();
+    let mut r = DVector::zeros(seg.len * p);
+    for k in 0..seg.len {
+        for (c, o) in observations.iter().enumerate() {
+            let v = y[(c, k)];
+            if !v.is_finite() {
+                return None;
+            }
+            r[k * p + c] = o.weight * (o.data[seg.start + k] - v);
+        }
+    }
+    Some(r)
+}
+
+/// Why the multiple shooting (or the open-loop run) of a model failed.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ShotError {
+    /// The simulation of the segments failed (the simulator's message).
+    Simulation(String),
+    /// A segment's prediction is not finite after its start state was
+    /// refined: the segment (index, when found) and the first sample.
+    Segment {
+        /// Index of the segment.
+        segment: Option<usize>,
+        /// Sample (of the record) where the prediction is NaN.
+        sample: usize,
+    },
+}
+
+impl std::fmt::Display for ShotError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ShotError::Simulation(m) => write!(f, "{m}"),
+            ShotError::Segment { segment, sample } => write!(
+                f,
+                "segment {} (sample {sample}) could not be simulated from its start state",
+                segment.map_or("?".into(), |s| s.to_string())
+            ),
+        }
+    }
+}
+
+/// The data a model is compared with.
+#[derive(Debug, Clone)]
+pub struct Comparison {
+    /// Sample rate, Hz.
+    pub fs: f64,
+    /// External force (n × N).
+    pub force: DMatrix<f64>,
+    /// Observed channels.
+    pub observations: Vec<Observation>,
+    /// Segments with start states (multiple shooting).
+    pub segments: Vec<Segment>,
+    /// The open-loop segment (whole record from the estimated start).
+    pub whole: Segment,
+    /// The segment start-state refinement ([`super::starts`];
+    /// `iterations` 0: the reconstructed start states as they are).
+    pub starts: StartSettings,
+}
+
+impl Comparison {
+    /// An updating problem with no free parameter on the given segments.
+    pub fn problem(&self, model: &Model, segments: Vec<Segment>, sim: SimSettings) -> Problem {
+        Problem {
+            model: model.clone(),
+            fs: self.fs,
+            force: self.force.clone(),
+            observations: self.observations.clone(),
+            parameters: vec![],
+            segments,
+            reduction: None,
+            metric: Metric::Gls,
+            alpha: 0.0,
+            sim,
+        }
+    }
+
+    /// Predicted channels (p × N) over the segments; Err names the failure.
+    pub fn predict(
+        &self,
+        model: &Model,
+        segments: &[Segment],
+        sim: SimSettings,
+    ) -> std::result::Result<DMatrix<f64>, ShotError> {
+        let p = self.problem(model, segments.to_vec(), sim);
+        let rows =
+            crate::update::predict(&p, &[]).map_err(|e| ShotError::Simulation(e.to_string()))?;
+        let ns = self.force.ncols();
+        Ok(DMatrix::from_fn(rows.len(), ns, |c, k| rows[c][k]))
+    }
+
+    fn sums(&self, y: &DMatrix<f64>, c: usize) -> (f64, f64) {
+        let d = &self.observations[c].data;
+        let (mut num, mut den) = (0.0, 0.0);
+        for (k, m) in d.iter().enumerate() {
+            let v = y[(c, k)];
+            if v.is_finite() {
+                num += (v - m) * (v - m);
+                den += m * m;
+            }
+        }
+        (num, den)
+    }
+
+    /// Relative error of one channel (samples covered by the segments).
+    pub fn channel_error(&self, y: &DMatrix<f64>, c: usize) -> f64 {
+        let (num, den) = self.sums(y, c);
+        crate::metrics::ratio(num, den)
+    }
+
+    /// Relative error over all channels.
+    pub fn total_error(&self, y: &DMatrix<f64>) -> f64 {
+        let (mut num, mut den) = (0.0, 0.0);
+        for c in 0..self.observations.len() {
+            let (a, b) = self.sums(y, c);
+            num += a;
+            den += b;
+        }
+        crate::metrics::ratio(num, den)
+    }
+
+    /// Measured channels as a p × N matrix.
+    pub fn measured(&self) -> DMatrix<f64> {
+        DMatrix::from_fn(self.observations.len(), self.force.ncols(), |c, k| {
+            self.observations[c].data[k]
+        })
+    }
+}

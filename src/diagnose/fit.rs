@@ -1,0 +1,512 @@
+//! Fit the added effects' parameters jointly by the multiple-shooting
+//! error: starts from the trace (floored away from zero), from the joint
+//! linearization's step, bracketing a cubic spring's `k3`, and from a scan
+//! of a contact's gap and stiffness (the cost is rough in the gap, see
+//! docs/theory.md); a short race of Levenberg–Marquardt from every start
+//! ([`crate::update::fit_multistart`]); the best carried on with the
+//! segment start states ([`super::polish`]).
+
+use super::effects::{self, AddedEffect};
+use super::errors::Comparison;
+use super::outcome::ToleratedFailure;
+use super::polish::{noise_cost, polish, Polished};
+use super::settings::ZeroStarts;
+use super::substeps::resolved;
+use super::DiagnoseSettings;
+use crate::error::Result;
+use crate::integrate::SimSettings;
+use crate::model::Model;
+use crate::trace::EffectKind;
+use crate::update::optimize::FitSettings;
+use crate::update::shooting::Segment;
+use crate::update::{Parameter, Problem, Target};
+use nalgebra::DMatrix;
+use std::time::Instant;
+
+/// The fit of the added effects.
+pub(super) struct EffectFit {
+    /// The model with the fitted values.
+    pub model: Model,
+    /// How the fit ended.
+    pub note: String,
+    /// Segment simulations spent.
+    pub simulations: usize,
+    /// The fit segments with their fitted start states, and the
+    /// simulation settings of the fit (None when no start was carried on).
+    pub fitted: Option<(Vec<Segment>, SimSettings)>,
+    /// Seconds spent in the contact scan, the race and the polish.
+    pub stages: [(&'static str, f64); 3],
+    /// Failures the fit went on past.
+    pub failures: Vec<ToleratedFailure>,
+}
+
+/// The starts of a fit being gathered.
+struct Starts {
+    /// Scaled parameter vectors.
+    list: Vec<Vec<f64>>,
+    /// The model at the stiffest start (sets the sub-steps).
+    stiffest: Model,
+    /// Segment simulations spent on scans.
+    simulations: usize,
+    /// Seconds spent on scans.
+    scan_secs: f64,
+}
+
+/// Pick up to `k` segments spread evenly over `all`.
+pub(super) fn spread(all: &[Segment], k: usize) -> Vec<Segment> {
+    if all.len() <= k || k == 0 {
+        return all.to_vec();
+    }
+    (0..k).map(|i| all[i * all.len() / k].clone()).collect()
+}
+
+/// Fit the parameters of all added effects jointly (module docs), the
+/// fit segments' start states corrected along the hidden trajectories by
+/// `correction` (2n × N) when given, with the joint linearization's
+/// `predicted` values as further starts.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn fit_effects(
+    trial: &Model,
+    all: &[AddedEffect],
+    cmp: &Comparison,
+    states: &DMatrix<f64>,
+    correction: Option<&DMatrix<f64>>,
+    predicted: Option<&[Vec<f64>]>,
+    fs: f64,
+    settings: &DiagnoseSettings,
+) -> Result<EffectFit> {
+    let mut floored = trial.clone();
+    for e in all {
+        floor_start(
+            &mut floored,
+            e,
+            (states, &cmp.force),
+            &settings.fit.zero_starts,
+        );
+    }
+    let trial = &floored;
+    let mut params = vec![];
+    for e in all {
+        params.extend(effects::parameters(trial, e)?);
+    }
+    let mut segments = spread(&cmp.segments, settings.segments.fit_segments);
+    let corrected;
+    let states = match correction {
+        Some(d) => {
+            let n = trial.ndof();
+            for s in &mut segments {
+                for i in 0..n {
+                    s.u0[i] += d[(i, s.start)];
+                    s.v0[i] += d[(n + i, s.start)];
+                }
+            }
+            corrected = states + d;
+            &corrected
+        }
+        None => states,
+    };
+    let mut problem = cmp.problem(trial, segments.clone(), SimSettings::default());
+    problem.parameters = params;
+    let np = problem.parameters.len();
+    let mut starts = Starts {
+        list: vec![vec![0.0; np]],
+        stiffest: trial.clone(),
+        simulations: 0,
+        scan_secs: 0.0,
+    };
+    // the joint linearization's step at the current fit, when the effect
+    // came in on its predicted gain ([`super::screen`])
+    for at in predicted.unwrap_or_default() {
+        push_start(&mut starts.list, &problem.parameters, at);
+    }
+    let scan = Scan {
+        cmp,
+        segments: &segments,
+        states,
+        settings,
+    };
+    match all.last().map(|e| (e, e.candidate.kind)) {
+        Some((_, EffectKind::Cubic)) => {
+            cubic_starts(trial, &problem, &settings.fit.cubic_brackets, &mut starts)
+        }
+        Some((last, EffectKind::Contact)) => {
+            contact_starts(trial, last, &mut problem, &scan, &mut starts)
+        }
+        Some((last, EffectKind::Clearance)) => {
+            clearance_starts(trial, last, &problem, &scan, &mut starts)
+        }
+        _ => {}
+    }
+    rescan_beside(trial, all, &problem, predicted, &scan, &mut starts);
+    problem.sim = resolved(&starts.stiffest, fs, settings, states);
+    race_and_polish(trial, cmp, &problem, starts, settings)
+}
+
+/// What a contact scan runs on.
+struct Scan<'a> {
+    cmp: &'a Comparison,
+    segments: &'a [Segment],
+    states: &'a DMatrix<f64>,
+    settings: &'a DiagnoseSettings,
+}
+
+/// A cubic spring: the segment error has local minima in k3 (the traced
+/// value comes from linear-model states), so more starts bracket it, at
+/// `brackets` times the traced value.
+fn cubic_starts(trial: &Model, problem: &Problem, brackets: &[f64], starts: &mut Starts) {
+    let np = problem.parameters.len();
+    let p = &problem.parameters[np - 1];
+    let k3 = trial.cubics[trial.cubics.len() - 1].k3;
+    for &f in brackets {
+        let mut s = vec![0.0; np];
+        s[np - 1] = p.to_x((k3 * f).clamp(p.lower, p.upper));
+        starts.list.push(s);
+    }
+    let c = starts.stiffest.cubics.len() - 1;
+    starts.stiffest.cubics[c].k3 = k3 * brackets.iter().copied().fold(1.0, f64::max);
+}
+
+/// A contact: starts from a scan of gap and stiffness ([`scan_contact`]);
+/// the gap's upper bound raised to the largest reconstructed relative
+/// displacement.
+fn contact_starts(
+    trial: &Model,
+    last: &AddedEffect,
+    problem: &mut Problem,
+    scan: &Scan<'_>,
+    starts: &mut Starts,
+) {
+    let np = problem.parameters.len();
+    let ci = trial.contacts.len() - 1;
+    // the gap may lie anywhere below the largest reconstructed relative
+    // displacement (beyond it the contact never closes), not only within
+    // 3× the traced value: a traced gap from a few sensors can be a third
+    // of the truth
+    let dmax = (0..scan.states.ncols())
+        .map(|k| last.candidate.delta(scan.states, k))
+        .fold(0.0, f64::max);
+    let pg = &mut problem.parameters[np - 2];
+    pg.upper = pg.upper.max(scan.settings.fit.gap_upper * dmax);
+    let t = Instant::now();
+    let (best, evals) = scan_contact(trial, ci, &last.candidate, scan);
+    starts.simulations += evals * scan.segments.len();
+    starts.scan_secs += t.elapsed().as_secs_f64();
+    let (pg, pk) = (&problem.parameters[np - 2], &problem.parameters[np - 1]);
+    for (g, kc) in best {
+        let mut s = vec![0.0; np];
+        s[np - 2] = pg.to_x(g.clamp(pg.lower, pg.upper));
+        s[np - 1] = pk.to_x(kc.clamp(pk.lower, pk.upper));
+        if starts.list.contains(&s) {
+            continue;
+        }
+        starts.list.push(s);
+        if kc > starts.stiffest.contacts[ci].stiffness {
+            starts.stiffest.contacts[ci].stiffness = kc;
+        }
+    }
+}
+
+/// A clearance: starts from the same scan as a contact, on `|δ|`.
+fn clearance_starts(
+    trial: &Model,
+    last: &AddedEffect,
+    problem: &Problem,
+    scan: &Scan<'_>,
+    starts: &mut Starts,
+) {
+    let np = problem.parameters.len();
+    let ci = trial.clearances.len() - 1;
+    let t = Instant::now();
+    let (best, evals) = scan_contact(trial, ci, &last.candidate, scan);
+    starts.simulations += evals * scan.segments.len();
+    starts.scan_secs += t.elapsed().as_secs_f64();
+    let (pg, pk) = (&problem.parameters[np - 2], &problem.parameters[np - 1]);
+    for (g, kc) in best {
+        let mut s = vec![0.0; np];
+        s[np - 2] = pg.to_x(g.clamp(pg.lower, pg.upper));
+        s[np - 1] = pk.to_x(kc.clamp(pk.lower, pk.upper));
+        if !starts.list.contains(&s) {
+            starts.list.push(s);
+            let c = &mut starts.stiffest.clearances[ci];
+            c.stiffness = c.stiffness.max(kc);
+        }
+    }
+}
+
+/// A change linear in the state beside a contact found before: the
+/// contact's gap and stiffness scanned again with the change at the
+/// farthest predicted value, or at its start (the contact fitted alone
+/// took up part of it).
+fn rescan_beside(
+    trial: &Model,
+    all: &[AddedEffect],
+    problem: &Problem,
+    predicted: Option<&[Vec<f64>]>,
+    scan: &Scan<'_>,
+    starts: &mut Starts,
+) {
+    let np = problem.parameters.len();
+    let start_values: Vec<f64> = problem.parameters.iter().map(|p| p.start).collect();
+    let far = predicted.and_then(|p| p.last()).unwrap_or(&start_values);
+    let Some(last) = all.last() else {
+        return;
+    };
+    let contact = all[..all.len() - 1]
+        .iter()
+        .rev()
+        .find(|e| e.candidate.kind == EffectKind::Contact);
+    let Some(c) = contact.filter(|_| last.candidate.kind.linear_in_state() && far.len() == np)
+    else {
+        return;
+    };
+    let Some(ci) = c.targets.iter().find_map(|t| match t {
+        Target::ContactGap(i) => Some(*i),
+        _ => None,
+    }) else {
+        return;
+    };
+    let slot = |t: Target| problem.parameters.iter().position(|p| p.target == t);
+    let (Some(ig), Some(ik)) = (
+        slot(Target::ContactGap(ci)),
+        slot(Target::ContactStiffness(ci)),
+    ) else {
+        return;
+    };
+    let mut at = trial.clone();
+    for (p, &v) in problem.parameters.iter().zip(far) {
+        p.target.set(&mut at, v);
+    }
+    let t = Instant::now();
+    let (best, evals) = scan_contact(&at, ci, &c.candidate, scan);
+    starts.simulations += evals * scan.segments.len();
+    starts.scan_secs += t.elapsed().as_secs_f64();
+    for (g, kc) in best {
+        let mut v = far.to_vec();
+        v[ig] = g;
+        v[ik] = kc;
+        push_start(&mut starts.list, &problem.parameters, &v);
+        if kc > starts.stiffest.contacts[ci].stiffness {
+            starts.stiffest.contacts[ci].stiffness = kc;
+        }
+    }
+}
+
+/// The starts race: a few iterations each from the reconstructed start
+/// states; the best one or two are carried on ([`polish`]).
+fn race_and_polish(
+    trial: &Model,
+    cmp: &Comparison,
+    problem: &Problem,
+    starts: Starts,
+    settings: &DiagnoseSettings,
+) -> Result<EffectFit> {
+    let mut sims = starts.simulations;
+    let mut stages = [
+        ("fit_scan", starts.scan_secs),
+        ("fit_race", 0.0),
+        ("fit_polish", 0.0),
+    ];
+    let sub = problem.sim.substeps;
+    let fit = settings.fit_settings();
+    let race = FitSettings {
+        max_iterations: fit.max_iterations.min(settings.fit.race_iterations),
+        ..fit
+    };
+    let t = Instant::now();
+    let (_, results) = crate::update::fit_multistart(problem, &race, &starts.list)?;
+    sims += results.iter().map(|r| r.simulations).sum::<usize>();
+    stages[1].1 += t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    // the race's starts, best first
+    let mut order: Vec<usize> = (0..results.len())
+        .filter(|&i| results[i].cost().is_finite())
+        .collect();
+    order.sort_by(|&a, &b| results[a].cost().total_cmp(&results[b].cost()));
+    let floor = noise_cost(cmp, &problem.segments, settings.noise.level);
+    let mut kept: Option<Polished> = None;
+    let mut failures = vec![];
+    for (tries, &i) in order.iter().enumerate() {
+        // a second start only when the first ends far above the noise
+        if tries >= settings.fit.polish_starts
+            || kept
+                .as_ref()
+                .is_some_and(|k| k.cost <= settings.fit.noise_margin * floor)
+        {
+            break;
+        }
+        let r = &results[i];
+        let beat = kept.as_ref().map(|k| k.cost);
+        let mut p = polish(cmp, problem, &r.x, r.cost(), settings, beat);
+        sims += p.simulations;
+        failures.append(&mut p.failures);
+        p.note = format!(
+            "start {} of {} carried on after a {}-iteration race ({:?}; {} sub-steps){}",
+            i + 1,
+            starts.list.len(),
+            r.iterations,
+            r.termination,
+            sub,
+            p.note
+        );
+        if kept.as_ref().is_none_or(|k| p.cost < k.cost) {
+            kept = Some(p);
+        }
+    }
+    // (no start with a finite cost: none was carried on)
+    let Some(k) = kept else {
+        failures.push(ToleratedFailure {
+            step: "fit".into(),
+            error: "every start of the race failed".into(),
+            fallback: "the traced values".into(),
+        });
+        return Ok(EffectFit {
+            model: trial.clone(),
+            note: "every start failed; traced values kept".into(),
+            simulations: sims,
+            fitted: None,
+            stages,
+            failures,
+        });
+    };
+    stages[2].1 += t.elapsed().as_secs_f64();
+    Ok(EffectFit {
+        model: k.model,
+        note: k.note,
+        simulations: sims,
+        fitted: Some((k.segments, problem.sim)),
+        stages,
+        failures,
+    })
+}
+
+/// Add the start at parameter `values` (clamped to the bounds, scaled)
+/// unless it is there already, has the wrong length or is not finite.
+fn push_start(starts: &mut Vec<Vec<f64>>, params: &[Parameter], values: &[f64]) {
+    if values.len() != params.len() {
+        return;
+    }
+    let s: Vec<f64> = params
+        .iter()
+        .zip(values)
+        .map(|(p, &v)| p.to_x(v.clamp(p.lower, p.upper)))
+        .collect();
+    if s.iter().all(|v| v.is_finite()) && !starts.contains(&s) {
+        starts.push(s);
+    }
+}
+
+/// Gap and stiffness starts of a contact from a scan of the
+/// multiple-shooting error with the nonlinear model (the cost is rough
+/// in the gap): gaps at upper quantiles of the reconstructed
+/// relative displacement, stiffnesses at multiples of the stiffest spring
+/// the pair touches. Returns the two best (gap, stiffness) pairs and the
+/// evaluations spent.
+fn scan_contact(
+    trial: &Model,
+    ci: usize,
+    cand: &crate::trace::Candidate,
+    scan: &Scan<'_>,
+) -> (Vec<(f64, f64)>, usize) {
+    const KEEP: usize = 2;
+    let Scan {
+        cmp,
+        segments,
+        states,
+        settings,
+    } = *scan;
+    let fs = cmp.fs;
+    // a clearance: its gap on |δ|, its own entry
+    let two_sided = cand.kind == EffectKind::Clearance;
+    let dofs = if two_sided {
+        &trial.clearances[ci].dofs
+    } else {
+        &trial.contacts[ci].dofs
+    };
+    let mut d: Vec<f64> = (0..states.ncols())
+        .map(|k| cand.delta(states, k))
+        .map(|x| if two_sided { x.abs() } else { x })
+        .collect();
+    d.sort_by(f64::total_cmp);
+    let q = |f: f64| d[((d.len() - 1) as f64 * f) as usize].max(0.0);
+    let kspring = trial
+        .springs
+        .iter()
+        .filter(|s| s.dofs.contains(&dofs[0]) || dofs.get(1).is_some_and(|j| s.dofs.contains(j)))
+        .map(|s| s.stiffness)
+        .fold(0.0, f64::max)
+        .max(1.0);
+    let mut scored = vec![];
+    let mut evals = 0;
+    for &m in &settings.fit.contact_stiffnesses {
+        let kc = m * kspring;
+        for &f in &settings.fit.gap_quantiles {
+            let g = q(f);
+            let mut m = trial.clone();
+            if two_sided {
+                m.clearances[ci].gap = g;
+                m.clearances[ci].stiffness = kc;
+            } else {
+                m.contacts[ci].gap = g;
+                m.contacts[ci].stiffness = kc;
+            }
+            let sim = resolved(&m, fs, settings, states);
+            evals += 1;
+            if let Ok(y) = cmp.predict(&m, segments, sim) {
+                scored.push((cmp.total_error(&y), g, kc));
+            }
+        }
+    }
+    scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // distinct pairs only (upper quantiles of a sparse impact history can
+    // coincide)
+    let mut best: Vec<(f64, f64)> = vec![];
+    for (_, g, kc) in scored {
+        if best.len() < KEEP && !best.contains(&(g, kc)) {
+            best.push((g, kc));
+        }
+    }
+    (best, evals)
+}
+
+/// A traced value of zero cannot be scaled relatively (a contact traced
+/// to switch on at zero gap, or with zero stiffness; a friction level or
+/// a spring of zero): such a value starts the fit at a small positive one
+/// instead ([`ZeroStarts`]: by default a gap of 5 % of the largest
+/// reconstructed relative displacement, 10× the stiffest spring at the
+/// pair, 0.1 % of the largest applied force, 0.1 % of the stiffest
+/// spring).
+fn floor_start(
+    model: &mut Model,
+    e: &AddedEffect,
+    (states, force): (&DMatrix<f64>, &DMatrix<f64>),
+    z: &ZeroStarts,
+) {
+    let stiffest = |m: &Model, dofs: &[usize]| {
+        m.springs
+            .iter()
+            .filter(|s| dofs.iter().any(|d| s.dofs.contains(&(d + 1))))
+            .map(|s| s.stiffness)
+            .fold(0.0, f64::max)
+            .max(1.0)
+    };
+    for &t in &e.targets {
+        let v = t.get(model).unwrap_or(0.0);
+        if v != 0.0 && v.is_finite() {
+            continue;
+        }
+        let dofs = &e.candidate.dofs;
+        let floor = match t {
+            Target::ContactGap(_) => {
+                let dmax = (0..states.ncols())
+                    .map(|k| e.candidate.delta(states, k))
+                    .fold(0.0, f64::max);
+                (z.gap * dmax).max(1e-9)
+            }
+            Target::ContactStiffness(_) => z.contact_stiffness * stiffest(model, dofs),
+            Target::FrictionLevel(_) => (z.friction * force.amax()).max(1e-9),
+            Target::SpringStiffness(_) => z.spring * stiffest(model, dofs),
+            _ => continue,
+        };
+        t.set(model, floor);
+    }
+}

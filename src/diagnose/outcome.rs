@@ -1,0 +1,245 @@
+//! What the diagnosis returns: the errors before and after, the effects
+//! found and how each round of the loop ended.
+
+use super::errors::ErrorSet;
+use super::prepare::Prepared;
+use crate::model::Model;
+use crate::trace::{EffectKind, RankedEffect};
+use nalgebra::DMatrix;
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// One effect in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct EffectReport {
+    /// `contact`, `friction`, `cubic`, `stiffness`, `ground_spring`, `damping`.
+    pub kind: EffectKind,
+    /// DOFs from 1 (contact `[i, j]`: on when `u_i − u_j` exceeds the gap).
+    pub dofs: Vec<usize>,
+    /// Label.
+    pub label: String,
+    /// Fitted parameters, SI (`gap` m, `stiffness` N/m, `level` N, `k3`
+    /// N/m³, `delta` relative change).
+    pub parameters: BTreeMap<String, f64>,
+    /// Standard errors of the parameters (null when not determined).
+    pub std_errors: BTreeMap<String, Option<f64>>,
+    /// Parameters from the trace regression (the fit's start).
+    pub traced: BTreeMap<String, f64>,
+    /// Scores.
+    pub score: Score,
+}
+
+/// How much an effect pays.
+#[derive(Debug, Clone, Serialize)]
+pub struct Score {
+    /// Fraction of the remaining segment residual its regression removed.
+    pub residual_explained: f64,
+    /// BIC change of the regression (negative pays).
+    pub bic_change: f64,
+    /// Fraction of the identified force it explains.
+    pub force_explained: Option<f64>,
+    /// Multiple-shooting error before it was added.
+    pub error_before: Option<f64>,
+    /// Multiple-shooting error after it was added and fitted.
+    pub error_after: Option<f64>,
+}
+
+/// One round of the loop (written to report.json with `kept` and `note`,
+/// the decision in words, by [`super::report`]).
+#[derive(Debug, Clone)]
+pub struct Round {
+    /// Effect proposed (None when none was fitted).
+    pub proposed: Option<String>,
+    /// How the round ended.
+    pub decision: Decision,
+    /// How the fit of the effect proposed ended (if fitted).
+    pub fit: Option<String>,
+    /// The cubic spring tried in place of a large stiffness change
+    /// ([`super::alternative`]), if it was.
+    pub alternative: Option<AlternativeTried>,
+    /// Simulations spent by the fit (by the screen when nothing was fitted).
+    pub simulations: usize,
+}
+
+impl Round {
+    /// A round that fitted nothing.
+    pub fn unfitted(decision: Decision, simulations: usize) -> Round {
+        Round {
+            proposed: None,
+            decision,
+            fit: None,
+            alternative: None,
+            simulations,
+        }
+    }
+
+    /// Whether the effect proposed was kept.
+    pub fn kept(&self) -> bool {
+        matches!(self.decision, Decision::Kept { .. })
+    }
+}
+
+/// Errors on the validation record.
+#[derive(Debug, Clone, Serialize)]
+pub struct Validation {
+    /// Declared model.
+    pub before: ErrorSet,
+    /// Fitted model.
+    pub after: ErrorSet,
+    /// Linear model driven by the force identified on the first record
+    /// (non-parametric prediction), multiple-shooting error.
+    pub nonparametric_relative_error: Option<f64>,
+}
+
+/// A failure the diagnosis went on past (it used a fallback), reported so
+/// that nothing is lost silently.
+#[derive(Debug, Clone, Serialize)]
+pub struct ToleratedFailure {
+    /// The step that failed.
+    pub step: String,
+    /// What failed.
+    pub error: String,
+    /// What was used instead.
+    pub fallback: String,
+}
+
+/// The result of [`super::diagnose`].
+#[derive(Debug, Clone, Serialize)]
+pub struct Diagnosis {
+    /// "no missing effect found" or what was found.
+    pub verdict: String,
+    /// Declared model's errors.
+    pub before: ErrorSet,
+    /// Fitted model's errors.
+    pub after: ErrorSet,
+    /// On the validation record, when given.
+    pub validation: Option<Validation>,
+    /// Effects added, in order.
+    pub effects: Vec<EffectReport>,
+    /// Best candidates of the first trace round.
+    pub ranking: Vec<RankedEffect>,
+    /// The rounds of the loop.
+    pub rounds: Vec<Round>,
+    /// Sub-steps used before and after.
+    pub substeps: (usize, usize),
+    /// Nonlinear simulations run (fits and errors).
+    pub simulations: usize,
+    /// Linear segment simulations of the trace.
+    pub trace_simulations: usize,
+    /// Identification notes.
+    pub identification: String,
+    /// Failures the diagnosis went on past, each with its fallback.
+    pub tolerated_failures: Vec<ToleratedFailure>,
+    /// Timings, s.
+    pub timings: BTreeMap<String, f64>,
+    /// The calibration of the linear part and its corrections (None when
+    /// the declared model was trusted).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<super::calibrated::CalibrationReport>,
+    /// The fitted model.
+    #[serde(skip)]
+    pub model: Model,
+    /// The effects' parameter bookkeeping, in the order of `effects`.
+    #[serde(skip)]
+    pub added: Vec<super::effects::AddedEffect>,
+    /// Data of the first record (for figures).
+    #[serde(skip)]
+    pub prepared: Prepared,
+    /// Segment predictions before and after (p × N).
+    #[serde(skip)]
+    pub predictions: (Option<DMatrix<f64>>, Option<DMatrix<f64>>),
+}
+
+/// A candidate below the trace's screen that was considered anyway.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BelowScreen {
+    /// Why the trace's screen proposed nothing (the trace's words).
+    pub trace: String,
+    /// Candidates the joint linearization predicted below the screen:
+    /// label and predicted fraction of the fit cost removed.
+    pub screened_out: Vec<(String, f64)>,
+    /// The screen: the fraction of the fit cost a candidate had to be
+    /// predicted to remove.
+    pub screen: f64,
+}
+
+/// Why a fitted effect was withdrawn.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WithdrawReason {
+    /// Switched off in the fitted model the error is hardly higher: it
+    /// does not itself remove the share `need` of the squared error.
+    NotItself {
+        /// Error with it switched off.
+        without: Option<f64>,
+        /// Error with it.
+        with: Option<f64>,
+        /// Share of the squared error it had to remove.
+        need: f64,
+    },
+    /// Fitted, it does not remove the share `need` of the squared error.
+    TooLittle {
+        /// Share of the squared error it had to remove.
+        need: f64,
+        /// Error before it.
+        before: Option<f64>,
+        /// Error with it, fitted.
+        after: Option<f64>,
+    },
+}
+
+/// How a round of the loop ended.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case", tag = "outcome")]
+pub enum Decision {
+    /// The model explains the record up to noise: no effect sought.
+    AtNoise {
+        /// Multiple-shooting error.
+        error: f64,
+        /// The noise floor it is at or below.
+        floor: f64,
+    },
+    /// No candidate pays (the trace's words).
+    NothingPays {
+        /// Why the trace stopped.
+        reason: String,
+    },
+    /// Every candidate below the screen was predicted to gain too little.
+    ScreenedOut(BelowScreen),
+    /// The effect is kept.
+    Kept {
+        /// Error before it.
+        before: Option<f64>,
+        /// Error with it, fitted.
+        after: Option<f64>,
+        /// When it came in below the screen.
+        below: Option<BelowScreen>,
+    },
+    /// The effect is withdrawn.
+    Withdrawn {
+        /// Why.
+        reason: WithdrawReason,
+        /// When it came in below the screen.
+        below: Option<BelowScreen>,
+        /// The effects found, as refitted beside it, kept instead: error
+        /// before and after.
+        refit_kept: Option<(Option<f64>, Option<f64>)>,
+    },
+}
+
+/// The cubic spring tried in place of a stiffness change (or the
+/// clearance in place of a cubic spring).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AlternativeTried {
+    /// The cubic spring's label.
+    pub label: String,
+    /// Its start: parameter names and values, SI (a cubic's k3 is the
+    /// change's equivalent).
+    pub start: Vec<(String, f64)>,
+    /// Its multiple-shooting error, fitted (None when it failed).
+    pub error: Option<f64>,
+    /// Whether it replaced the stiffness change.
+    pub taken: bool,
+    /// The stiffness change: label and error.
+    pub instead_of: (String, Option<f64>),
+}

@@ -1,0 +1,213 @@
+//! The screen: which candidate of a trace round is fitted.
+//!
+//! The trace's screen ([`crate::trace`]) proposes at most one effect. When
+//! it proposes none after a first effect was found, two candidates below
+//! it are still considered: a change linear in the state along the
+//! located force direction (the *companion*: a nonlinear effect's fit
+//! absorbs a linear change at the same place, so the screen, run after
+//! that fit, cannot see it), then the best remaining candidate that lowers
+//! the BIC (the screen's regression on the linear model's states can
+//! underrate a second effect). Each is fitted only when the joint
+//! linearization at the current fit ([`joint::predicted_gain`]) predicts
+//! it removes enough of the fit cost.
+
+use super::effects::{self, AddedEffect};
+use super::errors::Comparison;
+use super::joint;
+use super::outcome::BelowScreen;
+use super::prepare::grounded;
+use super::state::{add_time, add_to, Context, KeptEffect, State};
+use super::DiagnoseSettings;
+use crate::error::Result;
+use crate::integrate::SimSettings;
+use crate::model::Model;
+use crate::trace::{self, EffectKind, RankedEffect, TraceResult};
+use crate::update::shooting::Segment;
+use nalgebra::DMatrix;
+use std::time::Instant;
+
+/// A candidate chosen for the fit.
+pub(super) struct Chosen {
+    /// The candidate.
+    pub best: RankedEffect,
+    /// Start values from the joint linearization's step (below the screen).
+    pub predicted: Option<Vec<Vec<f64>>>,
+}
+
+/// The candidates of a round, in the order they are tried: the one the
+/// trace's screen selected, else the companion and the best remaining one
+/// that lowers the BIC (module docs).
+pub(super) fn pool(
+    tr: &TraceResult,
+    added: &[KeptEffect],
+    located: Option<&DMatrix<f64>>,
+) -> Vec<RankedEffect> {
+    if let Some(s) = tr.selected.first() {
+        return vec![s.clone()];
+    }
+    let mut pool: Vec<RankedEffect> = companion(tr, added, located).into_iter().collect();
+    if !added.is_empty() {
+        let next = tr
+            .ranking
+            .iter()
+            .find(|e| e.bic_change < 0.0 && !pool.iter().any(|p| p.candidate == e.candidate));
+        pool.extend(next.cloned());
+    }
+    pool
+}
+
+/// A change linear in the state along the located directions, once a
+/// nonlinear effect was found: fitted once below the screen, jointly with
+/// the effects found (a bumper's gap and penalty stiffness trade against a
+/// softer spring beside it); the fit decides whether it pays. (A damping
+/// change acts along no single direction.)
+fn companion(
+    tr: &TraceResult,
+    added: &[KeptEffect],
+    located: Option<&DMatrix<f64>>,
+) -> Option<RankedEffect> {
+    let dirs = located.filter(|d| d.ncols() > 0)?;
+    if added
+        .iter()
+        .all(|a| a.effect.candidate.kind.linear_in_state())
+    {
+        return None;
+    }
+    tr.ranking
+        .iter()
+        .find(|e| e.candidate.kind.linear_in_state() && trace::acts_along(&e.candidate, dirs))
+        .cloned()
+}
+
+/// The first candidate of `pool` that passes the screen (every one when
+/// the trace selected it, `screened`), what the screen turned away, and
+/// the simulations spent.
+pub(super) fn choose(
+    ctx: &Context<'_>,
+    st: &mut State,
+    pool: Vec<RankedEffect>,
+    screened: bool,
+    trace_reason: &str,
+) -> (Option<Chosen>, BelowScreen, usize) {
+    let mut below = BelowScreen {
+        trace: trace_reason.to_string(),
+        screened_out: vec![],
+        screen: companion_screen(st.error, ctx.settings),
+    };
+    let mut sims = 0;
+    for best in pool {
+        let (model, _, all) = add_to(st, &best);
+        let mut predicted = None;
+        // (a spring to ground on a free-free model is judged on states
+        // reconstructed with it, [`super::prepare::rescore_prep`]:
+        // linearized on the declared model's reconstruction its gain is
+        // not seen, and with modal damping its derivative at zero is
+        // infinite; the fit decides)
+        let own = grounded(&model) && !grounded(&st.current) && !grounded(ctx.declared);
+        if !screened && !own {
+            if let Some((segs, sim)) = st.fitted.as_ref() {
+                let t = Instant::now();
+                let strides = &ctx.settings.screen.gn_strides;
+                let gain = companion_gain(&model, &all, ctx.cmp(), (segs, *sim), strides);
+                let (g, n, at) = gain.unwrap_or_else(|e| {
+                    let step = format!("predicted gain of {}", best.label);
+                    ctx.tolerate(&step, e, "fitted without a predicted gain");
+                    (None, 0, None)
+                });
+                sims += n;
+                predicted = at;
+                add_time(&mut st.timings, "fit", t);
+                if let Some(g) = g.filter(|&g| g < below.screen) {
+                    below.screened_out.push((best.label.clone(), g));
+                    continue;
+                }
+            }
+        }
+        return (Some(Chosen { best, predicted }), below, sims);
+    }
+    (None, below, sims)
+}
+
+/// The companion screen at multiple-shooting error `err`
+/// ([`super::settings::ScreenSettings::companion_screen`]: lower far from
+/// the noise floor).
+fn companion_screen(err: Option<f64>, settings: &DiagnoseSettings) -> f64 {
+    let s = &settings.screen;
+    if err.is_some_and(|e| e > s.far_from_noise * settings.noise_floor()) {
+        s.companion_screen_far
+    } else {
+        s.companion_screen
+    }
+}
+
+/// A predicted gain, the simulations spent and the parameter values at
+/// the strides of the linearization's step.
+type Predicted = (Option<f64>, usize, Option<Vec<Vec<f64>>>);
+
+/// The fraction of the fit cost a candidate below the screen (the last
+/// effect of `all` on `trial`, taken at no change: a spring at its declared
+/// stiffness, a nonlinear element at zero strength with its traced gap) is
+/// predicted to remove at the current fit
+/// ([`joint::predicted_gain`] on the fit segments `segs`, with the fit's
+/// sub-steps), and the simulations spent; with the parameter values at
+/// `strides` multiples of the linearization's step (starts for the fit);
+/// None when a simulation fails; Err when the effects' parameters cannot
+/// be set up.
+fn companion_gain(
+    trial: &Model,
+    all: &[AddedEffect],
+    cmp: &Comparison,
+    (segs, sim): (&[Segment], SimSettings),
+    strides: &[f64],
+) -> Result<Predicted> {
+    let mut params = vec![];
+    let mut extra = 0;
+    for e in all {
+        let p = effects::parameters(trial, e)?;
+        extra = p.len();
+        params.extend(p);
+    }
+    let Some(last) = all.last() else {
+        return Ok((None, 0, None));
+    };
+    let mut problem = cmp.problem(trial, segs.to_vec(), sim);
+    problem.parameters = params;
+    // linearized where the candidate is no change at all (the traced
+    // value is only the screen's estimate)
+    let mut x = problem.x_start();
+    let zero = match last.candidate.kind {
+        EffectKind::GroundSpring => 0.0,
+        _ => last.nominal,
+    };
+    for (xi, p) in x.iter_mut().zip(&problem.parameters).rev().take(extra) {
+        // a contact is switched off by its stiffness; its gap stays where
+        // the trace put it
+        if !matches!(
+            p.target,
+            crate::update::Target::ContactGap(_) | crate::update::Target::ClearanceGap(_)
+        ) {
+            *xi = p.to_x(zero);
+        }
+    }
+    match joint::predicted_gain(&problem, &x, extra) {
+        Some((g, dx, n)) => {
+            // the Gauss–Newton step's parameter values: a start for the
+            // fit (the trace's value of a companion comes from a
+            // regression on states the effects found already absorb it in)
+            let (lo, hi) = problem.x_bounds();
+            let at = strides
+                .iter()
+                .map(|f| {
+                    problem
+                        .parameters
+                        .iter()
+                        .enumerate()
+                        .map(|(i, p)| p.from_x((x[i] + f * dx[i]).clamp(lo[i], hi[i])))
+                        .collect()
+                })
+                .collect();
+            Ok((Some(g), n, Some(at)))
+        }
+        None => Ok((None, 0, None)),
+    }
+}

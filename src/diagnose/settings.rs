@@ -1,0 +1,1025 @@
+//! Settings of the diagnosis: every threshold in one tree.
+//!
+//! [`DiagnoseSettings`] holds one group per stage. Each field says what it
+//! means, its unit, its default, the values [`DiagnoseSettings::validate`]
+//! accepts, and why it has its default. The noise-related thresholds are
+//! multiples of one assumed noise level ([`NoiseSettings::level`]). The
+//! whole tree is written into report.json and read back by
+//! `tacit diagnose --settings FILE` (TOML or JSON), so a run can be
+//! replayed.
+
+use super::lifted::LiftedSettings;
+use crate::error::{Result, TacitError};
+use crate::horizon::{self, settings::HorizonSettings};
+use crate::trace::TraceSettings;
+use crate::update::optimize::{FitSettings, JacobianMethod};
+use serde::{Deserialize, Serialize};
+
+/// Settings of the diagnosis (module docs). Every field has a default; a
+/// settings file may give any subset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DiagnoseSettings {
+    /// Where the states come from (default: the lifted smoother).
+    pub states: StatesSource,
+    /// The assumed measurement noise.
+    pub noise: NoiseSettings,
+    /// Segments of the multiple-shooting error.
+    pub segments: SegmentSettings,
+    /// Sub-steps of the simulations.
+    pub substeps: SubstepSettings,
+    /// The force-location search.
+    pub locate: LocateSettings,
+    /// The lifted smoother.
+    pub lifted: LiftedGroup,
+    /// The full-horizon smoother ([`StatesSource::Reconstructed`] only).
+    pub horizon: HorizonSettings,
+    /// The trace of the residual to candidate effects.
+    pub trace: TraceGroup,
+    /// Which candidate is fitted, and which is kept.
+    pub screen: ScreenSettings,
+    /// The fit of the added effects.
+    pub fit: FitGroup,
+    /// The segment start states.
+    pub starts: StartSettings,
+}
+
+/// Source of the states the trace and the segments use.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StatesSource {
+    /// Reconstructed by the sub-sample ("lifted") smoother
+    /// ([`super::lifted::reconstruct`]): the unknown force piecewise
+    /// constant on sub-intervals of each sample, so impacts between samples
+    /// are seen.
+    #[default]
+    Lifted,
+    /// Reconstructed by the full-horizon smoother ([`crate::horizon`]), the
+    /// unknown force linear between samples.
+    Reconstructed,
+    /// The truth stored with a simulated record (for validation of the
+    /// later steps only; an error on a record without truth).
+    Truth,
+}
+
+/// The assumed measurement noise.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NoiseSettings {
+    /// Noise standard deviation of every channel as a fraction of its RMS
+    /// (default 0.01; > 0 and < 1). Weighs the lifted smoother's data, sets
+    /// the fit's standard errors and the noise cost a fit is judged against.
+    /// Reason: accelerometers of a shaker test read about 1 %.
+    pub level: f64,
+    /// Multiple-shooting relative error at or below `floor_multiple ×
+    /// level` is taken as noise and integration error: no effect is sought
+    /// (default 2.5; > 0). Reason: the exact model of a 1 %-noise record
+    /// scores 1.1–1.4 %, so 2.5 % leaves room without hiding a missing
+    /// effect.
+    pub floor_multiple: f64,
+}
+
+impl Default for NoiseSettings {
+    fn default() -> Self {
+        NoiseSettings {
+            level: 0.01,
+            floor_multiple: 2.5,
+        }
+    }
+}
+
+impl NoiseSettings {
+    /// The noise floor of the multiple-shooting error, `floor_multiple ×
+    /// level`.
+    pub fn floor(&self) -> f64 {
+        self.floor_multiple * self.level
+    }
+}
+
+/// Segments of the multiple-shooting error.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SegmentSettings {
+    /// Segment length, s (default 0.1; > 0, at least 4 samples are used,
+    /// and the record must hold two segments). Reason: a few periods of
+    /// the lowest mode, short enough that a start-state error does not grow
+    /// past the effect sought.
+    pub seconds: f64,
+    /// Segments used by the fit, evenly spread over the record (default
+    /// 20; ≥ 1). Reason: enough impacts for a contact's gap and stiffness
+    /// at a tenth of the cost of every segment.
+    pub fit_segments: usize,
+    /// Samples over which the identified force must be quiet where a
+    /// segment boundary is placed (default 4; ≥ 1). Reason: a start
+    /// state estimated just after an impact carries the impulse's error.
+    pub quiet_window: usize,
+}
+
+impl Default for SegmentSettings {
+    fn default() -> Self {
+        SegmentSettings {
+            seconds: 0.1,
+            fit_segments: 20,
+            quiet_window: 4,
+        }
+    }
+}
+
+/// Sub-steps per sample of the simulations.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SubstepSettings {
+    /// Sub-steps of the identification and the trace's linear model
+    /// (default 10; ≥ 1). Reason: the sampled map of a linear model is
+    /// exact at 10.
+    pub base: usize,
+    /// Fewest sub-steps of a scored or fitted model (default 40; ≥ 1).
+    /// Reason: at 10 the Newmark period error of the highest modes was
+    /// left for an effect to fit; a linear model (and a contact model
+    /// while its contacts are open) is stepped a whole sample at a time,
+    /// so it costs nothing there.
+    pub min: usize,
+    /// Target `ω h` of the stiffest element (default 0.15 rad; > 0).
+    /// Reason: a period error of about `(ω h)²/12`, 0.2 %, below the noise.
+    pub omega_h: f64,
+    /// Most sub-steps (default 80; ≥ `min`). Reason: bounds the cost of a
+    /// very stiff trial contact.
+    pub max: usize,
+}
+
+impl Default for SubstepSettings {
+    fn default() -> Self {
+        SubstepSettings {
+            base: 10,
+            min: 40,
+            omega_h: 0.15,
+            max: 80,
+        }
+    }
+}
+
+/// The force-location search ([`super::locate`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LocateSettings {
+    /// Dominance ratio: a direction is taken when its weighted residual is
+    /// at most this times the residual without it and that of the
+    /// runner-up (default 0.8; 0 ≤ ratio < 1, 0 disables the search: an
+    /// unknown force at every DOF). Reason: a ratio holds whatever the
+    /// noise level; 0.8 separated every single-place effect of the test
+    /// matrix from distributed friction.
+    pub ratio: f64,
+    /// Most directions selected (default 3; the search also takes at most
+    /// one per two channels). Reason: each direction needs about two
+    /// channels' worth of data beyond the states.
+    pub max: usize,
+    /// Weighted residual RMS (1 = the assumed noise) at which the search
+    /// stops adding directions (default 1.5; > 0). Reason: below it a
+    /// further direction only fits noise.
+    pub noise_stop: f64,
+    /// Directions after the best tried together with it when it does not
+    /// dominate alone (default 4; ≥ 0). Reason: two effects at two places.
+    pub pair_trials: usize,
+}
+
+impl Default for LocateSettings {
+    fn default() -> Self {
+        LocateSettings {
+            ratio: 0.8,
+            max: 3,
+            noise_stop: 1.5,
+            pair_trials: 4,
+        }
+    }
+}
+
+/// The lifted smoother ([`LiftedSettings`] without its noise level, which
+/// is [`NoiseSettings::level`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LiftedGroup {
+    /// Sub-intervals per sample on which the unknown force is constant
+    /// (default 8; 1..=64). Reason: an impact between samples is placed to
+    /// an eighth of a sample.
+    pub resolution: usize,
+    /// Weight of the force prior, 1/N² relative to the data weight
+    /// (default 1e-2; > 0). Reason: 1e-4 to 1e-1 gave the same states
+    /// within a few per cent on the LANL contact records.
+    pub lambda: f64,
+    /// Prior standard deviations of the initial displacements (m) and
+    /// velocities (m/s) (default (1, 10); finite, > 0). Reason: weak, yet
+    /// states the data do not see stay determined.
+    pub x0_std: (f64, f64),
+    /// Reweighting passes that make the force prior sparse (default 4;
+    /// 0..=50). Reason: a contact force has a mean that a quadratic prior
+    /// removes.
+    pub reweight_passes: usize,
+    /// ε of the reweighting relative to the force RMS (default 1e-3;
+    /// (0, 1]). Reason: bounds the weights by 1/ε.
+    pub reweight_floor: f64,
+}
+
+impl Default for LiftedGroup {
+    fn default() -> Self {
+        let l = LiftedSettings::default();
+        LiftedGroup {
+            resolution: l.resolution,
+            lambda: l.lambda,
+            x0_std: l.x0_std,
+            reweight_passes: l.reweight_passes,
+            reweight_floor: l.reweight_floor,
+        }
+    }
+}
+
+/// The trace ([`TraceSettings`]; one effect is selected per round).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TraceGroup {
+    /// Smallest fraction of the remaining residual energy an effect must
+    /// remove to be selected (default 0.05; [0, 1)). Reason: noise and
+    /// integration error select nothing.
+    pub min_gain: f64,
+    /// Friction regularisation velocity, m/s (default 1e-3; > 0). Reason:
+    /// well below the velocities of the test.
+    pub friction_vreg: f64,
+    /// Points of the coarse gap scan of a contact (default 24; ≥ 2).
+    /// Reason: resolves the gap to a few per cent of the displacement range.
+    pub gap_grid: usize,
+}
+
+impl Default for TraceGroup {
+    fn default() -> Self {
+        let t = TraceSettings::default();
+        TraceGroup {
+            min_gain: t.min_gain,
+            friction_vreg: t.friction_vreg,
+            gap_grid: t.gap_grid,
+        }
+    }
+}
+
+/// Which candidate is fitted, and which is kept.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ScreenSettings {
+    /// Most effects added (default 3; ≥ 0). Reason: a model that needs
+    /// more is better rebuilt than patched.
+    pub max_effects: usize,
+    /// Share of the squared multiple-shooting error a fitted effect must
+    /// remove, or it is withdrawn (default 0.05; [0, 1)). Reason: the
+    /// trace's threshold.
+    pub min_improvement: f64,
+    /// The same for a candidate below the trace's screen (default 0.5;
+    /// [0, 1)). Reason: it must explain half of what remains.
+    pub companion_improvement: f64,
+    /// A candidate below the screen predicted to remove less than this
+    /// share of the fit cost is not fitted (default 0.2; [0, 1]). Reason:
+    /// a smaller gain is within what the linearization misjudges.
+    pub companion_screen: f64,
+    /// ...unless the error is above `far_from_noise ×` the noise floor
+    /// (default 4; > 0)...
+    pub far_from_noise: f64,
+    /// ...when this screen applies (default 0.05; [0, 1]). Reason: a model
+    /// that far from the record is worth a fit for a smaller predicted
+    /// gain (the linearization at a contact's fit underrated a spring
+    /// beside it: 18.9 % predicted, 25 % → 1.2 % fitted).
+    pub companion_screen_far: f64,
+    /// Multiples of the joint linearization's parameter step that start
+    /// the fit of a candidate taken in below the screen (default [1, 2,
+    /// 3]; finite). Reason: the linearized step falls short along the
+    /// valley where a companion trades against the effect found.
+    pub gn_strides: Vec<f64>,
+    /// Smallest relative stiffness change that is also fitted as the
+    /// cubic spring on its pair (default 0.5; > 0). Reason: a large
+    /// change is how a stiffening spring shows up linearized.
+    pub alternative_change: f64,
+    /// ...when the error it leaves is above this multiple of the noise
+    /// floor (default 4; > 0). Reason: near the noise the linear change
+    /// is as good.
+    pub alternative_floor: f64,
+}
+
+impl Default for ScreenSettings {
+    fn default() -> Self {
+        ScreenSettings {
+            max_effects: 3,
+            min_improvement: 0.05,
+            companion_improvement: 0.5,
+            companion_screen: 0.2,
+            far_from_noise: 4.0,
+            companion_screen_far: 0.05,
+            gn_strides: vec![1.0, 2.0, 3.0],
+            alternative_change: 0.5,
+            alternative_floor: 4.0,
+        }
+    }
+}
+
+/// The fit of the added effects.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FitGroup {
+    /// Levenberg–Marquardt iteration limit of the fit and of the joint fit
+    /// of parameters and start states (default 30; ≥ 1). Reason: the joint
+    /// fit converges in under 20 on the test matrix.
+    pub max_iterations: usize,
+    /// Converged when a step changes every scaled parameter by less than
+    /// `x_tol (1 + |x|)` (default 1e-5; > 0). Reason: far below the
+    /// parameters' standard errors.
+    pub x_tol: f64,
+    /// Converged when an accepted step lowers the cost by less than this
+    /// fraction (default 1e-7; > 0).
+    pub f_tol: f64,
+    /// Jacobian of the race of starts (default the integrator's forward
+    /// sensitivities; the joint fit always uses them).
+    pub jacobian: JacobianMethod,
+    /// Initial Levenberg–Marquardt damping relative to `diag(JᵀJ)`
+    /// (default 1e-3; > 0).
+    pub lm_lambda: f64,
+    /// Iterations each start of the race gets before the best goes on
+    /// (default 6; ≥ 1). Reason: enough to rank the basins.
+    pub race_iterations: usize,
+    /// Race starts carried on at most (default 2; ≥ 1).
+    pub polish_starts: usize,
+    /// A carried-on fit ending below this multiple of the noise cost is
+    /// not tried from another start (default 10; > 0).
+    pub noise_margin: f64,
+    /// Multiples of a cubic spring's traced `k3` that start the fit too
+    /// (default [0.6, 1.6]; > 0). Reason: the segment error has local
+    /// minima in `k3`.
+    pub cubic_brackets: Vec<f64>,
+    /// Contact stiffnesses of the scan, as multiples of the stiffest
+    /// spring at the pair (default [10, 40]; > 0). Reason: a bumper is
+    /// one to two orders stiffer than the springs it stops.
+    pub contact_stiffnesses: Vec<f64>,
+    /// Quantiles of the reconstructed relative displacement tried as the
+    /// contact's gap (default [0.8, 0.88, 0.93, 0.96, 0.98, 0.99, 0.995];
+    /// in [0, 1]). Reason: the cost is rough in the gap, and a contact
+    /// closes in the top fifth of the motion.
+    pub gap_quantiles: Vec<f64>,
+    /// The contact gap's upper bound, as a multiple of the largest
+    /// reconstructed relative displacement (default 1.2; ≥ 1). Reason:
+    /// beyond it the contact never closes.
+    pub gap_upper: f64,
+    /// Where a parameter traced at zero (which cannot be scaled
+    /// relatively) starts instead.
+    pub zero_starts: ZeroStarts,
+}
+
+/// Starts of parameters traced at zero: a contact traced to switch on at
+/// zero gap or with zero stiffness, a friction level or a spring of zero.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ZeroStarts {
+    /// A contact's gap, as a fraction of the largest reconstructed
+    /// relative displacement (default 0.05; > 0). Reason: just inside the
+    /// motion, so the contact closes.
+    pub gap: f64,
+    /// A contact's stiffness, as a multiple of the stiffest spring at the
+    /// pair (default 10; > 0). Reason: the lower end of a bumper's range.
+    pub contact_stiffness: f64,
+    /// A friction level, as a fraction of the largest applied force
+    /// (default 1e-3; > 0). Reason: small, yet it scales.
+    pub friction: f64,
+    /// A spring's stiffness, as a fraction of the stiffest spring at its
+    /// DOFs (default 1e-3; > 0). Reason: small, yet it scales.
+    pub spring: f64,
+}
+
+impl Default for ZeroStarts {
+    fn default() -> Self {
+        ZeroStarts {
+            gap: 0.05,
+            contact_stiffness: 10.0,
+            friction: 1e-3,
+            spring: 1e-3,
+        }
+    }
+}
+
+impl Default for FitGroup {
+    fn default() -> Self {
+        FitGroup {
+            max_iterations: 30,
+            x_tol: 1e-5,
+            f_tol: 1e-7,
+            jacobian: FitSettings::default().jacobian,
+            lm_lambda: FitSettings::default().lm_lambda,
+            race_iterations: 6,
+            polish_starts: 2,
+            noise_margin: 10.0,
+            cubic_brackets: vec![0.6, 1.6],
+            contact_stiffnesses: vec![10.0, 40.0],
+            gap_quantiles: vec![0.8, 0.88, 0.93, 0.96, 0.98, 0.99, 0.995],
+            gap_upper: 1.2,
+            zero_starts: ZeroStarts::default(),
+        }
+    }
+}
+
+/// The segment start states ([`super::starts`], [`super::joint`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StartSettings {
+    /// Gauss–Newton iterations refining each segment's start state for the
+    /// model scored (default 3; 0 = the reconstructed states; a linear
+    /// model takes one). Reason: from a few sensors the reconstructed
+    /// start state's error dominates an exact model's segment error.
+    pub iterations: usize,
+    /// Most alternations of start-state refinement and joint fit after an
+    /// effect's race (default 12). Reason: they stop earlier, once the cost
+    /// falls by less than `alternation_gain`.
+    pub alternations: usize,
+    /// Relative cost decrease below which the alternations stop (default
+    /// 0.01; [0, 1)).
+    pub alternation_gain: f64,
+    /// A segment whose cost exceeds this multiple of the median is taken to
+    /// be started in a wrong basin (default 8; > 1). Reason: an impact on
+    /// the wrong side of a gap costs an order of magnitude.
+    pub outlier: f64,
+    /// A segment whose step lowered its cost by less than this fraction
+    /// takes no further step (default 1e-3; [0, 1)).
+    pub settled: f64,
+    /// Run-in passes over outlying segments (default 2).
+    pub run_in_passes: usize,
+    /// Accepted joint-fit steps in a row each lowering the cost by less
+    /// than `stall_gain` after which the joint fit stops (default 3; ≥ 1).
+    /// Reason: a run of them is the cost's roughness (contact switches
+    /// within the segments), not progress.
+    pub stall_steps: usize,
+    /// See `stall_steps` (default 1e-3; [0, 1)).
+    pub stall_gain: f64,
+    /// A second race start carried on is given up once its cost exceeds
+    /// this multiple of the first's (default 2; ≥ 1). Reason: it will not
+    /// catch up, and each alternation costs a joint fit.
+    pub give_up: f64,
+}
+
+impl Default for StartSettings {
+    fn default() -> Self {
+        StartSettings {
+            iterations: 3,
+            alternations: 12,
+            alternation_gain: 0.01,
+            outlier: 8.0,
+            settled: 1e-3,
+            run_in_passes: 2,
+            stall_steps: 3,
+            stall_gain: 1e-3,
+            give_up: 2.0,
+        }
+    }
+}
+
+impl Default for DiagnoseSettings {
+    fn default() -> Self {
+        DiagnoseSettings {
+            states: StatesSource::Lifted,
+            noise: NoiseSettings::default(),
+            segments: SegmentSettings::default(),
+            substeps: SubstepSettings::default(),
+            locate: LocateSettings::default(),
+            lifted: LiftedGroup::default(),
+            horizon: HorizonSettings {
+                selection: horizon::settings::WeightSelection::Gcv,
+                ..HorizonSettings::default()
+            },
+            trace: TraceGroup::default(),
+            screen: ScreenSettings::default(),
+            fit: FitGroup::default(),
+            starts: StartSettings::default(),
+        }
+    }
+}
+
+/// A rule of [`DiagnoseSettings::validate`]: Err names the field, its
+/// value and the rule.
+fn rule(ok: bool, field: &str, value: impl std::fmt::Debug, rule: &str) -> Result<()> {
+    if ok {
+        Ok(())
+    } else {
+        Err(TacitError::Setting(format!(
+            "diagnose settings: {field} = {value:?}: {rule}"
+        )))
+    }
+}
+
+/// `x` in `(0, ∞)`, finite.
+fn positive(x: f64) -> bool {
+    x > 0.0 && x.is_finite()
+}
+
+/// `x` in `[0, 1)`.
+fn fraction(x: f64) -> bool {
+    (0.0..1.0).contains(&x)
+}
+
+impl DiagnoseSettings {
+    /// The multiple-shooting relative error taken as noise and integration
+    /// error ([`NoiseSettings::floor`]).
+    pub fn noise_floor(&self) -> f64 {
+        self.noise.floor()
+    }
+
+    /// The optimizer settings of the fit (Levenberg–Marquardt; the noise
+    /// level of the standard errors is [`NoiseSettings::level`]).
+    pub fn fit_settings(&self) -> FitSettings {
+        FitSettings {
+            max_iterations: self.fit.max_iterations,
+            x_tol: self.fit.x_tol,
+            f_tol: self.fit.f_tol,
+            jacobian: self.fit.jacobian,
+            lm_lambda: self.fit.lm_lambda,
+            noise_level: self.noise.level,
+            ..FitSettings::default()
+        }
+    }
+
+    /// The lifted smoother's settings (its noise level is
+    /// [`NoiseSettings::level`]).
+    pub fn lifted_settings(&self) -> LiftedSettings {
+        LiftedSettings {
+            resolution: self.lifted.resolution,
+            lambda: self.lifted.lambda,
+            noise_fraction: self.noise.level,
+            x0_std: self.lifted.x0_std,
+            reweight_passes: self.lifted.reweight_passes,
+            reweight_floor: self.lifted.reweight_floor,
+        }
+    }
+
+    /// The trace's settings for one round (one effect selected).
+    pub fn trace_settings(&self) -> TraceSettings {
+        TraceSettings {
+            min_gain: self.trace.min_gain,
+            max_effects: 1,
+            friction_vreg: self.trace.friction_vreg,
+            gap_grid: self.trace.gap_grid,
+        }
+    }
+
+    /// Check every rule; the error names the field, its value and the rule.
+    pub fn validate(&self) -> Result<()> {
+        self.validate_basics()?;
+        self.validate_lifted()?;
+        self.horizon.validate().map_err(|e| match e {
+            TacitError::Setting(m) => TacitError::Setting(format!("diagnose settings: {m}")),
+            e => e,
+        })?;
+        let t = &self.trace;
+        rule(
+            fraction(t.min_gain),
+            "trace.min_gain",
+            t.min_gain,
+            "must be in [0, 1)",
+        )?;
+        rule(
+            positive(t.friction_vreg),
+            "trace.friction_vreg",
+            t.friction_vreg,
+            "must be > 0",
+        )?;
+        rule(t.gap_grid >= 2, "trace.gap_grid", t.gap_grid, "must be ≥ 2")?;
+        self.validate_screen()?;
+        self.validate_fit()?;
+        let st = &self.starts;
+        rule(
+            fraction(st.alternation_gain),
+            "starts.alternation_gain",
+            st.alternation_gain,
+            "must be in [0, 1)",
+        )?;
+        rule(
+            st.outlier > 1.0 && st.outlier.is_finite(),
+            "starts.outlier",
+            st.outlier,
+            "must be > 1",
+        )?;
+        rule(
+            fraction(st.settled),
+            "starts.settled",
+            st.settled,
+            "must be in [0, 1)",
+        )?;
+        rule(
+            st.stall_steps >= 1,
+            "starts.stall_steps",
+            st.stall_steps,
+            "must be ≥ 1",
+        )?;
+        rule(
+            fraction(st.stall_gain),
+            "starts.stall_gain",
+            st.stall_gain,
+            "must be in [0, 1)",
+        )?;
+        let g = st.give_up;
+        rule(
+            g >= 1.0 && g.is_finite(),
+            "starts.give_up",
+            g,
+            "must be ≥ 1",
+        )
+    }
+
+    fn validate_basics(&self) -> Result<()> {
+        let n = &self.noise;
+        rule(
+            n.level > 0.0 && n.level < 1.0,
+            "noise.level",
+            n.level,
+            "must be in (0, 1)",
+        )?;
+        rule(
+            positive(n.floor_multiple),
+            "noise.floor_multiple",
+            n.floor_multiple,
+            "must be > 0",
+        )?;
+        let g = &self.segments;
+        rule(
+            positive(g.seconds),
+            "segments.seconds",
+            g.seconds,
+            "must be > 0",
+        )?;
+        rule(
+            g.fit_segments >= 1,
+            "segments.fit_segments",
+            g.fit_segments,
+            "must be ≥ 1",
+        )?;
+        rule(
+            g.quiet_window >= 1,
+            "segments.quiet_window",
+            g.quiet_window,
+            "must be ≥ 1",
+        )?;
+        let s = &self.substeps;
+        rule(s.base >= 1, "substeps.base", s.base, "must be ≥ 1")?;
+        rule(s.min >= 1, "substeps.min", s.min, "must be ≥ 1")?;
+        rule(
+            positive(s.omega_h),
+            "substeps.omega_h",
+            s.omega_h,
+            "must be > 0",
+        )?;
+        rule(
+            s.max >= s.min,
+            "substeps.max",
+            s.max,
+            "must be ≥ substeps.min",
+        )?;
+        let l = &self.locate;
+        rule(
+            (0.0..1.0).contains(&l.ratio),
+            "locate.ratio",
+            l.ratio,
+            "must be in [0, 1) (0: off)",
+        )?;
+        rule(
+            positive(l.noise_stop),
+            "locate.noise_stop",
+            l.noise_stop,
+            "must be > 0",
+        )
+    }
+
+    fn validate_lifted(&self) -> Result<()> {
+        let l = &self.lifted;
+        rule(
+            (1..=64).contains(&l.resolution),
+            "lifted.resolution",
+            l.resolution,
+            "must be in 1..=64",
+        )?;
+        rule(positive(l.lambda), "lifted.lambda", l.lambda, "must be > 0")?;
+        let x0 = l.x0_std;
+        rule(
+            positive(x0.0) && positive(x0.1),
+            "lifted.x0_std",
+            x0,
+            "both must be > 0 and finite",
+        )?;
+        rule(
+            l.reweight_passes <= 50,
+            "lifted.reweight_passes",
+            l.reweight_passes,
+            "must be in 0..=50",
+        )?;
+        rule(
+            l.reweight_floor > 0.0 && l.reweight_floor <= 1.0,
+            "lifted.reweight_floor",
+            l.reweight_floor,
+            "must be in (0, 1]",
+        )
+    }
+
+    fn validate_screen(&self) -> Result<()> {
+        let s = &self.screen;
+        rule(
+            fraction(s.min_improvement),
+            "screen.min_improvement",
+            s.min_improvement,
+            "must be in [0, 1)",
+        )?;
+        rule(
+            fraction(s.companion_improvement),
+            "screen.companion_improvement",
+            s.companion_improvement,
+            "must be in [0, 1)",
+        )?;
+        rule(
+            (0.0..=1.0).contains(&s.companion_screen),
+            "screen.companion_screen",
+            s.companion_screen,
+            "must be in [0, 1]",
+        )?;
+        rule(
+            positive(s.far_from_noise),
+            "screen.far_from_noise",
+            s.far_from_noise,
+            "must be > 0",
+        )?;
+        rule(
+            (0.0..=1.0).contains(&s.companion_screen_far),
+            "screen.companion_screen_far",
+            s.companion_screen_far,
+            "must be in [0, 1]",
+        )?;
+        rule(
+            s.gn_strides.iter().all(|f| f.is_finite()),
+            "screen.gn_strides",
+            &s.gn_strides,
+            "must be finite",
+        )?;
+        rule(
+            positive(s.alternative_change),
+            "screen.alternative_change",
+            s.alternative_change,
+            "must be > 0",
+        )?;
+        rule(
+            positive(s.alternative_floor),
+            "screen.alternative_floor",
+            s.alternative_floor,
+            "must be > 0",
+        )
+    }
+
+    fn validate_fit(&self) -> Result<()> {
+        let f = &self.fit;
+        rule(
+            f.max_iterations >= 1,
+            "fit.max_iterations",
+            f.max_iterations,
+            "must be ≥ 1",
+        )?;
+        rule(positive(f.x_tol), "fit.x_tol", f.x_tol, "must be > 0")?;
+        rule(positive(f.f_tol), "fit.f_tol", f.f_tol, "must be > 0")?;
+        rule(
+            positive(f.lm_lambda),
+            "fit.lm_lambda",
+            f.lm_lambda,
+            "must be > 0",
+        )?;
+        rule(
+            f.race_iterations >= 1,
+            "fit.race_iterations",
+            f.race_iterations,
+            "must be ≥ 1",
+        )?;
+        rule(
+            f.polish_starts >= 1,
+            "fit.polish_starts",
+            f.polish_starts,
+            "must be ≥ 1",
+        )?;
+        rule(
+            positive(f.noise_margin),
+            "fit.noise_margin",
+            f.noise_margin,
+            "must be > 0",
+        )?;
+        let all_pos = |v: &[f64]| !v.is_empty() && v.iter().all(|&x| positive(x));
+        rule(
+            all_pos(&f.cubic_brackets),
+            "fit.cubic_brackets",
+            &f.cubic_brackets,
+            "must be > 0, at least one",
+        )?;
+        rule(
+            all_pos(&f.contact_stiffnesses),
+            "fit.contact_stiffnesses",
+            &f.contact_stiffnesses,
+            "must be > 0, at least one",
+        )?;
+        let quantiles =
+            !f.gap_quantiles.is_empty() && f.gap_quantiles.iter().all(|q| (0.0..=1.0).contains(q));
+        rule(
+            quantiles,
+            "fit.gap_quantiles",
+            &f.gap_quantiles,
+            "must be in [0, 1], at least one",
+        )?;
+        rule(
+            f.gap_upper >= 1.0 && f.gap_upper.is_finite(),
+            "fit.gap_upper",
+            f.gap_upper,
+            "must be ≥ 1",
+        )?;
+        let z = &f.zero_starts;
+        rule(positive(z.gap), "fit.zero_starts.gap", z.gap, "must be > 0")?;
+        let k = z.contact_stiffness;
+        rule(
+            positive(k),
+            "fit.zero_starts.contact_stiffness",
+            k,
+            "must be > 0",
+        )?;
+        rule(
+            positive(z.friction),
+            "fit.zero_starts.friction",
+            z.friction,
+            "must be > 0",
+        )?;
+        rule(
+            positive(z.spring),
+            "fit.zero_starts.spring",
+            z.spring,
+            "must be > 0",
+        )
+    }
+
+    /// Read settings from a file: TOML (`.toml`), or JSON — a settings
+    /// object, or a diagnosis report.json whose `settings` it replays.
+    /// Missing fields take their defaults; unknown fields are errors. The
+    /// result is validated.
+    pub fn from_file(path: &std::path::Path) -> Result<DiagnoseSettings> {
+        let text = std::fs::read_to_string(path).map_err(|e| TacitError::Io {
+            path: path.to_path_buf(),
+            source: e,
+        })?;
+        let bad = |msg: String| TacitError::Setting(format!("{}: {msg}", path.display()));
+        let s: DiagnoseSettings = if path.extension().is_some_and(|e| e == "json") {
+            let v: serde_json::Value =
+                serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+            let v = match v.get("settings") {
+                Some(s) if v.get("verdict").is_some() => s.clone(),
+                _ => v,
+            };
+            serde_json::from_value(v).map_err(|e| bad(e.to_string()))?
+        } else {
+            toml::from_str(&text).map_err(|e| bad(e.to_string()))?
+        };
+        s.validate().map_err(|e| match e {
+            TacitError::Setting(m) => bad(m),
+            e => e,
+        })?;
+        Ok(s)
+    }
+
+    /// The settings as TOML (what [`DiagnoseSettings::from_file`] reads).
+    pub fn to_toml_string(&self) -> Result<String> {
+        toml::to_string(self)
+            .map_err(|e| TacitError::Setting(format!("diagnose settings as TOML: {e}")))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The defaults pass, and the noise floor derived from the noise level
+    /// is the 0.025 used before it was derived, to the bit.
+    #[test]
+    fn the_defaults_are_valid_and_the_floor_is_two_and_a_half_percent() {
+        let s = DiagnoseSettings::default();
+        s.validate().unwrap();
+        assert_eq!(s.noise_floor(), 0.025);
+        assert_eq!(s.fit_settings().noise_level, 0.01);
+        assert_eq!(s.lifted_settings().noise_fraction, 0.01);
+        assert_eq!(s.lifted_settings(), LiftedSettings::default());
+    }
+
+    /// Each invalid value is refused with a message naming its field.
+    #[test]
+    fn validate_names_the_field_of_each_invalid_value() {
+        type Breaker = fn(&mut DiagnoseSettings);
+        let cases: &[(&str, Breaker)] = &[
+            ("noise.level", |s| s.noise.level = 0.0),
+            ("noise.level", |s| s.noise.level = f64::NAN),
+            ("noise.floor_multiple", |s| s.noise.floor_multiple = -1.0),
+            ("segments.seconds", |s| s.segments.seconds = 0.0),
+            ("segments.fit_segments", |s| s.segments.fit_segments = 0),
+            ("segments.quiet_window", |s| s.segments.quiet_window = 0),
+            ("substeps.base", |s| s.substeps.base = 0),
+            ("substeps.min", |s| s.substeps.min = 0),
+            ("substeps.omega_h", |s| s.substeps.omega_h = 0.0),
+            ("substeps.max", |s| s.substeps.max = 39),
+            ("locate.ratio", |s| s.locate.ratio = 1.0),
+            ("locate.noise_stop", |s| s.locate.noise_stop = 0.0),
+            ("lifted.resolution", |s| s.lifted.resolution = 0),
+            ("lifted.lambda", |s| s.lifted.lambda = 0.0),
+            ("lifted.x0_std", |s| s.lifted.x0_std = (1.0, f64::INFINITY)),
+            ("lifted.reweight_passes", |s| s.lifted.reweight_passes = 51),
+            ("lifted.reweight_floor", |s| s.lifted.reweight_floor = 0.0),
+            ("trace.min_gain", |s| s.trace.min_gain = 1.0),
+            ("trace.friction_vreg", |s| s.trace.friction_vreg = 0.0),
+            ("trace.gap_grid", |s| s.trace.gap_grid = 1),
+            ("screen.min_improvement", |s| {
+                s.screen.min_improvement = -0.1
+            }),
+            ("screen.companion_improvement", |s| {
+                s.screen.companion_improvement = 1.0
+            }),
+            ("screen.companion_screen", |s| {
+                s.screen.companion_screen = 1.5
+            }),
+            ("screen.far_from_noise", |s| s.screen.far_from_noise = 0.0),
+            ("screen.companion_screen_far", |s| {
+                s.screen.companion_screen_far = -1.0
+            }),
+            ("screen.gn_strides", |s| {
+                s.screen.gn_strides = vec![f64::NAN]
+            }),
+            ("screen.alternative_change", |s| {
+                s.screen.alternative_change = 0.0
+            }),
+            ("screen.alternative_floor", |s| {
+                s.screen.alternative_floor = 0.0
+            }),
+            ("fit.max_iterations", |s| s.fit.max_iterations = 0),
+            ("fit.x_tol", |s| s.fit.x_tol = 0.0),
+            ("fit.f_tol", |s| s.fit.f_tol = -1.0),
+            ("fit.lm_lambda", |s| s.fit.lm_lambda = 0.0),
+            ("fit.race_iterations", |s| s.fit.race_iterations = 0),
+            ("fit.polish_starts", |s| s.fit.polish_starts = 0),
+            ("fit.noise_margin", |s| s.fit.noise_margin = 0.0),
+            ("fit.cubic_brackets", |s| s.fit.cubic_brackets = vec![]),
+            ("fit.contact_stiffnesses", |s| {
+                s.fit.contact_stiffnesses = vec![10.0, 0.0]
+            }),
+            ("fit.gap_quantiles", |s| s.fit.gap_quantiles = vec![1.2]),
+            ("fit.gap_upper", |s| s.fit.gap_upper = 0.9),
+            ("starts.alternation_gain", |s| {
+                s.starts.alternation_gain = 1.0
+            }),
+            ("starts.outlier", |s| s.starts.outlier = 1.0),
+            ("starts.settled", |s| s.starts.settled = -0.5),
+            ("starts.stall_steps", |s| s.starts.stall_steps = 0),
+            ("starts.stall_gain", |s| s.starts.stall_gain = 2.0),
+            ("starts.give_up", |s| s.starts.give_up = 0.5),
+            ("fit.zero_starts.gap", |s| s.fit.zero_starts.gap = 0.0),
+            ("fit.zero_starts.contact_stiffness", |s| {
+                s.fit.zero_starts.contact_stiffness = -1.0
+            }),
+            ("fit.zero_starts.friction", |s| {
+                s.fit.zero_starts.friction = 0.0
+            }),
+            ("fit.zero_starts.spring", |s| {
+                s.fit.zero_starts.spring = f64::NAN
+            }),
+            ("horizon: lambda", |s| s.horizon.lambda = 0.0),
+        ];
+        for (field, brk) in cases {
+            let mut s = DiagnoseSettings::default();
+            brk(&mut s);
+            let e = s.validate().expect_err(field).to_string();
+            assert!(e.contains(field), "{field}: {e}");
+        }
+    }
+
+    /// Written as TOML and read back, non-default settings come back
+    /// equal; a report.json's settings are read the same way; a partial
+    /// file takes the defaults for the rest.
+    #[test]
+    fn settings_files_round_trip() {
+        let mut s = DiagnoseSettings::default();
+        s.noise.level = 0.02;
+        s.segments.fit_segments = 7;
+        s.states = StatesSource::Reconstructed;
+        s.fit.gap_quantiles = vec![0.9, 0.95];
+        s.fit.jacobian = JacobianMethod::CentralDifference;
+        s.lifted.x0_std = (0.5, 3.0);
+        let dir = tempfile::tempdir().unwrap();
+        let toml_path = dir.path().join("s.toml");
+        std::fs::write(&toml_path, s.to_toml_string().unwrap()).unwrap();
+        assert_eq!(DiagnoseSettings::from_file(&toml_path).unwrap(), s);
+        let report = serde_json::json!({ "verdict": "found", "settings": s });
+        let json_path = dir.path().join("report.json");
+        std::fs::write(&json_path, report.to_string()).unwrap();
+        assert_eq!(DiagnoseSettings::from_file(&json_path).unwrap(), s);
+        std::fs::write(&toml_path, "[screen]\nmax_effects = 1\n").unwrap();
+        let partial = DiagnoseSettings::from_file(&toml_path).unwrap();
+        let mut want = DiagnoseSettings::default();
+        want.screen.max_effects = 1;
+        assert_eq!(partial, want);
+        std::fs::write(&toml_path, "[screen]\nmax_efects = 1\n").unwrap();
+        let e = DiagnoseSettings::from_file(&toml_path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("max_efects") && e.contains("s.toml"), "{e}");
+    }
+}

@@ -1,0 +1,144 @@
+//! The effects found, as reported: fitted values and standard errors.
+
+use super::effects;
+use super::errors::Comparison;
+use super::fit::spread;
+use super::outcome::{EffectReport, ToleratedFailure};
+use super::state::{Context, KeptEffect, State};
+use super::{joint, DiagnoseSettings};
+use crate::integrate::SimSettings;
+use crate::model::Model;
+use crate::trace::EffectKind;
+use crate::update::optimize::FitSettings;
+use crate::update::shooting::Segment;
+use std::collections::BTreeMap;
+
+/// Effect reports with fitted values and standard errors: from the joint
+/// Jacobian of the fit's multiple-shooting residual in the parameters and
+/// start states when the fit's segments are given (the states as nuisance
+/// parameters), else from the parameter Jacobian with the reconstructed
+/// start states.
+pub(super) fn report_effects(
+    ctx: &Context<'_>,
+    st: &mut State,
+    sim: SimSettings,
+) -> Vec<EffectReport> {
+    let (model, added) = (&st.current, &st.added);
+    let fitted = st.fitted.as_ref();
+    let ses = standard_errors(ctx, (model, added), sim, fitted, &mut st.simulations);
+    added
+        .iter()
+        .enumerate()
+        .map(|(ei, k)| {
+            let (e, r, score) = (&k.effect, &k.ranked, &k.score);
+            let vals = effects::values(model, e);
+            let mut std_errors = BTreeMap::new();
+            for (pi, (name, _)) in vals.iter().enumerate() {
+                let se = ses.get(&(ei, pi)).copied().filter(|x| x.is_finite());
+                let se = match e.candidate.kind {
+                    EffectKind::Stiffness if e.nominal != 0.0 => se.map(|s| s / e.nominal),
+                    _ => se,
+                };
+                std_errors.insert(name.clone(), se);
+            }
+            EffectReport {
+                kind: e.candidate.kind,
+                dofs: e.candidate.dofs.iter().map(|d| d + 1).collect(),
+                label: e.label.clone(),
+                parameters: vals.into_iter().collect(),
+                std_errors,
+                traced: r.parameters.iter().cloned().collect(),
+                score: score.clone(),
+            }
+        })
+        .collect()
+}
+
+/// The standard error of each parameter, by (effect, parameter) index.
+fn standard_errors(
+    ctx: &Context<'_>,
+    (model, added): (&Model, &[KeptEffect]),
+    sim: SimSettings,
+    fitted: Option<&(Vec<Segment>, SimSettings)>,
+    sims: &mut usize,
+) -> BTreeMap<(usize, usize), f64> {
+    let (cmp, settings): (&Comparison, &DiagnoseSettings) = (ctx.cmp(), ctx.settings);
+    let mut tolerated = ctx.tolerated.borrow_mut();
+    let mut tolerate = |step: String, error: String, fallback: &str| {
+        tolerated.push(ToleratedFailure {
+            step,
+            error,
+            fallback: fallback.into(),
+        })
+    };
+    let mut ses: BTreeMap<(usize, usize), f64> = BTreeMap::new();
+    if !added.is_empty() {
+        let mut params = vec![];
+        let mut owner = vec![];
+        for (ei, k) in added.iter().enumerate() {
+            match effects::parameters(model, &k.effect) {
+                Ok(ps) => {
+                    for (pi, p) in ps.into_iter().enumerate() {
+                        params.push(p);
+                        owner.push((ei, pi));
+                    }
+                }
+                Err(e) => tolerate(
+                    format!("standard errors of {}", k.effect.label),
+                    e.to_string(),
+                    "none reported",
+                ),
+            }
+        }
+        // with the fit's segments and start states: the start states are
+        // nuisance parameters of the same fit ([`joint::std_errors`])
+        let joint = fitted.and_then(|(segs, fsim)| {
+            let mut problem = cmp.problem(model, segs.clone(), *fsim);
+            problem.parameters = params.clone();
+            *sims += segs.len();
+            let x = vec![0.0; problem.parameters.len()];
+            joint::std_errors(&problem, &x, settings.noise.level)
+        });
+        match joint {
+            Some(sd) => {
+                for (k, v) in sd.into_iter().enumerate() {
+                    if let Some(&o) = owner.get(k) {
+                        ses.insert(o, v);
+                    }
+                }
+            }
+            None => {
+                let segs = spread(&cmp.segments, settings.segments.fit_segments);
+                let mut problem = cmp.problem(model, segs, sim);
+                problem.parameters = params;
+                let fs_ = FitSettings {
+                    max_iterations: 1,
+                    ..settings.fit_settings()
+                };
+                if fitted.is_some() {
+                    tolerate(
+                        "standard errors with the start states as nuisance parameters".into(),
+                        "a simulation failed or the Schur complement is singular".into(),
+                        "from the parameter Jacobian at the reconstructed start states",
+                    );
+                }
+                let r = crate::update::fit(&problem, &fs_);
+                if let Err(e) = &r {
+                    let step = "standard errors from the parameter Jacobian".into();
+                    tolerate(step, e.to_string(), "none reported");
+                }
+                if let Ok(r) = r {
+                    *sims += r.simulations;
+                    if let Some(id) = &r.identifiability {
+                        for (k, pid) in id.parameters.iter().enumerate() {
+                            if let Some(&o) = owner.get(k) {
+                                ses.insert(o, pid.std_value);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    ses
+}
