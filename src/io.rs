@@ -67,31 +67,6 @@ fn naming(e: TacitError, tmp: &Path, path: &Path) -> TacitError {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn errors_name_the_target_not_the_temporary_file() {
-        let d = tempfile::tempdir().unwrap();
-        let target = d.path().join("report.md");
-        let e = write_atomic(&target, |tmp| {
-            Err(TacitError::io(tmp, std::io::Error::other("disk full")))
-        })
-        .unwrap_err()
-        .to_string();
-        assert!(e.starts_with(&target.display().to_string()), "{e}");
-        assert!(!e.contains(".report.md."), "{e}");
-        let e = write_atomic(&target, |tmp| {
-            Err(TacitError::record(tmp, format!("cannot write {}", tmp.display())))
-        })
-        .unwrap_err()
-        .to_string();
-        assert!(!e.contains(".report.md."), "{e}");
-        assert_eq!(std::fs::read_dir(d.path()).unwrap().count(), 0);
-    }
-}
-
 /// Write a string atomically.
 pub fn write_string(path: &Path, text: &str) -> Result<()> {
     write_atomic(path, |tmp| {
@@ -109,4 +84,32 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
 /// Create an output directory (and parents).
 pub fn ensure_dir(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| TacitError::io(dir, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn errors_name_the_target_not_the_temporary_file() {
+        let d = tempfile::tempdir().unwrap();
+        let target = d.path().join("report.md");
+        let e = write_atomic(&target, |tmp| {
+            Err(TacitError::io(tmp, std::io::Error::other("disk full")))
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with(&target.display().to_string()), "{e}");
+        assert!(!e.contains(".report.md."), "{e}");
+        let e = write_atomic(&target, |tmp| {
+            Err(TacitError::record(
+                tmp,
+                format!("cannot write {}", tmp.display()),
+            ))
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(!e.contains(".report.md."), "{e}");
+        assert_eq!(std::fs::read_dir(d.path()).unwrap().count(), 0);
+    }
 }
