@@ -67,6 +67,25 @@ fn naming(e: TacitError, tmp: &Path, path: &Path) -> TacitError {
     }
 }
 
+/// Write a string atomically.
+pub fn write_string(path: &Path, text: &str) -> Result<()> {
+    write_atomic(path, |tmp| {
+        std::fs::write(tmp, text).map_err(|e| TacitError::io(tmp, e))
+    })
+}
+
+/// Write a value as pretty JSON atomically.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| TacitError::Setting(format!("JSON encoding of {}: {e}", path.display())))?;
+    write_string(path, &text)
+}
+
+/// Create an output directory (and parents).
+pub fn ensure_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| TacitError::io(dir, e))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -93,23 +112,4 @@ mod tests {
         assert!(!e.contains(".report.md."), "{e}");
         assert_eq!(std::fs::read_dir(d.path()).unwrap().count(), 0);
     }
-}
-
-/// Write a string atomically.
-pub fn write_string(path: &Path, text: &str) -> Result<()> {
-    write_atomic(path, |tmp| {
-        std::fs::write(tmp, text).map_err(|e| TacitError::io(tmp, e))
-    })
-}
-
-/// Write a value as pretty JSON atomically.
-pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
-    let text = serde_json::to_string_pretty(value)
-        .map_err(|e| TacitError::Setting(format!("JSON encoding of {}: {e}", path.display())))?;
-    write_string(path, &text)
-}
-
-/// Create an output directory (and parents).
-pub fn ensure_dir(dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| TacitError::io(dir, e))
 }

@@ -296,12 +296,25 @@ fn jacobian_line(r: &FitResult) -> String {
 fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
     let mut s = String::new();
     s.push_str(&format!(
-        "# Model updating of {}\n\nRecord `{}`; metric {:?}; reduction {:?}; optimizer {:?}; α = {}; {} segment(s).\n\n",
+        "# Model updating of {}\n\nRecord `{}`; metric {}; reduction {}; optimizer {}; α = {}; {} segment(s).\n\n",
         p.model.name,
         a.record.display(),
-        r.metric,
-        r.reduction,
-        r.optimizer,
+        match r.metric {
+            Metric::Gls => "GLS (generalized least squares)",
+            Metric::Pcd { .. } => "PCD (principal components)",
+        },
+        match r.reduction {
+            None => "none (full-order model)",
+            Some(tacit::reduce::Method::Guyan) => "Guyan",
+            Some(tacit::reduce::Method::Serep) => "SEREP",
+            Some(tacit::reduce::Method::Irs) => "IRS",
+        },
+        match r.optimizer {
+            Optimizer::Lm => "Levenberg–Marquardt",
+            Optimizer::Gn => "Gauss–Newton",
+            Optimizer::Bfgs => "BFGS",
+            Optimizer::Simplex => "Nelder–Mead simplex",
+        },
         p.alpha,
         p.segments.len()
     ));

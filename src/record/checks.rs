@@ -543,7 +543,7 @@ mod tests {
         b.terms[2].2 += 5.0;
         let f = momentum(&b, &s).unwrap();
         assert_eq!(f.channel.as_deref(), Some("accel_3"));
-        assert!(f.message.contains("an offset of 4.9875 m/s^2"), "{f}");
+        assert!(f.message.contains("an offset of 5.0025 m/s^2"), "{f}");
     }
 
     #[test]
