@@ -1,5 +1,5 @@
 //! Model reduction onto a set of kept DOFs (the sensors): `u ≈ T u_a`,
-//! `M_a = Tᵀ M T`, `K_a = Tᵀ K T`, `f_a = Tᵀ f` (CONTEXT §5).
+//! `M_a = Tᵀ M T`, `K_a = Tᵀ K T`, `f_a = Tᵀ f`.
 //!
 //! - SEREP (O'Callahan 1989): `T = Φ Φ_a⁺` with Φ the lowest `m` modes
 //!   (m = number of kept DOFs) and Φ_a its rows at the kept DOFs; the
@@ -7,6 +7,9 @@
 //! - Guyan (static condensation): `T = [I; −K_oo⁻¹ K_oa]`.
 //! - IRS (improved reduced system): `T = T_G + S M T_G M_G⁻¹ K_G` with
 //!   `S = [0 0; 0 K_oo⁻¹]`, the first-order inertia correction.
+
+pub mod cb;
+pub mod sparse;
 
 use crate::error::{Result, TacitError};
 use nalgebra::{DMatrix, DVector};
