@@ -50,12 +50,15 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let model = Model::from_file(&a.model)?;
-    let rec = load_record(&a.record, &a.rec)?;
-    let val = match &a.validate {
+    let mut rec = load_record(&a.record, &a.rec)?;
+    let mut val = match &a.validate {
         Some(p) => Some(load_record(p, &a.rec)?),
         None => None,
     };
+    // a model from matrices is reduced onto the records' points
+    let mut recs: Vec<&mut tacit::record::Record> = vec![&mut rec];
+    recs.extend(val.as_mut());
+    let model = Model::load(&a.model, &mut recs)?;
     if !(a.segment > 0.0) {
         anyhow::bail!("--segment {} must be > 0", a.segment);
     }
@@ -103,6 +106,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         tacit_version: env!("CARGO_PKG_VERSION").to_string(),
     };
     report::write(&a.output, &meta, &d, &settings)?;
+    if let Some(r) = model.matrices.as_ref().and_then(|l| l.report.as_ref()) {
+        tacit::model::matrix::append_report(&a.output, r)?;
+    }
     println!("{}", d.verdict);
     let pct = |x: Option<f64>| x.map_or("failed".to_string(), |v| format!("{:.2} %", 100.0 * v));
     println!(

@@ -185,12 +185,19 @@ impl Candidate {
 }
 
 /// Pairs of DOFs joined by a spring of the model (0-based, i < j), and the
-/// spring index.
+/// spring index; then the model's interface pairs not joined by a spring
+/// (index `usize::MAX`).
 pub fn spring_pairs(model: &Model) -> Vec<(usize, usize, usize)> {
     let mut out = Vec::new();
     for (s, sp) in model.springs.iter().enumerate() {
         if let (i, Some(j)) = sp.ends() {
             out.push((i.min(j), i.max(j), s));
+        }
+    }
+    for &[i, j] in &model.interface_pairs {
+        let (a, b) = ((i - 1).min(j - 1), (i - 1).max(j - 1));
+        if !out.iter().any(|p| (p.0, p.1) == (a, b)) {
+            out.push((a, b, usize::MAX));
         }
     }
     out
@@ -202,7 +209,7 @@ pub fn spring_pairs(model: &Model) -> Vec<(usize, usize, usize)> {
 /// stiffness change of each spring, a spring to ground at each DOF, and a
 /// change of the viscous damping (when the model has damping).
 pub fn library(model: &Model, has_damping: bool, vreg: f64) -> Vec<Candidate> {
-    let n = model.ndof();
+    let n = model.physical_ndof();
     let pairs = spring_pairs(model);
     let mut out = Vec::new();
     for &(i, j, _) in &pairs {

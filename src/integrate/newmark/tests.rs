@@ -12,9 +12,7 @@ fn sdof(m: f64, k: f64) -> Model {
             name: None,
         }],
         damping: Damping::None,
-        contacts: vec![],
-        frictions: vec![],
-        cubics: vec![],
+        ..Default::default()
     }
 }
 
