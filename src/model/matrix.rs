@@ -188,6 +188,8 @@ pub struct LinearMatrices {
     pub c: Option<DMatrix<f64>>,
     /// The reduction and its check.
     pub report: Option<ReductionReport>,
+    /// DOF in the matrices (from 1) of each kept point.
+    pub kept_dofs: Vec<usize>,
 }
 
 fn model_err(src: &Path, m: String) -> TacitError {
@@ -331,6 +333,14 @@ impl MatrixModel {
         self.index.get(label).copied()
     }
 
+    /// The label of DOF `d` of the matrices (from 1), if it has one.
+    pub fn label_of(&self, d: usize) -> Option<&str> {
+        self.points
+            .iter()
+            .find(|p| p.1 + 1 == d)
+            .map(|p| p.0.as_str())
+    }
+
     fn free(&self) -> Vec<usize> {
         let mut is_fixed = vec![false; self.n];
         for &d in &self.fixed {
@@ -446,6 +456,9 @@ impl MatrixModel {
             kept: kept.clone(),
         };
         let mut model = self.assemble(cb, kept)?;
+        if let Some(lin) = model.matrices.as_mut() {
+            Arc::make_mut(lin).kept_dofs = kept_dofs.iter().map(|d| d + 1).collect();
+        }
         let secs = t0.elapsed().as_secs_f64();
         if let Some(lin) = model.matrices.as_mut() {
             Arc::make_mut(lin).report = Some(ReductionReport {
@@ -537,6 +550,7 @@ impl MatrixModel {
             k_rest,
             c: cb.c,
             report: None,
+            kept_dofs: vec![],
         }));
         model.validate(&src)?;
         Ok(model)

@@ -154,9 +154,16 @@ impl Model {
             let mut labels = vec![];
             for r in records.iter() {
                 for c in r.inputs.iter().chain(&r.outputs) {
-                    if let Some(p) = &c.point {
-                        labels.push(p.clone());
-                    }
+                    let l = match &c.point {
+                        Some(p) => p.as_str(),
+                        None => mm.label_of(c.dof).ok_or_else(|| {
+                            TacitError::record(
+                                r.source.clone(),
+                                format!("channel {}: DOF {} of the matrices has no label in [points] of {}", c.name(), c.dof, path.display()),
+                            )
+                        })?,
+                    };
+                    labels.push(l.to_string());
                 }
             }
             let top = records
@@ -175,9 +182,17 @@ impl Model {
 
     /// Give each labelled channel of `rec` (`accel:n12:uy`) the DOF of its
     /// point; an error names the channel when the model has no such point.
+    /// A channel named by DOF (`accel_5`) on a model from matrices means DOF 5
+    /// of the matrices: it gets the reduced DOF of that point (call once).
     pub fn resolve_channels(&self, rec: &mut crate::record::Record) -> Result<()> {
+        let kept = self.matrices.as_ref().map(|l| &l.kept_dofs);
         for c in rec.inputs.iter_mut().chain(rec.outputs.iter_mut()) {
-            let Some(p) = &c.point else { continue };
+            let Some(p) = &c.point else {
+                if let Some(kept) = kept {
+                    c.dof = kept.iter().position(|&d| d == c.dof).map_or(0, |i| i + 1);
+                }
+                continue;
+            };
             let d = self.points.iter().position(|l| l == p).ok_or_else(|| {
                 TacitError::record(
                     rec.source.clone(),
