@@ -204,7 +204,8 @@ pub fn spring_pairs(model: &Model) -> Vec<(usize, usize, usize)> {
 }
 
 /// The candidate library for a model: contact on each spring-joined pair in
-/// both directions, friction at each DOF and at all DOFs with one level, a
+/// both directions (and, for a model from matrices, a stop against ground
+/// at each point), friction at each DOF and at all DOFs with one level, a
 /// cubic spring on each spring-joined pair and from each DOF to ground, a
 /// stiffness change of each spring, a spring to ground at each DOF, and a
 /// change of the viscous damping (when the model has damping).
@@ -215,6 +216,12 @@ pub fn library(model: &Model, has_damping: bool, vreg: f64) -> Vec<Candidate> {
     for &(i, j, _) in &pairs {
         out.push(Candidate::new(EffectKind::Contact, vec![i, j]));
         out.push(Candidate::new(EffectKind::Contact, vec![j, i]));
+    }
+    // a model from matrices: a stop against ground at each point too
+    if !model.points.is_empty() {
+        for d in 0..n {
+            out.push(Candidate::new(EffectKind::Contact, vec![d]));
+        }
     }
     for d in 0..n {
         out.push(Candidate {
