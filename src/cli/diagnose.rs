@@ -107,7 +107,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     report::write(&a.output, &meta, &d, &settings)?;
     if let Some(r) = model.matrices.as_ref().and_then(|l| l.report.as_ref()) {
-        tacit::model::matrix::append_report(&a.output, r)?;
+        let effects: Vec<(String, Vec<usize>)> = d
+            .effects
+            .iter()
+            .map(|e| (e.label.clone(), e.dofs.clone()))
+            .collect();
+        tacit::model::matrix::append_report(&a.output, r, &effects)?;
     }
     println!("{}", d.verdict);
     let pct = |x: Option<f64>| x.map_or("failed".to_string(), |v| format!("{:.2} %", 100.0 * v));

@@ -694,8 +694,9 @@ fn map_element_labels(t: &mut toml::Table, to: &dyn Fn(&str) -> Option<usize>) {
 }
 
 /// Add the reduction to a diagnose report directory: `reduction.json`
-/// and a section at the end of `report.md`.
-pub fn append_report(dir: &Path, r: &ReductionReport) -> Result<()> {
+/// and a section at the end of `report.md` that also names the points of
+/// the `effects` found (label, DOFs from 1).
+pub fn append_report(dir: &Path, r: &ReductionReport, effects: &[(String, Vec<usize>)]) -> Result<()> {
     use std::io::Write;
     let json = serde_json::to_string_pretty(r)
         .map_err(|e| TacitError::Numerical(format!("reduction report: {e}")))?;
@@ -706,5 +707,16 @@ pub fn append_report(dir: &Path, r: &ReductionReport) -> Result<()> {
         .append(true)
         .open(&p)
         .map_err(|e| TacitError::io(&p, e))?;
-    write!(f, "\n{}", r.markdown()).map_err(|e| TacitError::io(&p, e))
+    let name = |d: usize| r.kept.get(d - 1).map_or(d.to_string(), |l| format!("`{l}`"));
+    let mut s = String::new();
+    if !effects.is_empty() {
+        s += "## Effects at points\n\n";
+        for (label, dofs) in effects {
+            let at: Vec<String> = dofs.iter().map(|&d| name(d)).collect();
+            let ground = if dofs.len() == 1 { " (to ground)" } else { "" };
+            s += &format!("- {label} at {}{ground}\n", at.join(" – "));
+        }
+        s += "\n";
+    }
+    write!(f, "\n{s}{}", r.markdown()).map_err(|e| TacitError::io(&p, e))
 }

@@ -155,6 +155,12 @@ impl Model {
             for r in records.iter() {
                 for c in r.inputs.iter().chain(&r.outputs) {
                     let l = match &c.point {
+                        Some(p) if mm.dof_of(p).is_none() => {
+                            return Err(TacitError::record(
+                                r.source.clone(),
+                                format!("channel {}: point \"{p}\" is not in [points] of {}", c.name(), path.display()),
+                            ))
+                        }
                         Some(p) => p.as_str(),
                         None => mm.label_of(c.dof).ok_or_else(|| {
                             TacitError::record(
