@@ -359,10 +359,14 @@ impl MatrixModel {
     /// The mass matrix of the free DOFs must be positive definite.
     fn check_mass(&self) -> Result<()> {
         let free = self.free();
+        let mut diag = vec![0.0; self.n];
+        for (i, j, v) in sparse::entries(&self.m) {
+            if i == j {
+                diag[i] += v;
+            }
+        }
         for &d in &free {
-            let v = sparse::entries(&sparse::block(&self.m, &[d], &[d])?)
-                .first()
-                .map_or(0.0, |t| t.2);
+            let v = diag[d];
             if !(v > 0.0) {
                 return Err(model_err(
                     &self.source,

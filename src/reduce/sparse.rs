@@ -175,12 +175,22 @@ pub fn lowest_modes(
     // deterministic start vector
     let v0 = Mat::<f64>::from_fn(n, 1, |i, _| 1.0 + ((i * 7919) % 101) as f64 / 101.0);
     let v0 = v0.col(0) / v0.col(0).norm_l2();
+    // the residual test is absolute: scale it by the largest μ (power
+    // iterations from v0)
+    let mut x = v0.as_mat().to_owned();
+    let mut mu_max = 0.0;
+    for _ in 0..6 {
+        let mut y = Mat::<f64>::zeros(n, 1);
+        op.apply(y.as_mut(), x.as_ref(), par, MemStack::new(&mut MemBuffer::new(StackReq::EMPTY)));
+        mu_max = y.col(0).norm_l2();
+        x = y / mu_max.max(f64::MIN_POSITIVE);
+    }
     let info = partial_eigen(
         vecs.as_mut(),
         &mut vals,
         &op,
         v0.as_ref(),
-        1e-12,
+        1e-10 * mu_max,
         par,
         MemStack::new(&mut mem),
         params,
@@ -193,9 +203,10 @@ pub fn lowest_modes(
     }
     // real basis: real and imaginary parts (a complex eigenvector of a
     // real operator with a real eigenvalue is a real vector times a phase)
+    let phases: Vec<(f64, f64)> = (0..got).map(|j| phase_fix(vecs.as_ref(), j)).collect();
     let basis = Mat::<f64>::from_fn(n, got, |i, j| {
         let z = vecs[(i, j)];
-        let (re, im) = phase_fix(vecs.as_ref(), j);
+        let (re, im) = phases[j];
         z.re * re + z.im * im
     });
     rayleigh_ritz(k, m, basis.as_ref())
