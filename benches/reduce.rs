@@ -17,7 +17,10 @@ use tacit::model::matrix::MatrixModel;
 
 /// Lower triangles of K and M of `ne` beam elements over 1 m (steel strip
 /// 40 × 10 mm), DOFs (uy, rz) per node, 0-based.
-fn beam(ne: usize) -> (Vec<(usize, usize, f64)>, Vec<(usize, usize, f64)>) {
+/// Matrix entries `(row, col, value)`, 0-based.
+type Entries = Vec<(usize, usize, f64)>;
+
+fn beam(ne: usize) -> (Entries, Entries) {
     let (e, rho, b, h) = (210e9, 7850.0, 0.04, 0.01);
     let l = 1.0 / ne as f64;
     let ck = e * b * h * h * h / 12.0 / (l * l * l);
@@ -34,7 +37,10 @@ fn beam(ne: usize) -> (Vec<(usize, usize, f64)>, Vec<(usize, usize, f64)>) {
         [54.0, 13.0 * l, 156.0, -22.0 * l],
         [-13.0 * l, -3.0 * l * l, -22.0 * l, 4.0 * l * l],
     ];
-    let (mut k, mut m) = (std::collections::BTreeMap::new(), std::collections::BTreeMap::new());
+    let (mut k, mut m) = (
+        std::collections::BTreeMap::new(),
+        std::collections::BTreeMap::new(),
+    );
     for el in 0..ne {
         for a in 0..4 {
             for bb in 0..4 {
@@ -73,7 +79,13 @@ fn write_model(dir: &Path, ne: usize, cutoff: f64) -> std::path::PathBuf {
         "name = \"beam{ne}\"\n[matrices]\nmass = \"m.mtx\"\nstiffness = \"k.mtx\"\nfixed = [\"n0:uy\", \"n0:rz\"]\n[reduction]\ncutoff_hz = {cutoff}\n[points]\n"
     );
     for i in 0..=ne {
-        writeln!(t, "\"n{i}:uy\" = {}\n\"n{i}:rz\" = {}", 2 * i + 1, 2 * i + 2).unwrap();
+        writeln!(
+            t,
+            "\"n{i}:uy\" = {}\n\"n{i}:rz\" = {}",
+            2 * i + 1,
+            2 * i + 2
+        )
+        .unwrap();
     }
     let p = dir.join(format!("beam{ne}-{cutoff}.toml"));
     std::fs::write(&p, t).unwrap();

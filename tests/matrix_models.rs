@@ -104,7 +104,9 @@ fn beam_stop_at_the_tip_is_found_by_label() {
     let (gap, k) = (param("gap"), param("stiffness"));
     assert!((gap / 2e-4 - 1.0).abs() < 0.1, "gap {gap}");
     assert!((k / 5e4 - 1.0).abs() < 0.1, "stiffness {k}");
-    let val = rep["validation"]["after"]["relative_error"].as_f64().unwrap();
+    let val = rep["validation"]["after"]["relative_error"]
+        .as_f64()
+        .unwrap();
     assert!(val < 0.03, "validation error {val}");
     // the reduction check: in-band frequencies within 1 %
     assert!(red["max_error_in_band"].as_f64().unwrap() < 0.01, "{red}");
@@ -130,7 +132,15 @@ fn lanl8dof_from_matrices_gives_the_lumped_report() {
     };
     let a = run("data/lanl8dof.toml", &dir.path().join("a"));
     let b = run("data/lanl8dof-mtx/model.toml", &dir.path().join("b"));
-    for key in ["verdict", "before", "after", "validation", "effects", "ranking", "rounds"] {
+    for key in [
+        "verdict",
+        "before",
+        "after",
+        "validation",
+        "effects",
+        "ranking",
+        "rounds",
+    ] {
         assert_eq!(a[key], b[key], "{key}");
     }
 }
@@ -151,7 +161,8 @@ fn write_model(dir: &Path, mass: &str, stiffness: &str, extra: &str) -> std::pat
 }
 
 const M2: &str = "%%MatrixMarket matrix coordinate real symmetric\n2 2 2\n1 1 1.0\n2 2 1.0\n";
-const K2: &str = "%%MatrixMarket matrix coordinate real general\n2 2 4\n1 1 2.0\n1 2 -1.0\n2 1 -1.0\n2 2 1.0\n";
+const K2: &str =
+    "%%MatrixMarket matrix coordinate real general\n2 2 4\n1 1 2.0\n1 2 -1.0\n2 1 -1.0\n2 2 1.0\n";
 
 fn load_err(p: &Path) -> String {
     tacit::model::matrix::MatrixModel::from_file(p)
@@ -170,11 +181,17 @@ fn bad_matrix_models_are_named_errors() {
     // wrong size
     let k3 = "%%MatrixMarket matrix coordinate real general\n3 3 1\n1 1 1.0\n";
     let e = load_err(&write_model(d, M2, k3, ""));
-    assert!(e.contains("k.mtx") && e.contains("3 × 3") && e.contains("2 × 2"), "{e}");
+    assert!(
+        e.contains("k.mtx") && e.contains("3 × 3") && e.contains("2 × 2"),
+        "{e}"
+    );
     // not symmetric: names the entry
     let kn = K2.replace("2 1 -1.0", "2 1 -1.5");
     let e = load_err(&write_model(d, M2, &kn, ""));
-    assert!(e.contains("k.mtx") && e.contains("not symmetric") && e.contains("(1, 2)"), "{e}");
+    assert!(
+        e.contains("k.mtx") && e.contains("not symmetric") && e.contains("(1, 2)"),
+        "{e}"
+    );
     // a label twice (the same DOF under two labels)
     let e = load_err(&write_model(d, M2, K2, "\"c\" = 2\n"));
     assert!(e.contains("\"c\"") && e.contains("\"b\""), "{e}");
@@ -188,7 +205,10 @@ fn bad_matrix_models_are_named_errors() {
         K2,
         "\n[[contact]]\ndofs = [\"tip\"]\ngap = 1e-3\nstiffness = 1e4\n",
     ));
-    assert!(e.contains("contact[0].dofs") && e.contains("\"tip\""), "{e}");
+    assert!(
+        e.contains("contact[0].dofs") && e.contains("\"tip\""),
+        "{e}"
+    );
     // a point out of range
     let e = load_err(&write_model(d, M2, K2, "\"c\" = 7\n"));
     assert!(e.contains("\"c\" = 7") && e.contains("1..=2"), "{e}");

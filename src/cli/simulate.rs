@@ -217,8 +217,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 type Labelled = Option<(Vec<usize>, usize)>;
 
 fn load_model(a: &Args) -> anyhow::Result<(Model, Labelled)> {
-    let text = std::fs::read_to_string(&a.model)
-        .map_err(|e| tacit::TacitError::io(&a.model, e))?;
+    let text = std::fs::read_to_string(&a.model).map_err(|e| tacit::TacitError::io(&a.model, e))?;
     if !tacit::model::matrix::is_matrix_model(&text) {
         if !a.points.is_empty() || a.input_point.is_some() {
             anyhow::bail!("--points and --input-point name points of a model from matrices; {} is a lumped model (use --sensors and --input-dof)", a.model.display());
@@ -227,7 +226,10 @@ fn load_model(a: &Args) -> anyhow::Result<(Model, Labelled)> {
     }
     let mm = tacit::model::matrix::MatrixModel::from_file(&a.model)?;
     if a.points.is_empty() {
-        anyhow::bail!("{}: a model from matrices needs the sensor points (--points a,b,...)", a.model.display());
+        anyhow::bail!(
+            "{}: a model from matrices needs the sensor points (--points a,b,...)",
+            a.model.display()
+        );
     }
     let input = match (&a.input_point, a.input) {
         (Some(p), _) => p.clone(),
@@ -243,7 +245,11 @@ fn load_model(a: &Args) -> anyhow::Result<(Model, Labelled)> {
     labels.push(input.clone());
     let model = mm.reduce(&labels, Some(top))?;
     let dof = |l: &str| model.points.iter().position(|p| p == l).map(|i| i + 1);
-    let sensors = a.points.iter().map(|l| dof(l).expect("kept point")).collect();
+    let sensors = a
+        .points
+        .iter()
+        .map(|l| dof(l).expect("kept point"))
+        .collect();
     let input_dof = dof(&input).expect("kept point");
     if let Some(r) = model.matrices.as_ref().and_then(|l| l.report.as_ref()) {
         eprintln!(

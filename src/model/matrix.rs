@@ -224,12 +224,13 @@ pub fn read_matrix_market(path: &Path, what: &str, n: Option<usize>) -> Result<S
             )));
         }
     }
-    let mut e: Vec<(usize, usize, f64)> = coo
-        .triplet_iter()
-        .map(|(i, j, &v)| (i, j, v))
-        .collect();
+    let mut e: Vec<(usize, usize, f64)> = coo.triplet_iter().map(|(i, j, &v)| (i, j, v)).collect();
     if let Some(&(i, j, v)) = e.iter().find(|t| !t.2.is_finite()) {
-        return Err(err(format!("entry ({}, {}) = {v} is not finite", i + 1, j + 1)));
+        return Err(err(format!(
+            "entry ({}, {}) = {v} is not finite",
+            i + 1,
+            j + 1
+        )));
     }
     e.retain(|t| t.2 != 0.0);
     let a = sparse::from_entries(r, r, &e)?;
@@ -269,8 +270,12 @@ impl MatrixModel {
             .ok_or_else(|| model_err(path, "no [matrices] section".into()))?
             .try_into()
             .map_err(|e: toml::de::Error| model_err(path, format!("[matrices]: {e}")))?;
-        let points_t = take(&mut rest, "points")
-            .ok_or_else(|| model_err(path, "[points]: a model from matrices needs a table of point labels".into()))?;
+        let points_t = take(&mut rest, "points").ok_or_else(|| {
+            model_err(
+                path,
+                "[points]: a model from matrices needs a table of point labels".into(),
+            )
+        })?;
         let interfaces: InterfacesSpec = match take(&mut rest, "interfaces") {
             Some(v) => v
                 .try_into()
@@ -284,21 +289,29 @@ impl MatrixModel {
             None => ReductionSpec::default(),
         };
         if rest.contains_key("masses") {
-            return Err(model_err(path, "masses: a model from matrices takes its masses from [matrices] mass".into()));
+            return Err(model_err(
+                path,
+                "masses: a model from matrices takes its masses from [matrices] mass".into(),
+            ));
         }
         let dir = path.parent().unwrap_or(Path::new("."));
         let m = read_matrix_market(&dir.join(&spec.mass), "[matrices] mass", None)?;
         let n = m.nrows();
         let k = read_matrix_market(&dir.join(&spec.stiffness), "[matrices] stiffness", Some(n))?;
         let c = match &spec.damping {
-            Some(f) => Some(read_matrix_market(&dir.join(f), "[matrices] damping", Some(n))?),
+            Some(f) => Some(read_matrix_market(
+                &dir.join(f),
+                "[matrices] damping",
+                Some(n),
+            )?),
             None => None,
         };
         let (points, index) = read_points(path, points_t, n)?;
         let label_of = |what: &str, l: &str| -> Result<usize> {
-            index.get(l).copied().ok_or_else(|| {
-                model_err(path, format!("{what}: point \"{l}\" is not in [points]"))
-            })
+            index
+                .get(l)
+                .copied()
+                .ok_or_else(|| model_err(path, format!("{what}: point \"{l}\" is not in [points]")))
         };
         let mut fixed = vec![];
         for l in &spec.fixed {
@@ -306,7 +319,11 @@ impl MatrixModel {
         }
         fixed.sort_unstable();
         fixed.dedup();
-        for l in interfaces.points.iter().chain(interfaces.pairs.iter().flatten()) {
+        for l in interfaces
+            .points
+            .iter()
+            .chain(interfaces.pairs.iter().flatten())
+        {
             label_of("[interfaces]", l)?;
         }
         let element_points = element_labels(path, &rest, &index)?;
@@ -405,7 +422,10 @@ impl MatrixModel {
             .chain(measured)
         {
             let d = self.dof_of(l).ok_or_else(|| {
-                model_err(src, format!("point \"{l}\" (a record channel) is not in [points]"))
+                model_err(
+                    src,
+                    format!("point \"{l}\" (a record channel) is not in [points]"),
+                )
             })?;
             if self.fixed.binary_search(&d).is_ok() {
                 return Err(model_err(src, format!("point \"{l}\" is fixed ([matrices] fixed) and cannot be kept, measured or driven")));
@@ -493,7 +513,10 @@ impl MatrixModel {
             }
         };
         if !(f.is_finite() && f > 0.0) {
-            return Err(model_err(&self.source, format!("[reduction]: cut-off {f} Hz must be > 0")));
+            return Err(model_err(
+                &self.source,
+                format!("[reduction]: cut-off {f} Hz must be > 0"),
+            ));
         }
         Ok(f)
     }
@@ -576,11 +599,18 @@ fn check_frequencies(
         k.ncols(),
         &sparse::entries(k)
             .into_iter()
-            .chain(sparse::entries(m).into_iter().map(|(i, j, v)| (i, j, sigma * v)))
+            .chain(
+                sparse::entries(m)
+                    .into_iter()
+                    .map(|(i, j, v)| (i, j, sigma * v)),
+            )
             .collect::<Vec<_>>(),
     )?;
     let factor = Factor::new(&shifted).ok_or_else(|| {
-        TacitError::Numerical("the full stiffness is not positive semi-definite (K + σM has no Cholesky factor)".into())
+        TacitError::Numerical(
+            "the full stiffness is not positive semi-definite (K + σM has no Cholesky factor)"
+                .into(),
+        )
     })?;
     let (modes, _) = sparse::modes_up_to(k, m, &factor, top, 2 * reduced_hz.len() + 20)?;
     Ok(modes
@@ -599,24 +629,38 @@ fn check_frequencies(
         .collect())
 }
 
+/// Point labels with their DOF (0-based), by DOF, and the label index.
+type Points = (Vec<(String, usize)>, HashMap<String, usize>);
+
 /// Parse `[points]`: label → DOF from 1; each DOF at most one label.
 fn read_points(
     path: &Path,
     t: toml::Value,
     n: usize,
-) -> Result<(Vec<(String, usize)>, HashMap<String, usize>)> {
+) -> Result<Points> {
     let t = match t {
         toml::Value::Table(t) => t,
-        _ => return Err(model_err(path, "[points] must be a table of label = DOF".into())),
+        _ => {
+            return Err(model_err(
+                path,
+                "[points] must be a table of label = DOF".into(),
+            ))
+        }
     };
     let mut by_dof: HashMap<usize, String> = HashMap::new();
     let mut points = vec![];
     for (label, v) in t {
         if label.is_empty() || label.chars().any(|c| c.is_whitespace() || c == ',') {
-            return Err(model_err(path, format!("[points] \"{label}\": a label may not be empty or hold spaces or commas")));
+            return Err(model_err(
+                path,
+                format!("[points] \"{label}\": a label may not be empty or hold spaces or commas"),
+            ));
         }
         let d = v.as_integer().ok_or_else(|| {
-            model_err(path, format!("[points] \"{label}\" = {v}: expected a DOF number (from 1)"))
+            model_err(
+                path,
+                format!("[points] \"{label}\" = {v}: expected a DOF number (from 1)"),
+            )
         })?;
         if d < 1 || d as usize > n {
             return Err(model_err(
@@ -628,7 +672,11 @@ fn read_points(
         if let Some(other) = by_dof.insert(d, label.clone()) {
             return Err(model_err(
                 path,
-                format!("[points] \"{label}\" = {}: DOF {} already has the label \"{other}\"", d + 1, d + 1),
+                format!(
+                    "[points] \"{label}\" = {}: DOF {} already has the label \"{other}\"",
+                    d + 1,
+                    d + 1
+                ),
             ));
         }
         points.push((label, d));
@@ -642,14 +690,20 @@ fn read_points(
 fn element_arrays(t: &mut toml::Table) -> Vec<(&String, &mut Vec<toml::Value>)> {
     t.iter_mut()
         .filter_map(|(k, v)| match v {
-            toml::Value::Array(a) if a.iter().all(|x| x.is_table()) && !a.is_empty() => Some((k, a)),
+            toml::Value::Array(a) if a.iter().all(|x| x.is_table()) && !a.is_empty() => {
+                Some((k, a))
+            }
             _ => None,
         })
         .collect()
 }
 
 /// Labels placed in the elements' `dofs` / `dof`; errors name the key.
-fn element_labels(path: &Path, rest: &toml::Table, index: &HashMap<String, usize>) -> Result<Vec<String>> {
+fn element_labels(
+    path: &Path,
+    rest: &toml::Table,
+    index: &HashMap<String, usize>,
+) -> Result<Vec<String>> {
     let mut t = rest.clone();
     let mut out = vec![];
     for (key, arr) in element_arrays(&mut t) {
@@ -666,7 +720,10 @@ fn element_labels(path: &Path, rest: &toml::Table, index: &HashMap<String, usize
                         model_err(path, format!("{key}[{i}].{f}: a model from matrices places elements by point label (\"n12:uy\"), not by DOF number ({v})"))
                     })?;
                     if !index.contains_key(l) {
-                        return Err(model_err(path, format!("{key}[{i}].{f}: point \"{l}\" is not in [points]")));
+                        return Err(model_err(
+                            path,
+                            format!("{key}[{i}].{f}: point \"{l}\" is not in [points]"),
+                        ));
                     }
                     out.push(l.to_string());
                 }
@@ -685,7 +742,9 @@ fn map_element_labels(t: &mut toml::Table, to: &dyn Fn(&str) -> Option<usize>) {
     };
     for (_, arr) in element_arrays(t) {
         for e in arr.iter_mut() {
-            let Some(tbl) = e.as_table_mut() else { continue };
+            let Some(tbl) = e.as_table_mut() else {
+                continue;
+            };
             for f in ["dofs", "dof"] {
                 match tbl.get_mut(f) {
                     Some(toml::Value::Array(a)) => a.iter_mut().for_each(conv),
@@ -700,7 +759,11 @@ fn map_element_labels(t: &mut toml::Table, to: &dyn Fn(&str) -> Option<usize>) {
 /// Add the reduction to a diagnose report directory: `reduction.json`
 /// and a section at the end of `report.md` that also names the points of
 /// the `effects` found (label, DOFs from 1).
-pub fn append_report(dir: &Path, r: &ReductionReport, effects: &[(String, Vec<usize>)]) -> Result<()> {
+pub fn append_report(
+    dir: &Path,
+    r: &ReductionReport,
+    effects: &[(String, Vec<usize>)],
+) -> Result<()> {
     use std::io::Write;
     let json = serde_json::to_string_pretty(r)
         .map_err(|e| TacitError::Numerical(format!("reduction report: {e}")))?;
@@ -711,7 +774,11 @@ pub fn append_report(dir: &Path, r: &ReductionReport, effects: &[(String, Vec<us
         .append(true)
         .open(&p)
         .map_err(|e| TacitError::io(&p, e))?;
-    let name = |d: usize| r.kept.get(d - 1).map_or(d.to_string(), |l| format!("`{l}`"));
+    let name = |d: usize| {
+        r.kept
+            .get(d - 1)
+            .map_or(d.to_string(), |l| format!("`{l}`"))
+    };
     let mut s = String::new();
     if !effects.is_empty() {
         s += "## Effects at points\n\n";

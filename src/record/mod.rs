@@ -388,8 +388,11 @@ pub fn band_top(rec: &Record) -> Option<f64> {
     let fft = FftPlanner::<f64>::new().plan_fft_forward(n);
     for c in &rec.inputs {
         let mean = c.data.iter().sum::<f64>() / n as f64;
-        let mut buf: Vec<Complex<f64>> =
-            c.data.iter().map(|&x| Complex::new(x - mean, 0.0)).collect();
+        let mut buf: Vec<Complex<f64>> = c
+            .data
+            .iter()
+            .map(|&x| Complex::new(x - mean, 0.0))
+            .collect();
         fft.process(&mut buf);
         for (p, z) in power.iter_mut().zip(&buf) {
             *p += z.norm_sqr();

@@ -148,13 +148,8 @@ fn interior_basis(
     let mut psi = kob.to_dense();
     psi *= faer::Scale(-1.0);
     factor.solve_in_place(psi.as_mut());
-    let (modes, complete) = sparse::modes_up_to(
-        &koo,
-        &moo,
-        &factor,
-        settings.cutoff_hz,
-        settings.max_modes,
-    )?;
+    let (modes, complete) =
+        sparse::modes_up_to(&koo, &moo, &factor, settings.cutoff_hz, settings.max_modes)?;
     Ok((psi, modes.shapes, modes.omega2, complete))
 }
 
@@ -167,12 +162,20 @@ mod tests {
     fn chain(n: usize) -> (SpMat, SpMat) {
         let mut k = vec![];
         for i in 0..n - 1 {
-            for (a, b, v) in [(i, i, 1.0), (i + 1, i + 1, 1.0), (i, i + 1, -1.0), (i + 1, i, -1.0)] {
+            for (a, b, v) in [
+                (i, i, 1.0),
+                (i + 1, i + 1, 1.0),
+                (i, i + 1, -1.0),
+                (i + 1, i, -1.0),
+            ] {
                 k.push((a, b, 1000.0 * v));
             }
         }
         let m: Vec<_> = (0..n).map(|i| (i, i, 1.0)).collect();
-        (from_entries(n, n, &m).unwrap(), from_entries(n, n, &k).unwrap())
+        (
+            from_entries(n, n, &m).unwrap(),
+            from_entries(n, n, &k).unwrap(),
+        )
     }
 
     #[test]
@@ -214,7 +217,10 @@ mod tests {
         )
         .unwrap_err()
         .to_string();
-        assert!(e.contains("not positive definite") && e.contains("10 DOFs"), "{e}");
+        assert!(
+            e.contains("not positive definite") && e.contains("10 DOFs"),
+            "{e}"
+        );
     }
 
     trait Dense {

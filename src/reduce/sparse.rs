@@ -147,12 +147,7 @@ impl SparseModes {
 /// The `count` lowest modes of `(k, m)` with shift `sigma` (`K + σM` must
 /// be positive definite; `factor` is its Cholesky factor). Returns fewer
 /// when the Krylov–Schur iteration converges fewer.
-pub fn lowest_modes(
-    k: &SpMat,
-    m: &SpMat,
-    factor: &Factor,
-    count: usize,
-) -> Result<SparseModes> {
+pub fn lowest_modes(k: &SpMat, m: &SpMat, factor: &Factor, count: usize) -> Result<SparseModes> {
     let n = m.nrows();
     let count = count.min(n);
     if count == 0 {
@@ -181,7 +176,12 @@ pub fn lowest_modes(
     let mut mu_max = 0.0;
     for _ in 0..6 {
         let mut y = Mat::<f64>::zeros(n, 1);
-        op.apply(y.as_mut(), x.as_ref(), par, MemStack::new(&mut MemBuffer::new(StackReq::EMPTY)));
+        op.apply(
+            y.as_mut(),
+            x.as_ref(),
+            par,
+            MemStack::new(&mut MemBuffer::new(StackReq::EMPTY)),
+        );
         mu_max = y.col(0).norm_l2();
         x = y / mu_max.max(f64::MIN_POSITIVE);
     }
@@ -291,7 +291,10 @@ mod tests {
             }
         }
         let m: Vec<_> = (0..n).map(|i| (i, i, 1.0)).collect();
-        (from_entries(n, n, &k).unwrap(), from_entries(n, n, &m).unwrap())
+        (
+            from_entries(n, n, &k).unwrap(),
+            from_entries(n, n, &m).unwrap(),
+        )
     }
 
     #[test]
@@ -323,8 +326,7 @@ mod tests {
         // the count is every mode below 0.05 Hz of the closed form
         let want = (0..500)
             .filter(|&r| {
-                let w = 2.0
-                    * ((2 * r + 1) as f64 * std::f64::consts::PI / (2.0 * 1001.0)).sin();
+                let w = 2.0 * ((2 * r + 1) as f64 * std::f64::consts::PI / (2.0 * 1001.0)).sin();
                 w / (2.0 * std::f64::consts::PI) <= 0.05
             })
             .count();
