@@ -633,11 +633,7 @@ fn check_frequencies(
 type Points = (Vec<(String, usize)>, HashMap<String, usize>);
 
 /// Parse `[points]`: label → DOF from 1; each DOF at most one label.
-fn read_points(
-    path: &Path,
-    t: toml::Value,
-    n: usize,
-) -> Result<Points> {
+fn read_points(path: &Path, t: toml::Value, n: usize) -> Result<Points> {
     let t = match t {
         toml::Value::Table(t) => t,
         _ => {

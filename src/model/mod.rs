@@ -214,9 +214,16 @@ impl Model {
         Ok(())
     }
 
-    /// Read and validate a model file.
+    /// Read and validate a lumped model file (a model from matrices is an
+    /// error that says where it is taken: [`Model::load`]).
     pub fn from_file(path: &Path) -> Result<Model> {
         let text = std::fs::read_to_string(path).map_err(|e| TacitError::io(path, e))?;
+        if matrix::is_matrix_model(&text) {
+            return Err(TacitError::model(
+                path.display().to_string(),
+                "a model from matrices ([matrices]) is reduced onto the points of a record: use it with `tacit diagnose`, or `tacit simulate --points ... --input-point ...`; this command takes a lumped model (masses and springs)",
+            ));
+        }
         Model::from_toml_str(&text, &path.display().to_string())
     }
 
@@ -228,9 +235,18 @@ impl Model {
         Ok(model)
     }
 
-    /// Serialize to TOML text.
+    /// Serialize to TOML text. A reduced model from matrices is written
+    /// with its masses and springs only, under a comment that says so.
     pub fn to_toml_string(&self) -> String {
-        toml::to_string(self).unwrap_or_else(|e| format!("# model could not be serialized: {e}\n"))
+        let text = toml::to_string(self)
+            .unwrap_or_else(|e| format!("# model could not be serialized: {e}\n"));
+        match &self.matrices {
+            Some(_) => format!(
+                "# reduced model from matrices, points {}: its off-diagonal mass and the\n# stiffness beyond these springs are not in this text\n{text}",
+                self.points.join(", ")
+            ),
+            None => text,
+        }
     }
 
     /// True when the model has nonlinear elements.

@@ -411,3 +411,42 @@ pub fn band_top(rec: &Record) -> Option<f64> {
     }
     Some(rec.fs / 2.0)
 }
+
+#[cfg(test)]
+mod band_tests {
+    use super::*;
+
+    #[test]
+    fn band_top_of_a_band_limited_force() {
+        let fs = 1024.0;
+        let f = crate::signal::random_band(8192, fs, (5.0, 200.0), 5.0, 3).unwrap();
+        let rec = Record {
+            t0: 0.0,
+            fs,
+            inputs: vec![Channel::new(Quantity::Force, 1, f)],
+            outputs: vec![],
+            truth: None,
+            source: Default::default(),
+        };
+        let top = band_top(&rec).unwrap();
+        assert!(top > 185.0 && top <= 201.0, "{top}");
+        let none = Record {
+            inputs: vec![],
+            ..rec
+        };
+        assert_eq!(band_top(&none), None);
+    }
+
+    #[test]
+    fn point_names_parse_and_print() {
+        assert_eq!(
+            parse_point_name("accel:n12:uy"),
+            Some((Quantity::Accel, "n12:uy"))
+        );
+        assert_eq!(parse_point_name("accel_5"), None);
+        assert_eq!(parse_point_name("strain:n1"), None);
+        assert_eq!(parse_point_name("accel:"), None);
+        let c = Channel::at_point(Quantity::Force, "n20:uy", vec![0.0]);
+        assert_eq!(c.name(), "force:n20:uy");
+    }
+}
