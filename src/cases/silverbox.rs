@@ -161,14 +161,7 @@ fn one_dof(m: f64, d: f64, a: f64) -> Model {
             ratio: Some((d / (2.0 * (a * m).sqrt())).clamp(1e-4, 0.9)),
             ratios: vec![],
         },
-        contacts: vec![],
-        frictions: vec![],
-        cubics: vec![],
-        quadratics: vec![],
-        quadratic_dampers: vec![],
-        cubic_dampers: vec![],
-        clearances: vec![],
-        relative_frictions: vec![],
+        ..Default::default()
     }
 }
 

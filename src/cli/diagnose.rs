@@ -103,12 +103,21 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     )?;
     settings.validate()?;
     let staging = super::output::Staging::begin(&a.output, a.force)?;
-    let model = Model::from_file(&a.model)?;
-    let rec = load_record(&a.record, &a.rec)?;
-    let val = match &a.validate {
+    let mut rec = load_record(&a.record, &a.rec)?;
+    let mut val = match &a.validate {
         Some(p) => Some(load_record(p, &a.rec)?),
         None => None,
     };
+    let mut linear = a
+        .linear_records
+        .iter()
+        .map(|p| load_record(p, &a.rec))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    // a model from matrices is reduced onto the records' points
+    let mut recs: Vec<&mut tacit::record::Record> = vec![&mut rec];
+    recs.extend(val.as_mut());
+    recs.extend(linear.iter_mut());
+    let model = Model::load(&a.model, &mut recs)?;
     let chosen = a.sensors.as_ref().map(|d| d.0.as_slice());
     let mut warnings = super::records::check(&rec, &model, chosen)?;
     if let Some(v) = &val {
@@ -129,11 +138,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     } else {
         ProgressBar::hidden()
     };
-    let linear = a
-        .linear_records
-        .iter()
-        .map(|p| load_record(p, &a.rec))
-        .collect::<anyhow::Result<Vec<_>>>()?;
     let cal = diagnose::calibrated::CalibratedSettings {
         off: a.trust_linear,
         ..Default::default()
@@ -160,6 +164,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     report::write(staging.dir(), &meta, &d, &settings)
         .map_err(|e| staging.user_message(e.into()))?;
+    if let Some(r) = model.matrices.as_ref().and_then(|l| l.report.as_ref()) {
+        let effects: Vec<(String, Vec<usize>)> = d
+            .effects
+            .iter()
+            .map(|e| (e.label.clone(), e.dofs.clone()))
+            .collect();
+        tacit::model::matrix::append_report(staging.dir(), r, &effects)
+            .map_err(|e| staging.user_message(e.into()))?;
+    }
     staging.commit()?;
     outln!("{}", d.verdict);
     let pct = |x: Option<f64>| x.map_or("failed".to_string(), |v| format!("{:.2} %", 100.0 * v));

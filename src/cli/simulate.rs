@@ -64,6 +64,14 @@ pub struct Args {
     /// Sensor DOFs numbered from 1, e.g. 1,5,6 or 1-8 (default: all).
     #[arg(long, value_name = "DOFS")]
     sensors: Option<DofList>,
+    /// Model from matrices: the sensor points by label, comma-separated
+    /// (channels are named `accel:<label>`).
+    #[arg(long, value_delimiter = ',')]
+    points: Vec<String>,
+    /// Model from matrices: the point the force acts at (random, sweep,
+    /// impulse).
+    #[arg(long)]
+    input_point: Option<String>,
     /// Measured quantity (repeatable).
     #[arg(long, value_enum, default_values_t = vec![Kind::Accel])]
     kind: Vec<Kind>,
@@ -167,13 +175,20 @@ fn check_output(path: &std::path::Path) -> anyhow::Result<record::Format> {
 pub fn run(a: Args) -> anyhow::Result<()> {
     validate(&a)?;
     let fmt = check_output(&a.output)?;
-    let model = Model::from_file(&a.model)?;
+    let (model, labelled) = load_model(&a)?;
     let n = model.ndof();
-    let sensors = a
-        .sensors
-        .clone()
-        .map(|d| d.0)
-        .unwrap_or_else(|| (1..=n).collect());
+    let sensors = match &labelled {
+        Some((s, _)) => s.clone(),
+        None => a
+            .sensors
+            .clone()
+            .map(|d| d.0)
+            .unwrap_or_else(|| (1..=n).collect()),
+    };
+    let a = Args {
+        input_dof: labelled.as_ref().map_or(a.input_dof, |l| l.1),
+        ..a
+    };
     check_dofs(&sensors, n, "--sensors")?;
     check_dofs(&[a.input_dof], n, "--input-dof")?;
     let (input, fs, samples, input_dof) = match a.input {
@@ -255,7 +270,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         &format!("{samples} samples of {n} DOFs at {} sub-steps", a.substeps),
     )?;
     let t = std::time::Instant::now();
-    let (rec, sim) = simulate_record(&model, &spec)?;
+    let (mut rec, sim) = simulate_record(&model, &spec)?;
+    if labelled.is_some() {
+        for c in rec.inputs.iter_mut().chain(rec.outputs.iter_mut()) {
+            c.point = Some(model.dof_name(c.dof));
+        }
+    }
     let elapsed = t.elapsed();
     rec.validate(None)?;
     let write_rec = |p: &std::path::Path| -> anyhow::Result<()> {
@@ -287,4 +307,59 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     );
     outln!("wrote {}", written.join(", "));
     Ok(())
+}
+
+/// The model, and for a model from matrices the sensor and input DOFs of
+/// `--points` and `--input-point` in the reduced numbering (the reduction
+/// keeps them physical, its cut-off from the excitation band).
+type Labelled = Option<(Vec<usize>, usize)>;
+
+fn load_model(a: &Args) -> anyhow::Result<(Model, Labelled)> {
+    let text = std::fs::read_to_string(&a.model).map_err(|e| tacit::TacitError::io(&a.model, e))?;
+    if !tacit::model::matrix::is_matrix_model(&text) {
+        if !a.points.is_empty() || a.input_point.is_some() {
+            anyhow::bail!("--points and --input-point name points of a model from matrices; {} is a lumped model (use --sensors and --input-dof)", a.model.display());
+        }
+        return Ok((Model::from_file(&a.model)?, None));
+    }
+    let mm = tacit::model::matrix::MatrixModel::from_file(&a.model)?;
+    if a.points.is_empty() {
+        anyhow::bail!(
+            "{}: a model from matrices needs the sensor points (--points a,b,...)",
+            a.model.display()
+        );
+    }
+    let input = match (&a.input_point, a.input) {
+        (Some(p), _) => p.clone(),
+        (None, InputKind::Record) => anyhow::bail!("--input record with a model from matrices: not supported; use --input-point with a random, sweep or impulse input"),
+        (None, _) => anyhow::bail!("{}: a model from matrices needs the input point (--input-point)", a.model.display()),
+    };
+    let top = match a.input {
+        InputKind::Random => a.band.1,
+        InputKind::Sweep => a.sweep.0.max(a.sweep.1),
+        _ => a.fs / 4.0,
+    };
+    let mut labels = a.points.clone();
+    labels.push(input.clone());
+    let model = mm.reduce(&labels, Some(top))?;
+    let dof = |l: &str| model.points.iter().position(|p| p == l).map(|i| i + 1);
+    let sensors = a
+        .points
+        .iter()
+        .map(|l| dof(l).expect("kept point"))
+        .collect();
+    let input_dof = dof(&input).expect("kept point");
+    if let Some(r) = model.matrices.as_ref().and_then(|l| l.report.as_ref()) {
+        eprintln!(
+            "reduced {} DOFs to {} points + {} modes (cut-off {:.1} Hz) in {:.2} s; frequency error {:.3} % up to {:.1} Hz",
+            r.full_dofs,
+            r.kept.len(),
+            r.modal_coordinates,
+            r.cutoff_hz,
+            r.seconds,
+            100.0 * r.max_error,
+            r.check_up_to_hz
+        );
+    }
+    Ok((model, Some((sensors, input_dof))))
 }

@@ -141,21 +141,23 @@ impl Located {
     }
 }
 
-/// Candidate directions of a model: every spring-joined pair, every DOF to
-/// ground.
+/// Candidate directions of a model: every spring-joined pair and
+/// interface pair, every physical DOF (point) to ground.
 pub fn directions(model: &Model) -> Vec<Direction> {
     let mut out = vec![];
-    for sp in &model.springs {
-        if let (i, Some(j)) = sp.ends() {
-            let d = Direction {
-                dofs: vec![i.min(j) + 1, i.max(j) + 1],
-            };
-            if !out.contains(&d) {
-                out.push(d);
-            }
+    let pairs = model.springs.iter().filter_map(|sp| match sp.ends() {
+        (i, Some(j)) => Some([i + 1, j + 1]),
+        _ => None,
+    });
+    for [i, j] in pairs.chain(model.interface_pairs.iter().copied()) {
+        let d = Direction {
+            dofs: vec![i.min(j), i.max(j)],
+        };
+        if !out.contains(&d) {
+            out.push(d);
         }
     }
-    for i in 1..=model.ndof() {
+    for i in 1..=model.physical_ndof() {
         out.push(Direction { dofs: vec![i] });
     }
     out

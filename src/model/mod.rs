@@ -10,11 +10,13 @@
 //! from 0 inside the numerical core.
 
 pub mod elements;
+pub mod matrix;
 
 use crate::error::{Result, TacitError};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+use std::sync::Arc;
 
 pub use elements::{
     Clearance, Contact, Cubic, CubicDamper, Friction, Quadratic, QuadraticDamper, RelativeFriction,
@@ -75,7 +77,7 @@ pub enum Damping {
 }
 
 /// A structural model.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Model {
     /// Short name.
@@ -128,6 +130,19 @@ pub struct Model {
         skip_serializing_if = "Vec::is_empty"
     )]
     pub relative_frictions: Vec<RelativeFriction>,
+    /// Point labels of DOFs `1..=points.len()` (models built from
+    /// matrices: the kept points; the DOFs after them are modal
+    /// coordinates). Empty for a lumped model.
+    #[serde(skip)]
+    pub points: Vec<String>,
+    /// Interface pairs (DOFs from 1) tried as effect locations besides the
+    /// spring-joined pairs.
+    #[serde(skip)]
+    pub interface_pairs: Vec<[usize; 2]>,
+    /// The linear part given as (reduced) matrices, added to the masses and
+    /// springs ([`matrix::LinearMatrices`]).
+    #[serde(skip)]
+    pub matrices: Option<Arc<matrix::LinearMatrices>>,
 }
 
 impl Model {
@@ -136,9 +151,108 @@ impl Model {
         self.masses.len()
     }
 
-    /// Read and validate a model file.
+    /// DOFs that are physical points (candidates for effects and
+    /// channels): all of them for a lumped model, the kept points for a
+    /// reduced one.
+    pub fn physical_ndof(&self) -> usize {
+        if self.points.is_empty() {
+            self.ndof()
+        } else {
+            self.points.len()
+        }
+    }
+
+    /// Name of DOF `d` (from 1) in reports: its point label, or the number.
+    pub fn dof_name(&self, d: usize) -> String {
+        d.checked_sub(1)
+            .and_then(|i| self.points.get(i))
+            .cloned()
+            .unwrap_or_else(|| d.to_string())
+    }
+
+    /// Read a model file for the given records: a lumped model as
+    /// [`Model::from_file`]; a model from matrices ([`matrix`]) reduced
+    /// onto its element and interface points and the records' labelled
+    /// channels, with the cut-off set from the records' excitation band.
+    /// The records' labelled channels are then resolved
+    /// ([`Model::resolve_channels`]).
+    pub fn load(path: &Path, records: &mut [&mut crate::record::Record]) -> Result<Model> {
+        let text = std::fs::read_to_string(path).map_err(|e| TacitError::io(path, e))?;
+        let model = if matrix::is_matrix_model(&text) {
+            let mm = matrix::MatrixModel::from_file(path)?;
+            let mut labels = vec![];
+            for r in records.iter() {
+                for c in r.inputs.iter().chain(&r.outputs) {
+                    let l = match &c.point {
+                        Some(p) if mm.dof_of(p).is_none() => {
+                            return Err(TacitError::record(
+                                r.source.clone(),
+                                format!("channel {}: point \"{p}\" is not in [points] of {}", c.name(), path.display()),
+                            ))
+                        }
+                        Some(p) => p.as_str(),
+                        None => mm.label_of(c.dof).ok_or_else(|| {
+                            TacitError::record(
+                                r.source.clone(),
+                                format!("channel {}: DOF {} of the matrices has no label in [points] of {}", c.name(), c.dof, path.display()),
+                            )
+                        })?,
+                    };
+                    labels.push(l.to_string());
+                }
+            }
+            let top = records
+                .iter()
+                .filter_map(|r| crate::record::band_top(r))
+                .fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.max(b))));
+            mm.reduce(&labels, top)?
+        } else {
+            Model::from_toml_str(&text, &path.display().to_string())?
+        };
+        for r in records.iter_mut() {
+            model.resolve_channels(r)?;
+        }
+        Ok(model)
+    }
+
+    /// Give each labelled channel of `rec` (`accel:n12:uy`) the DOF of its
+    /// point; an error names the channel when the model has no such point.
+    /// A channel named by DOF (`accel_5`) on a model from matrices means DOF 5
+    /// of the matrices: it gets the reduced DOF of that point (call once).
+    pub fn resolve_channels(&self, rec: &mut crate::record::Record) -> Result<()> {
+        let kept = self.matrices.as_ref().map(|l| &l.kept_dofs);
+        for c in rec.inputs.iter_mut().chain(rec.outputs.iter_mut()) {
+            let Some(p) = &c.point else {
+                if let Some(kept) = kept {
+                    c.dof = kept.iter().position(|&d| d == c.dof).map_or(0, |i| i + 1);
+                }
+                continue;
+            };
+            let d = self.points.iter().position(|l| l == p).ok_or_else(|| {
+                TacitError::record(
+                    rec.source.clone(),
+                    if self.points.is_empty() {
+                        format!("channel {}: the model has no point labels (it is a lumped model: name channels like {}_<dof>)", c.name(), c.quantity.prefix())
+                    } else {
+                        format!("channel {}: point \"{p}\" is not a point of the model", c.name())
+                    },
+                )
+            })?;
+            c.dof = d + 1;
+        }
+        Ok(())
+    }
+
+    /// Read and validate a lumped model file (a model from matrices is an
+    /// error that says where it is taken: [`Model::load`]).
     pub fn from_file(path: &Path) -> Result<Model> {
         let text = std::fs::read_to_string(path).map_err(|e| TacitError::io(path, e))?;
+        if matrix::is_matrix_model(&text) {
+            return Err(TacitError::model(
+                path.display().to_string(),
+                "a model from matrices ([matrices]) is reduced onto the points of a record: use it with `tacit diagnose`, or `tacit simulate --points ... --input-point ...`; this command takes a lumped model (masses and springs)",
+            ));
+        }
         Model::from_toml_str(&text, &path.display().to_string())
     }
 
@@ -150,9 +264,18 @@ impl Model {
         Ok(model)
     }
 
-    /// Serialize to TOML text.
+    /// Serialize to TOML text. A reduced model from matrices is written
+    /// with its masses and springs only, under a comment that says so.
     pub fn to_toml_string(&self) -> String {
-        toml::to_string(self).unwrap_or_else(|e| format!("# model could not be serialized: {e}\n"))
+        let text = toml::to_string(self)
+            .unwrap_or_else(|e| format!("# model could not be serialized: {e}\n"));
+        match &self.matrices {
+            Some(_) => format!(
+                "# reduced model from matrices, points {}: its off-diagonal mass and the\n# stiffness beyond these springs are not in this text\n{text}",
+                self.points.join(", ")
+            ),
+            None => text,
+        }
     }
 
     /// True when the model has nonlinear elements.
@@ -355,15 +478,24 @@ impl Model {
         Ok(())
     }
 
-    /// Mass matrix (diagonal, lumped).
+    /// Mass matrix: the masses on the diagonal, plus the off-diagonal mass
+    /// of a model from matrices.
     pub fn mass_matrix(&self) -> DMatrix<f64> {
-        DMatrix::from_diagonal(&nalgebra::DVector::from_vec(self.masses.clone()))
+        let d = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(self.masses.clone()));
+        match &self.matrices {
+            Some(lin) => d + &lin.m_offdiag,
+            None => d,
+        }
     }
 
-    /// Linear stiffness matrix.
+    /// Linear stiffness matrix: the springs, plus the rest of the
+    /// stiffness of a model from matrices.
     pub fn stiffness_matrix(&self) -> DMatrix<f64> {
         let n = self.ndof();
-        let mut k = DMatrix::zeros(n, n);
+        let mut k = match &self.matrices {
+            Some(lin) => lin.k_rest.clone(),
+            None => DMatrix::zeros(n, n),
+        };
         for s in &self.springs {
             add_spring(&mut k, s.ends(), s.stiffness);
         }
@@ -376,7 +508,11 @@ impl Model {
     pub fn damping_matrix(&self) -> Result<DMatrix<f64>> {
         let m = self.mass_matrix();
         let k = self.stiffness_matrix();
-        damping_matrix(&self.damping, &m, &k)
+        let c = damping_matrix(&self.damping, &m, &k)?;
+        match self.matrices.as_ref().and_then(|l| l.c.as_ref()) {
+            Some(c0) => Ok(c + c0),
+            None => Ok(c),
+        }
     }
 }
 

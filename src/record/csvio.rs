@@ -33,6 +33,9 @@ pub fn read(path: &Path) -> Result<Record> {
         if name == "time" {
             return Ok(());
         }
+        if super::parse_point_name(name).is_some() {
+            return Ok(());
+        }
         parse_channel_name(name).map(|_| ())
     })?;
     let time = table.column("time").ok_or_else(|| {
@@ -51,8 +54,14 @@ pub fn read(path: &Path) -> Result<Record> {
         if name == "time" {
             continue;
         }
-        let (q, dof) = parse_channel_name(name).map_err(err)?;
-        let c = Channel::new(q, dof, data);
+        let c = match super::parse_point_name(name) {
+            Some((q, point)) => Channel::at_point(q, point, data),
+            None => {
+                let (q, dof) = parse_channel_name(name).map_err(err)?;
+                Channel::new(q, dof, data)
+            }
+        };
+        let q = c.quantity;
         if q == Quantity::Force {
             rec.inputs.push(c);
         } else {

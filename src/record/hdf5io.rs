@@ -269,7 +269,11 @@ fn read_channels(file: &Group, gname: &str) -> Msg<Vec<Channel>> {
 }
 
 fn read_channel(g: &Group, gname: &str, name: &str) -> Msg<Channel> {
-    let (q, dof) = parse_channel_name(name).map_err(|m| format!("/{gname}: {m}"))?;
+    let point = super::parse_point_name(name);
+    let (q, dof) = match point {
+        Some((q, _)) => (q, 0),
+        None => parse_channel_name(name).map_err(|m| format!("/{gname}: {m}"))?,
+    };
     let label = format!("channel {name}");
     let ds = g
         .dataset(name)
@@ -282,7 +286,9 @@ fn read_channel(g: &Group, gname: &str, name: &str) -> Msg<Channel> {
             ));
         }
     }
-    if let Some(d) = get_f64(&ds, "dof")? {
+    // a labelled channel's `dof` attribute is the writer's numbering; the
+    // label is resolved against the model instead
+    if let (Some(d), None) = (get_f64(&ds, "dof")?, point) {
         if d != dof as f64 {
             return Err(format!(
                 "{label}: attribute dof is {d} but the name says {dof}"
@@ -302,6 +308,7 @@ fn read_channel(g: &Group, gname: &str, name: &str) -> Msg<Channel> {
     Ok(Channel {
         quantity: q,
         dof,
+        point: point.map(|(_, p)| p.to_string()),
         unit,
         data,
     })

@@ -62,13 +62,27 @@ impl Quantity {
     }
 }
 
+/// Parse a channel name `<quantity>:<label>` (`accel:n12:uy`): the
+/// quantity and the point label; `None` for any other name.
+pub fn parse_point_name(name: &str) -> Option<(Quantity, &str)> {
+    let (prefix, label) = name.split_once(':')?;
+    let q = Quantity::from_prefix(prefix)?;
+    (!label.is_empty() && !label.chars().any(|c| c.is_whitespace() || c == ','))
+        .then_some((q, label))
+}
+
 /// One measured signal at one DOF.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Channel {
     /// What it measures.
     pub quantity: Quantity,
-    /// DOF, numbered from 1.
+    /// DOF, numbered from 1; 0 for a channel named by point label until a
+    /// model resolves it ([`crate::model::Model::resolve_channels`]).
     pub dof: usize,
+    /// Point label of a channel named `<quantity>:<label>` (models built
+    /// from matrices); `None` for `<quantity>_<dof>`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub point: Option<String>,
     /// Unit string (SI unless the file says otherwise).
     pub unit: String,
     /// One value per sample.
@@ -81,13 +95,24 @@ impl Channel {
         Channel {
             quantity,
             dof,
+            point: None,
             unit: quantity.si_unit().to_string(),
             data,
         }
     }
-    /// Channel name, e.g. `accel_5`.
+    /// A channel at a labelled point (`accel:n12:uy`), DOF unresolved (0).
+    pub fn at_point(quantity: Quantity, point: &str, data: Vec<f64>) -> Self {
+        Channel {
+            point: Some(point.to_string()),
+            ..Channel::new(quantity, 0, data)
+        }
+    }
+    /// Channel name: `accel_5`, or `accel:n12:uy` for a labelled point.
     pub fn name(&self) -> String {
-        format!("{}_{}", self.quantity.prefix(), self.dof)
+        match &self.point {
+            Some(p) => format!("{}:{p}", self.quantity.prefix()),
+            None => format!("{}_{}", self.quantity.prefix(), self.dof),
+        }
     }
 }
 
@@ -228,11 +253,14 @@ impl Record {
                     n
                 )));
             }
-            if c.dof == 0 {
-                return Err(err(format!(
-                    "channel {}: DOFs are numbered from 1",
-                    c.name()
-                )));
+            if c.dof == 0 && (c.point.is_none() || ndof.is_some()) {
+                return Err(err(match c.point {
+                    None => format!("channel {}: DOFs are numbered from 1", c.name()),
+                    Some(_) => format!(
+                        "channel {}: the point label is not resolved against a model built from matrices",
+                        c.name()
+                    ),
+                }));
             }
             if let Some(nd) = ndof {
                 if c.dof > nd {
@@ -380,4 +408,80 @@ pub fn shared_data(rel: &str) -> Option<PathBuf> {
 /// Path of the record for messages.
 pub fn display_path(rec: &Record) -> PathBuf {
     rec.source.clone()
+}
+
+/// Top of the excitation band: the frequency below which 99 % of the
+/// power of the force inputs lies (periodogram, mean removed); `None`
+/// without a force channel or with a zero force.
+pub fn band_top(rec: &Record) -> Option<f64> {
+    use rustfft::{num_complex::Complex, FftPlanner};
+    let n = rec.len();
+    if n < 4 || rec.inputs.is_empty() {
+        return None;
+    }
+    let mut power = vec![0.0; n / 2 + 1];
+    let fft = FftPlanner::<f64>::new().plan_fft_forward(n);
+    for c in &rec.inputs {
+        let mean = c.data.iter().sum::<f64>() / n as f64;
+        let mut buf: Vec<Complex<f64>> = c
+            .data
+            .iter()
+            .map(|&x| Complex::new(x - mean, 0.0))
+            .collect();
+        fft.process(&mut buf);
+        for (p, z) in power.iter_mut().zip(&buf) {
+            *p += z.norm_sqr();
+        }
+    }
+    let total: f64 = power.iter().sum();
+    if !(total > 0.0) {
+        return None;
+    }
+    let mut acc = 0.0;
+    for (i, p) in power.iter().enumerate() {
+        acc += p;
+        if acc >= 0.99 * total {
+            return Some((i.max(1)) as f64 * rec.fs / n as f64);
+        }
+    }
+    Some(rec.fs / 2.0)
+}
+
+#[cfg(test)]
+mod band_tests {
+    use super::*;
+
+    #[test]
+    fn band_top_of_a_band_limited_force() {
+        let fs = 1024.0;
+        let f = crate::signal::random_band(8192, fs, (5.0, 200.0), 5.0, 3).unwrap();
+        let rec = Record {
+            t0: 0.0,
+            fs,
+            inputs: vec![Channel::new(Quantity::Force, 1, f)],
+            outputs: vec![],
+            truth: None,
+            source: Default::default(),
+        };
+        let top = band_top(&rec).unwrap();
+        assert!(top > 185.0 && top <= 201.0, "{top}");
+        let none = Record {
+            inputs: vec![],
+            ..rec
+        };
+        assert_eq!(band_top(&none), None);
+    }
+
+    #[test]
+    fn point_names_parse_and_print() {
+        assert_eq!(
+            parse_point_name("accel:n12:uy"),
+            Some((Quantity::Accel, "n12:uy"))
+        );
+        assert_eq!(parse_point_name("accel_5"), None);
+        assert_eq!(parse_point_name("strain:n1"), None);
+        assert_eq!(parse_point_name("accel:"), None);
+        let c = Channel::at_point(Quantity::Force, "n20:uy", vec![0.0]);
+        assert_eq!(c.name(), "force:n20:uy");
+    }
 }

@@ -8,6 +8,9 @@
 //! - IRS (improved reduced system): `T = T_G + S M T_G M_G⁻¹ K_G` with
 //!   `S = [0 0; 0 K_oo⁻¹]`, the first-order inertia correction.
 
+pub mod cb;
+pub mod sparse;
+
 use crate::error::{Result, TacitError};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;

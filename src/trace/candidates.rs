@@ -272,7 +272,8 @@ impl Candidate {
 }
 
 /// Pairs of DOFs joined by a spring of the model (0-based, i < j), and the
-/// spring index.
+/// spring index; then the model's interface pairs not joined by a spring
+/// (index `usize::MAX`).
 pub fn spring_pairs(model: &Model) -> Vec<(usize, usize, usize)> {
     let mut out = Vec::new();
     for (s, sp) in model.springs.iter().enumerate() {
@@ -280,11 +281,18 @@ pub fn spring_pairs(model: &Model) -> Vec<(usize, usize, usize)> {
             out.push((i.min(j), i.max(j), s));
         }
     }
+    for &[i, j] in &model.interface_pairs {
+        let (a, b) = ((i - 1).min(j - 1), (i - 1).max(j - 1));
+        if !out.iter().any(|p| (p.0, p.1) == (a, b)) {
+            out.push((a, b, usize::MAX));
+        }
+    }
     out
 }
 
 /// The candidate library for a model: contact on each spring-joined pair in
-/// both directions, friction at each DOF and at all DOFs with one level, a
+/// both directions (and, for a model from matrices, a stop against ground
+/// at each point), friction at each DOF and at all DOFs with one level, a
 /// cubic spring on each spring-joined pair and from each DOF to ground, a
 /// stiffness change of each spring, a spring to ground at each DOF, a
 /// change of the viscous damping (when the model has damping); then a
@@ -292,12 +300,18 @@ pub fn spring_pairs(model: &Model) -> Vec<(usize, usize, usize)> {
 /// pair and from each DOF to ground, and a clearance and friction on each
 /// spring-joined pair.
 pub fn library(model: &Model, has_damping: bool, vreg: f64) -> Vec<Candidate> {
-    let n = model.ndof();
+    let n = model.physical_ndof();
     let pairs = spring_pairs(model);
     let mut out = Vec::new();
     for &(i, j, _) in &pairs {
         out.push(Candidate::new(EffectKind::Contact, vec![i, j]));
         out.push(Candidate::new(EffectKind::Contact, vec![j, i]));
+    }
+    // a model from matrices: a stop against ground at each point too
+    if !model.points.is_empty() {
+        for d in 0..n {
+            out.push(Candidate::new(EffectKind::Contact, vec![d]));
+        }
     }
     for d in 0..n {
         out.push(Candidate {

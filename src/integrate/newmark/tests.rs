@@ -12,14 +12,7 @@ fn sdof(m: f64, k: f64) -> Model {
             name: None,
         }],
         damping: Damping::None,
-        contacts: vec![],
-        frictions: vec![],
-        cubics: vec![],
-        quadratics: vec![],
-        quadratic_dampers: vec![],
-        cubic_dampers: vec![],
-        clearances: vec![],
-        relative_frictions: vec![],
+        ..Default::default()
     }
 }
 
