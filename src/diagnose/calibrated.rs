@@ -2,6 +2,12 @@
 //! part, diagnose with the calibrated model, then refine every parameter
 //! (linear ones and the effects found) together by multiple shooting.
 //!
+//! 0. **Declared first**: the diagnosis with the declared linear part
+//!    trusted ([`super::diagnose`]). Without a linear record, when it
+//!    explains the record up to the noise floor, it is the result and
+//!    nothing is calibrated; otherwise it is the alternative the calibrated
+//!    diagnosis must beat on the record (the lower multiple-shooting error
+//!    is reported, report.json `calibration.choice` gives both).
 //! 1. **Calibrate** ([`crate::calibrate`]): springs and damping (and masses
 //!    on request) by the linear model's output error on segments with free
 //!    start states, on the low-level records when given (`--linear-record`),
@@ -122,6 +128,15 @@ pub fn diagnose_calibrated(
     // the declared model trusted, as the alternative the calibrated
     // diagnosis must beat on the record
     let trusted = super::diagnose(declared, rec, validation, sensors, settings, progress)?;
+    // without a linear record, a declared model that explains the record
+    // up to the noise floor is not recalibrated on it
+    let explained = trusted
+        .after
+        .relative_error
+        .is_some_and(|e| e <= settings.noise_floor());
+    if linear_records.is_empty() && explained {
+        return Ok(trusted);
+    }
     progress("calibrate the linear part");
     let on: Vec<&Record> = if linear_records.is_empty() {
         vec![rec]

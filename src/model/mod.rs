@@ -145,6 +145,10 @@ pub struct Model {
     pub matrices: Option<Arc<matrix::LinearMatrices>>,
 }
 
+/// Checks an element's DOF list: key, DOFs, whether one DOF (to ground)
+/// is allowed.
+type DofCheck<'a> = dyn Fn(String, &[usize], bool) -> Result<()> + 'a;
+
 impl Model {
     /// Number of DOFs.
     pub fn ndof(&self) -> usize {
@@ -424,11 +428,7 @@ impl Model {
     /// Check the quadratic springs, nonlinear dampers, clearances and
     /// friction between DOFs (`check_dofs(key, dofs, allow_ground)` checks
     /// the DOF lists).
-    fn validate_added_elements(
-        &self,
-        src: &str,
-        check_dofs: &dyn Fn(String, &[usize], bool) -> Result<()>,
-    ) -> Result<()> {
+    fn validate_added_elements(&self, src: &str, check_dofs: &DofCheck<'_>) -> Result<()> {
         let err = |m: String| Err(TacitError::model(src, m));
         for (i, q) in self.quadratics.iter().enumerate() {
             check_dofs(format!("quadratic[{i}]"), &q.dofs, true)?;
