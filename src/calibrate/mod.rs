@@ -206,7 +206,8 @@ pub struct Calibration {
     pub segments: usize,
     /// Records used.
     pub records: Vec<String>,
-    /// Wall time, s.
+    /// Wall time, s (not serialized: a report's timings hold it).
+    #[serde(skip)]
     pub seconds: f64,
 }
 

@@ -204,6 +204,8 @@ pub fn diagnose_calibrated(
         ),
     };
     let mut out = if use_calibrated { d } else { trusted };
+    out.timings
+        .insert("calibrate".into(), report.calibration.seconds);
     out.calibration = Some(report);
     Ok(out)
 }

@@ -187,23 +187,9 @@ fn contact_starts(
         .fold(0.0, f64::max);
     let pg = &mut problem.parameters[np - 2];
     pg.upper = pg.upper.max(scan.settings.fit.gap_upper * dmax);
-    let t = Instant::now();
-    let (best, evals) = scan_contact(trial, ci, &last.candidate, scan);
-    starts.simulations += evals * scan.segments.len();
-    starts.scan_secs += t.elapsed().as_secs_f64();
-    let (pg, pk) = (&problem.parameters[np - 2], &problem.parameters[np - 1]);
-    for (g, kc) in best {
-        let mut s = vec![0.0; np];
-        s[np - 2] = pg.to_x(g.clamp(pg.lower, pg.upper));
-        s[np - 1] = pk.to_x(kc.clamp(pk.lower, pk.upper));
-        if starts.list.contains(&s) {
-            continue;
-        }
-        starts.list.push(s);
-        if kc > starts.stiffest.contacts[ci].stiffness {
-            starts.stiffest.contacts[ci].stiffness = kc;
-        }
-    }
+    let kc = scanned_starts(trial, ci, last, problem, scan, starts);
+    let c = &mut starts.stiffest.contacts[ci];
+    c.stiffness = c.stiffness.max(kc);
 }
 
 /// A clearance: starts from the same scan as a contact, on `|δ|`.
@@ -214,23 +200,40 @@ fn clearance_starts(
     scan: &Scan<'_>,
     starts: &mut Starts,
 ) {
-    let np = problem.parameters.len();
     let ci = trial.clearances.len() - 1;
+    let kc = scanned_starts(trial, ci, last, problem, scan, starts);
+    let c = &mut starts.stiffest.clearances[ci];
+    c.stiffness = c.stiffness.max(kc);
+}
+
+/// The gap and stiffness scan of a contact or clearance (entry `ci`, its
+/// parameters the last two of `problem`) pushed as starts; returns the
+/// stiffest scanned stiffness (0 when none).
+fn scanned_starts(
+    trial: &Model,
+    ci: usize,
+    last: &AddedEffect,
+    problem: &Problem,
+    scan: &Scan<'_>,
+    starts: &mut Starts,
+) -> f64 {
+    let np = problem.parameters.len();
     let t = Instant::now();
     let (best, evals) = scan_contact(trial, ci, &last.candidate, scan);
     starts.simulations += evals * scan.segments.len();
     starts.scan_secs += t.elapsed().as_secs_f64();
     let (pg, pk) = (&problem.parameters[np - 2], &problem.parameters[np - 1]);
+    let mut stiffest: f64 = 0.0;
     for (g, kc) in best {
         let mut s = vec![0.0; np];
         s[np - 2] = pg.to_x(g.clamp(pg.lower, pg.upper));
         s[np - 1] = pk.to_x(kc.clamp(pk.lower, pk.upper));
         if !starts.list.contains(&s) {
             starts.list.push(s);
-            let c = &mut starts.stiffest.clearances[ci];
-            c.stiffness = c.stiffness.max(kc);
+            stiffest = stiffest.max(kc);
         }
     }
+    stiffest
 }
 
 /// A change linear in the state beside a contact found before: the
