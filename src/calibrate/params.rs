@@ -4,7 +4,7 @@
 //! stiffness, a mass or a damping ratio stays positive and `q` is the
 //! relative change to first order.
 
-use crate::error::{Result, TacitError};
+use crate::error::Result;
 use crate::modal;
 use crate::model::{Damping, Model};
 use serde::{Deserialize, Serialize};
@@ -50,33 +50,27 @@ impl LinearParam {
         }
     }
 
-    /// Value in `model` (damping ratios after [`per_mode`]).
-    pub fn get(&self, model: &Model) -> Result<f64> {
-        match (*self, &model.damping) {
-            (LinearParam::Spring(i), _) => Ok(model.springs[i].stiffness),
-            (LinearParam::Mass(i), _) => Ok(model.masses[i]),
-            (LinearParam::ModalRatio(r), Damping::Modal { ratio, ratios }) => Ok(ratio
-                .or_else(|| ratios.get(r).or(ratios.last()).copied())
-                .unwrap_or(0.0)),
-            (LinearParam::RayleighAlpha, Damping::Rayleigh { alpha, .. }) => Ok(*alpha),
-            (LinearParam::RayleighBeta, Damping::Rayleigh { beta, .. }) => Ok(*beta),
-            (p, _) => Err(TacitError::Setting(format!(
-                "calibration parameter {}: the model's damping is not of that kind",
-                p.label(model)
-            ))),
+    /// The same number as a target of the time-domain updating.
+    pub fn target(&self) -> crate::update::Target {
+        use crate::update::Target;
+        match *self {
+            LinearParam::Spring(i) => Target::SpringStiffness(i),
+            LinearParam::Mass(i) => Target::Mass(i),
+            LinearParam::ModalRatio(r) => Target::ModalRatio(r),
+            LinearParam::RayleighAlpha => Target::RayleighAlpha,
+            LinearParam::RayleighBeta => Target::RayleighBeta,
         }
+    }
+
+    /// Value in `model` (damping ratios after [`per_mode`]); an error
+    /// when the model has no such number.
+    pub fn get(&self, model: &Model) -> Result<f64> {
+        self.target().get(model)
     }
 
     /// Set the value in `model` (which must have been through [`per_mode`]).
     pub fn set(&self, model: &mut Model, value: f64) {
-        match (*self, &mut model.damping) {
-            (LinearParam::Spring(i), _) => model.springs[i].stiffness = value,
-            (LinearParam::Mass(i), _) => model.masses[i] = value,
-            (LinearParam::ModalRatio(r), Damping::Modal { ratios, .. }) => ratios[r] = value,
-            (LinearParam::RayleighAlpha, Damping::Rayleigh { alpha, .. }) => *alpha = value,
-            (LinearParam::RayleighBeta, Damping::Rayleigh { beta, .. }) => *beta = value,
-            _ => {}
-        }
+        self.target().set(model, value)
     }
 }
 

@@ -28,6 +28,7 @@
 //! standard errors from the refinement, significance and identifiability)
 //! apart from the effects.
 
+use super::fit::spread;
 use super::{effects, joint, prepare_located, DiagnoseSettings, Diagnosis, ErrorSet};
 use crate::calibrate::{self, params, Calibration, CalibrationSettings, LinearParam};
 use crate::error::Result;
@@ -35,7 +36,7 @@ use crate::integrate::SimSettings;
 use crate::model::Model;
 use crate::record::Record;
 use crate::trace::EffectKind;
-use crate::update::{Parameter, Segment, Target};
+use crate::update::{Parameter, Target};
 use serde::Serialize;
 
 /// Settings of the calibrated diagnosis.
@@ -175,8 +176,7 @@ pub fn diagnose_calibrated(
     };
     let declared_errors = d.prepared.comparison.errors(declared, sim0).0;
     let declared_validation = vcmp.map(|c| c.errors(declared, sim0).0);
-    let mut segs = None;
-    let (note, std) = refine_once(&mut d, cal, settings, vcmp, &mut segs)?;
+    let (note, std) = refine_once(&mut d, cal, settings, vcmp)?;
     update_effects(&mut d, &std);
     let corrections = corrections(declared, &calibration, &d.model, &std, &cal.calibration);
     let calibrated_errors = std::mem::replace(&mut d.before, declared_errors);
@@ -185,11 +185,7 @@ pub fn diagnose_calibrated(
     }
     d.verdict = super::verdict(&d.effects);
     let (calibrated_err, trusted_err) = (d.after.relative_error, trusted.after.relative_error);
-    let use_calibrated = match (calibrated_err, trusted_err) {
-        (Some(c), Some(t)) => c < t,
-        (Some(_), None) => true,
-        _ => false,
-    };
+    let use_calibrated = lower(calibrated_err, trusted_err);
     let report = CalibrationReport {
         calibration,
         corrections,
@@ -217,9 +213,8 @@ fn refine_once(
     cal: &CalibratedSettings,
     settings: &DiagnoseSettings,
     vcmp: Option<&super::Comparison>,
-    segs: &mut Option<Vec<Segment>>,
 ) -> Result<(String, Vec<Estimated>)> {
-    Ok(match refine(d, cal, settings, segs.as_deref())? {
+    Ok(match refine(d, cal, settings)? {
         Refined::Kept(k) => {
             let Kept {
                 model,
@@ -228,9 +223,7 @@ fn refine_once(
                 params,
                 std,
                 note,
-                segments,
             } = *k;
-            *segs = Some(segments);
             d.model = model;
             d.after = after;
             d.predictions.1 = pred;
@@ -260,15 +253,13 @@ fn refinement_parameters(
 ) -> Result<Vec<Parameter>> {
     let mut out = vec![];
     for p in params::select(model, &cal.freedom) {
-        let (target, lo, hi) = match p {
-            LinearParam::Spring(i) => (Target::SpringStiffness(i), -0.9, 10.0),
-            LinearParam::Mass(i) => (Target::Mass(i), -0.5, 1.0),
-            LinearParam::ModalRatio(r) => (Target::ModalRatio(r), -0.99, 20.0),
-            LinearParam::RayleighAlpha => (Target::RayleighAlpha, -0.99, 20.0),
-            LinearParam::RayleighBeta => (Target::RayleighBeta, -0.99, 20.0),
+        let (lo, hi) = match p {
+            LinearParam::Spring(_) => (-0.9, 10.0),
+            LinearParam::Mass(_) => (-0.5, 1.0),
+            _ => (-0.99, 20.0),
         };
         if p.get(model)? > 0.0 {
-            out.push(Parameter::relative(model, target)?.with_relative_bounds(lo, hi));
+            out.push(Parameter::relative(model, p.target())?.with_relative_bounds(lo, hi));
         }
     }
     // the effects' own parameters with their bounds; a stiffness or
@@ -282,14 +273,6 @@ fn refinement_parameters(
         }
     }
     Ok(out)
-}
-
-/// Up to `k` segments spread evenly over `all`.
-fn spread(all: &[Segment], k: usize) -> Vec<Segment> {
-    if all.len() <= k || k == 0 {
-        return all.to_vec();
-    }
-    (0..k).map(|i| all[i * all.len() / k].clone()).collect()
 }
 
 /// A refined parameter and its standard error.
@@ -312,23 +295,16 @@ struct Kept {
     params: Vec<Parameter>,
     std: Vec<Option<f64>>,
     note: String,
-    segments: Vec<Segment>,
 }
 
 /// Refit every parameter of the diagnosed model together with the segment
 /// start states; kept when it lowers the record's error.
-fn refine(
-    d: &Diagnosis,
-    cs: &CalibratedSettings,
-    settings: &DiagnoseSettings,
-    segs: Option<&[Segment]>,
-) -> Result<Refined> {
+fn refine(d: &Diagnosis, cs: &CalibratedSettings, settings: &DiagnoseSettings) -> Result<Refined> {
     let cal = &cs.calibration;
     let model = params::per_mode(&d.model)?;
     let sim = sim_of(d);
     let cmp = &d.prepared.comparison;
-    let start = segs.map_or_else(|| spread(&cmp.segments, cs.refine_segments), |s| s.to_vec());
-    let mut problem = cmp.problem(&model, start, sim);
+    let mut problem = cmp.problem(&model, spread(&cmp.segments, cs.refine_segments), sim);
     problem.parameters = refinement_parameters(&model, &d.added, cal)?;
     let x0 = vec![0.0; problem.parameters.len()];
     let fit = crate::update::FitSettings {
@@ -358,19 +334,14 @@ fn refine(
         pct(d.after.relative_error),
         pct(after.relative_error)
     );
-    let better = match (after.relative_error, d.after.relative_error) {
-        (Some(a), Some(b)) => a < b,
-        (Some(_), None) => true,
-        _ => false,
-    };
-    if !better {
+    if !lower(after.relative_error, d.after.relative_error) {
         return Ok(Refined::NotKept(format!("{note}; not kept")));
     }
     // standard errors at the refined point, the residual level measured
     let level = after.relative_error.unwrap_or(settings.noise.level);
     let mut at = problem.clone();
     at.model = refined.clone();
-    at.segments.clone_from(&jf.segments);
+    at.segments = jf.segments;
     at.parameters = refinement_parameters(&refined, &d.added, cal)?;
     let std = joint::std_errors(&at, &vec![0.0; at.parameters.len()], level)
         .map(|v| v.into_iter().map(|s| s.is_finite().then_some(s)).collect())
@@ -382,7 +353,6 @@ fn refine(
         params: at.parameters,
         std,
         note: format!("{note}; kept"),
-        segments: jf.segments,
     })))
 }
 
@@ -408,16 +378,13 @@ fn update_effects(d: &mut Diagnosis, std: &[Estimated]) {
             }
         }
     }
-    let mut i = 0;
-    d.effects.retain(|_| {
-        i += 1;
-        keep[i - 1]
-    });
-    let mut i = 0;
-    d.added.retain(|_| {
-        i += 1;
-        keep[i - 1]
-    });
+    let pairs = std::mem::take(&mut d.effects)
+        .into_iter()
+        .zip(std::mem::take(&mut d.added))
+        .zip(keep)
+        .filter(|(_, k)| *k)
+        .map(|(pair, _)| pair);
+    (d.effects, d.added) = pairs.unzip();
 }
 
 /// The linear corrections of the final model against the declared one.
@@ -433,13 +400,7 @@ fn corrections(
         .iter()
         .map(|c| {
             let value = c.parameter.get(model).unwrap_or(c.calibrated);
-            let target = match c.parameter {
-                LinearParam::Spring(i) => Target::SpringStiffness(i),
-                LinearParam::Mass(i) => Target::Mass(i),
-                LinearParam::ModalRatio(r) => Target::ModalRatio(r),
-                LinearParam::RayleighAlpha => Target::RayleighAlpha,
-                LinearParam::RayleighBeta => Target::RayleighBeta,
-            };
+            let target = c.parameter.target();
             let se = std
                 .iter()
                 .find(|(p, _)| p.target == target)
@@ -461,6 +422,16 @@ fn corrections(
             }
         })
         .collect()
+}
+
+/// True when error `a` is lower than `b` (a failed error is never lower;
+/// any error is lower than a failed one).
+fn lower(a: Option<f64>, b: Option<f64>) -> bool {
+    match (a, b) {
+        (Some(a), Some(b)) => a < b,
+        (Some(_), None) => true,
+        _ => false,
+    }
 }
 
 fn pct(x: Option<f64>) -> String {
