@@ -134,7 +134,7 @@ pub fn diagnose_calibrated(
     let explained = trusted
         .after
         .relative_error
-        .is_some_and(|e| e <= settings.noise_floor());
+        .is_some_and(|e| e <= trusted.noise_floor(settings));
     if linear_records.is_empty() && explained {
         return Ok(trusted);
     }

@@ -177,6 +177,9 @@ pub struct LiftedResult {
     /// RMS of the output residual weighted by the assumed noise (1 = the
     /// residual is as large as the noise `noise_fraction` describes).
     pub weighted_rms: f64,
+    /// The output residual weighted by the assumed noise (p × N, one row
+    /// per channel; 1 = the assumed standard deviation of that channel).
+    pub residual: DMatrix<f64>,
     /// What was done: Riccati convergence, sub-steps, weighted residual.
     pub status: String,
     /// Wall time, s.
@@ -748,6 +751,7 @@ pub fn reconstruct_along(
         force,
         fine_force,
         weighted_rms: wrms,
+        residual: res,
         status: format!(
             "solved: {steady_note}; {passes} group-L1 reweighting passes; {nq} force directions; R = {r} sub-intervals of {} Newmark sub-steps; {hidden} unobservable state directions (set by the priors); weighted residual RMS {wrms:.3} (1 = the assumed noise)",
             lm.substeps_per_sub

@@ -54,6 +54,7 @@ mod fit;
 pub mod joint;
 pub mod lifted;
 pub mod locate;
+pub mod noise;
 mod outcome;
 mod polish;
 pub mod prepare;
@@ -105,7 +106,13 @@ pub fn diagnose(
     let t_all = Instant::now();
     let mut timings = BTreeMap::new();
     progress("identify");
-    let (prep, vprep) = prepare::both(declared, rec, validation, sensors, settings, &mut timings)?;
+    let prepare::Both {
+        prep,
+        vprep,
+        noise,
+        settings,
+    } = prepare::both(declared, rec, validation, sensors, settings, &mut timings)?;
+    let settings = &settings;
     let (cy, dy) = prep.sampled.outputs(&prep.channels)?;
     let ctx = Context {
         declared,
@@ -173,6 +180,7 @@ pub fn diagnose(
         tolerated_failures,
         timings: st.timings,
         calibration: None,
+        noise,
         model: st.current,
         added: st.added.iter().map(|a| a.effect.clone()).collect(),
         prepared: prep,

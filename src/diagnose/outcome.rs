@@ -136,6 +136,9 @@ pub struct Diagnosis {
     /// the declared model was trusted).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub calibration: Option<super::calibrated::CalibrationReport>,
+    /// The noise measured on the record (None when the level was
+    /// assumed: [`super::NoiseSettings::measure`] off).
+    pub noise: Option<super::noise::NoiseEstimate>,
     /// The fitted model.
     #[serde(skip)]
     pub model: Model,
@@ -148,6 +151,22 @@ pub struct Diagnosis {
     /// Segment predictions before and after (p × N).
     #[serde(skip)]
     pub predictions: (Option<DMatrix<f64>>, Option<DMatrix<f64>>),
+}
+
+impl Diagnosis {
+    /// The noise level the diagnosis ran at: measured, or the assumed
+    /// [`super::NoiseSettings::level`] of `settings`.
+    pub fn noise_level(&self, settings: &super::DiagnoseSettings) -> f64 {
+        self.noise
+            .as_ref()
+            .map_or(settings.noise.level, |n| n.level)
+    }
+
+    /// The noise floor of the multiple-shooting error the diagnosis ran
+    /// at ([`super::NoiseSettings::floor_multiple`] × [`Self::noise_level`]).
+    pub fn noise_floor(&self, settings: &super::DiagnoseSettings) -> f64 {
+        settings.noise.floor_multiple * self.noise_level(settings)
+    }
 }
 
 /// A candidate below the trace's screen that was considered anyway.

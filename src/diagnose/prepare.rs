@@ -5,6 +5,7 @@
 //! the multiple-shooting error.
 
 use super::errors::Comparison;
+use super::noise::{self, NoiseEstimate, NoiseInput};
 use super::{lifted, locate, DiagnoseSettings, StatesSource};
 use crate::error::{Result, TacitError};
 use crate::horizon::{self, problem::HorizonData, settings::HorizonSettings};
@@ -408,10 +409,26 @@ pub fn reconstruct(
     })
 }
 
+/// The record and the validation record prepared for the loop, with the
+/// noise measured on the record and the settings the loop runs at.
+pub(super) struct Both {
+    /// The record.
+    pub prep: Prepared,
+    /// The validation record.
+    pub vprep: Option<Prepared>,
+    /// The noise measured on the record (None when not measured).
+    pub noise: Option<NoiseEstimate>,
+    /// `settings` with the measured noise level.
+    pub settings: DiagnoseSettings,
+}
+
 /// The record and the validation record prepared, the validation record
 /// with the force directions located on the record (the same structure;
 /// no second search), both smoothers at once (each one a sequential
-/// sweep). Inserts the stage times into `timings`.
+/// sweep). The noise is measured on the record after the search (which
+/// runs again at the measured level when that is far from the assumed
+/// one) and every later step uses the measured level. Inserts the stage
+/// times into `timings`.
 pub(super) fn both(
     declared: &Model,
     rec: &Record,
@@ -419,16 +436,33 @@ pub(super) fn both(
     sensors: Option<&[usize]>,
     settings: &DiagnoseSettings,
     timings: &mut BTreeMap<String, f64>,
-) -> Result<(Prepared, Option<Prepared>)> {
+) -> Result<Both> {
     let t = Instant::now();
     let st = setup(declared, rec, sensors, settings)?;
-    let found = search(declared, &st, settings)?;
+    let mut found = search(declared, &st, settings)?;
     let t_locate = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let mut eff = settings.clone();
+    let mut noise = None;
+    if settings.noise.measure {
+        let mut n = measure_noise(&st, found.as_ref(), settings)?;
+        eff.noise.level = n.level.clamp(MIN_LEVEL, MAX_LEVEL);
+        // far from the assumed level: the search and the measurement
+        // again at the measured level (the smoother weighs the data by it)
+        if far(eff.noise.level, settings.noise.level, settings.noise.relocate_factor) {
+            found = search(declared, &st, &eff)?;
+            n = measure_noise(&st, found.as_ref(), &eff)?;
+            n.assumed = settings.noise.level;
+            eff.noise.level = n.level.clamp(MIN_LEVEL, MAX_LEVEL);
+        }
+        timings.insert("noise".into(), t.elapsed().as_secs_f64());
+        noise = Some(n);
+    }
     let (prep, vprep) = rayon::join(
-        || prepare_from(declared, st, settings, found.clone(), Instant::now()),
+        || prepare_from(declared, st, &eff, found.clone(), Instant::now()),
         || {
             validation
-                .map(|v| prepare_located(declared, v, sensors, settings, found.as_ref()))
+                .map(|v| prepare_located(declared, v, sensors, &eff, found.as_ref()))
                 .transpose()
         },
     );
@@ -438,7 +472,47 @@ pub(super) fn both(
     if let Some(v) = &vprep {
         timings.insert("identify_validation".into(), v.recon.elapsed_s);
     }
-    Ok((prep, vprep))
+    Ok(Both {
+        prep,
+        vprep,
+        noise,
+        settings: eff,
+    })
+}
+
+/// True when `a` and `b` differ by more than `factor` (> 1) either way.
+fn far(a: f64, b: f64, factor: f64) -> bool {
+    (a / b).ln().abs() > factor.ln()
+}
+
+/// The measured level is used within these bounds (a level outside them
+/// is reported as measured; the thresholds stay meaningful).
+const MIN_LEVEL: f64 = 1e-5;
+const MAX_LEVEL: f64 = 0.5;
+
+/// The noise of the record's channels ([`noise::measure`]) along the
+/// located directions (a force at every DOF when none were located).
+fn measure_noise(
+    st: &Setup<'_>,
+    found: Option<&locate::Located>,
+    settings: &DiagnoseSettings,
+) -> Result<NoiseEstimate> {
+    let n = st.sampled.n;
+    let directions = match found {
+        Some(l) if !l.directions.is_empty() => l.matrix(n),
+        _ => DMatrix::identity(n, n),
+    };
+    let names: Vec<String> = st.outs.iter().map(|c| c.name()).collect();
+    let input = NoiseInput {
+        sampled: &st.sampled,
+        directions: &directions,
+        known_force: &st.force,
+        measured: &st.measured,
+        channels: &st.channels,
+        names: &names,
+        fs: st.rec.fs,
+    };
+    noise::measure(&input, &settings.lifted_settings(), settings.noise.bands)
 }
 
 /// True when `model` has a spring from a DOF to ground.

@@ -95,6 +95,7 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
     let _ = writeln!(s, "**Result: {}.**\n", d.verdict);
     record_warnings(&mut s, &meta.warnings);
     errors_section(&mut s, d);
+    noise_section(&mut s, d);
     effects_section(&mut s, d);
     loop_section(&mut s, d);
     let _ = writeln!(s, "\n## Figures\n");
@@ -178,6 +179,34 @@ fn errors_section(s: &mut String, d: &Diagnosis) {
             b.channel,
             pct(b.relative_error),
             pct(a.relative_error)
+        );
+    }
+}
+
+/// The noise measured on the record, per channel.
+fn noise_section(s: &mut String, d: &Diagnosis) {
+    let Some(n) = &d.noise else {
+        return;
+    };
+    let _ = writeln!(
+        s,
+        "\n## Noise\n\nMeasured on the record from what the located-force reconstruction leaves (median over {} frequency bands; a band far above the median holds model error, not noise): {}. The noise-related thresholds use this level (started from {:.2} %).\n",
+        n.bands,
+        n.summary(),
+        100.0 * n.assumed
+    );
+    let _ = writeln!(s, "| channel | noise std | % of RMS | worst band / median |\n|---|---|---|---|");
+    for c in &n.channels {
+        let _ = writeln!(
+            s,
+            "| {} | {:.3e} {} | {:.3} % | {:.1} ({:.0}–{:.0} Hz) |",
+            c.channel,
+            c.std,
+            c.unit,
+            100.0 * c.fraction,
+            c.colour,
+            c.band_hz.0,
+            c.band_hz.1
         );
     }
 }

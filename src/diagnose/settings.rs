@@ -3,7 +3,8 @@
 //! [`DiagnoseSettings`] holds one group per stage. Each field says what it
 //! means, its unit, its default, the values [`DiagnoseSettings::validate`]
 //! accepts, and why it has its default. The noise-related thresholds are
-//! multiples of one assumed noise level ([`NoiseSettings::level`]). The
+//! multiples of one noise level ([`NoiseSettings::level`], replaced by the
+//! level measured on the record unless [`NoiseSettings::measure`] is off). The
 //! whole tree is written into report.json and read back by
 //! `tacit diagnose --settings FILE` (TOML or JSON), so a run can be
 //! replayed.
@@ -22,7 +23,7 @@ use serde::{Deserialize, Serialize};
 pub struct DiagnoseSettings {
     /// Where the states come from (default: the lifted smoother).
     pub states: StatesSource,
-    /// The assumed measurement noise.
+    /// The measurement noise.
     pub noise: NoiseSettings,
     /// Segments of the multiple-shooting error.
     pub segments: SegmentSettings,
@@ -62,20 +63,41 @@ pub enum StatesSource {
     Truth,
 }
 
-/// The assumed measurement noise.
+/// The measurement noise: measured from the record ([`super::noise`]), or
+/// assumed.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct NoiseSettings {
     /// Noise standard deviation of every channel as a fraction of its RMS
-    /// (default 0.01; > 0 and < 1). Weighs the lifted smoother's data, sets
-    /// the fit's standard errors and the noise cost a fit is judged against.
-    /// Reason: accelerometers of a shaker test read about 1 %.
+    /// (default 0.01; > 0 and < 1): the level assumed when `measure` is
+    /// off, and the starting guess of the measurement. Weighs the lifted
+    /// smoother's data, sets the fit's standard errors and the noise cost
+    /// a fit is judged against. Reason: accelerometers of a shaker test
+    /// read about 1 %.
     pub level: f64,
-    /// Multiple-shooting relative error at or below `floor_multiple ×
-    /// level` is taken as noise and integration error: no effect is sought
-    /// (default 2.5; > 0). Reason: the exact model of a 1 %-noise record
-    /// scores 1.1–1.4 %, so 2.5 % leaves room without hiding a missing
-    /// effect.
+    /// Measure each channel's noise from the residual of the located-force
+    /// reconstruction and use the measured level in place of `level`
+    /// (default true). Reason: real records carry 0.1–5 % noise; a floor
+    /// assumed at 1 % hides small effects in quiet records and calls noise
+    /// an effect in noisy ones.
+    pub measure: bool,
+    /// The force directions are searched again with the measured level
+    /// when it differs from `level` by more than this factor (default 1.5;
+    /// > 1). Reason: the search stops when the residual reaches 1.5 × the
+    /// noise, so a level off by more than that changes how many directions
+    /// it takes.
+    pub relocate_factor: f64,
+    /// Frequency bands the residual's spectrum is split into for the
+    /// measurement (default 16; 4 to 256). The level is the median over the
+    /// bands, so model error confined to fewer than half of them (at the
+    /// modes) does not raise it. Reason: 16 bands of a 4096-sample record
+    /// hold 128 lines each, a 12 % scatter per band.
+    pub bands: usize,
+    /// Multiple-shooting relative error at or below `floor_multiple ×`
+    /// the noise level is taken as noise and integration error: no effect
+    /// is sought (default 2.5; > 0). Reason: the exact model of a record
+    /// scores 1.1–1.4 × its noise level, so 2.5 leaves room without hiding
+    /// a missing effect.
     pub floor_multiple: f64,
 }
 
@@ -83,6 +105,9 @@ impl Default for NoiseSettings {
     fn default() -> Self {
         NoiseSettings {
             level: 0.01,
+            measure: true,
+            relocate_factor: 1.5,
+            bands: 16,
             floor_multiple: 2.5,
         }
     }
@@ -632,6 +657,18 @@ impl DiagnoseSettings {
             "must be in (0, 1)",
         )?;
         rule(
+            n.relocate_factor > 1.0 && n.relocate_factor.is_finite(),
+            "noise.relocate_factor",
+            n.relocate_factor,
+            "must be > 1",
+        )?;
+        rule(
+            (4..=256).contains(&n.bands),
+            "noise.bands",
+            n.bands,
+            "must be in 4..=256",
+        )?;
+        rule(
             positive(n.floor_multiple),
             "noise.floor_multiple",
             n.floor_multiple,
@@ -911,6 +948,8 @@ mod tests {
             ("noise.level", |s| s.noise.level = 0.0),
             ("noise.level", |s| s.noise.level = f64::NAN),
             ("noise.floor_multiple", |s| s.noise.floor_multiple = -1.0),
+            ("noise.relocate_factor", |s| s.noise.relocate_factor = 1.0),
+            ("noise.bands", |s| s.noise.bands = 3),
             ("segments.seconds", |s| s.segments.seconds = 0.0),
             ("segments.fit_segments", |s| s.segments.fit_segments = 0),
             ("segments.quiet_window", |s| s.segments.quiet_window = 0),

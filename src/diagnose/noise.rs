@@ -1,0 +1,330 @@
+//! Measure each channel's noise from the record.
+//!
+//! The lifted smoother ([`super::lifted`]) reconstructs the states and the
+//! unknown force along the located directions; what it leaves in each
+//! channel is the measurement noise, the part of the noise the force and
+//! the states absorb taken away, plus whatever the declared linear part
+//! gets wrong. Without reweighting the smoother is a linear map of the
+//! data, so the share of white noise it leaves is measured by passing
+//! seeded white noise, at the same channel weights, through the same
+//! smoother (a reference residual). In each of `bands` frequency bands the
+//! residual's power over the reference's is the noise variance there (in
+//! units of the assumed one); the channel's noise is the median over the
+//! bands, so model error confined to a few bands (at the modes) does not
+//! raise it, and the largest band ratio over the median says how coloured
+//! the residual is (Welch 1967 for band-averaged periodograms; the
+//! reference replaces a degrees-of-freedom count of the smoother).
+//!
+//! The record's level is the RMS of the channels' fractions; it replaces
+//! the assumed level in every noise-related threshold of the diagnosis
+//! ([`super::NoiseSettings`]).
+
+use super::lifted::{self, LiftedSettings};
+use crate::error::{Result, TacitError};
+use crate::linear::SampledModel;
+use crate::record::Quantity;
+use nalgebra::DMatrix;
+use rand_distr::{Distribution, StandardNormal};
+use rustfft::{num_complex::Complex, FftPlanner};
+use serde::{Deserialize, Serialize};
+
+/// Seed of the reference noise (fixed: the same record gives the same
+/// measurement).
+const REFERENCE_SEED: u64 = 0x6e6f_6973_65;
+
+/// Band ratio over the median above which a channel's residual is called
+/// coloured: model error, not noise, dominates that band.
+pub const COLOURED: f64 = 4.0;
+
+/// The noise measured on one channel.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelNoise {
+    /// The channel's name in the record.
+    pub channel: String,
+    /// Noise standard deviation, in `unit`.
+    pub std: f64,
+    /// The channel's unit (SI).
+    pub unit: String,
+    /// `std` as a fraction of the channel's RMS.
+    pub fraction: f64,
+    /// The largest band's noise variance over the median band's (1 =
+    /// white; above [`COLOURED`] the band holds model error).
+    pub colour: f64,
+    /// That band, Hz.
+    pub band_hz: (f64, f64),
+}
+
+/// Whether the residual looks like noise.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum NoiseStatus {
+    /// Every channel's band ratios stay below [`COLOURED`].
+    White,
+    /// The most coloured channel: the linear model misses something in
+    /// that band (the level, a median over bands, stands; it is an upper
+    /// bound when more than half the bands hold model error).
+    Coloured {
+        /// Channel name.
+        channel: String,
+        /// Band, Hz.
+        band_hz: (f64, f64),
+        /// Band variance over the median band's.
+        ratio: f64,
+    },
+}
+
+/// The noise measured on a record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NoiseEstimate {
+    /// Per channel.
+    pub channels: Vec<ChannelNoise>,
+    /// The record's level: RMS of the channels' fractions.
+    pub level: f64,
+    /// The level assumed before measuring (the channel weights of the
+    /// smoother that measured).
+    pub assumed: f64,
+    /// Frequency bands of the measurement.
+    pub bands: usize,
+    /// Whether the residual looks like noise.
+    pub status: NoiseStatus,
+}
+
+impl NoiseEstimate {
+    /// One line for reports.
+    pub fn summary(&self) -> String {
+        let range = self
+            .channels
+            .iter()
+            .map(|c| c.fraction)
+            .fold((f64::INFINITY, 0.0_f64), |(lo, hi), f| (lo.min(f), hi.max(f)));
+        let colour = match &self.status {
+            NoiseStatus::White => "the residual is white".to_string(),
+            NoiseStatus::Coloured {
+                channel,
+                band_hz,
+                ratio,
+            } => format!(
+                "the residual is coloured ({channel}: {:.0}–{:.0} Hz at {ratio:.1} × the median band: model error there)",
+                band_hz.0, band_hz.1
+            ),
+        };
+        format!(
+            "measured noise {:.3} % of RMS (channels {:.3}–{:.3} %); {colour}",
+            100.0 * self.level,
+            100.0 * range.0,
+            100.0 * range.1
+        )
+    }
+}
+
+/// What [`measure`] reads.
+pub struct NoiseInput<'a> {
+    /// The linear model's sample map.
+    pub sampled: &'a SampledModel,
+    /// Force directions (n × q; the identity when none were located).
+    pub directions: &'a DMatrix<f64>,
+    /// Known force at every DOF (n × N).
+    pub known_force: &'a DMatrix<f64>,
+    /// Measured outputs (p × N).
+    pub measured: &'a DMatrix<f64>,
+    /// `(quantity, dof0)` of each row of `measured`.
+    pub channels: &'a [(Quantity, usize)],
+    /// Names of the rows, for the report.
+    pub names: &'a [String],
+    /// Sample rate, Hz.
+    pub fs: f64,
+}
+
+/// Measure the noise of every channel (module docs): `lifted` are the
+/// smoother's settings (its `noise_fraction` is the assumed level),
+/// `bands` the number of frequency bands.
+pub fn measure(input: &NoiseInput<'_>, lifted: &LiftedSettings, bands: usize) -> Result<NoiseEstimate> {
+    let (p, len) = (input.measured.nrows(), input.measured.ncols());
+    if len < 2 * bands {
+        return Err(TacitError::Setting(format!(
+            "noise measurement: {len} samples cannot fill {bands} bands"
+        )));
+    }
+    let s = LiftedSettings {
+        reweight_passes: 0,
+        ..lifted.clone()
+    };
+    let assumed = s.noise_fraction;
+    let residual = lifted::reconstruct_along(
+        input.sampled,
+        input.directions,
+        input.known_force,
+        input.measured,
+        input.channels,
+        &s,
+    )?
+    .residual;
+    let reference_data = reference_noise(input.measured);
+    let zero = DMatrix::zeros(input.known_force.nrows(), len);
+    let reference = lifted::reconstruct_along(
+        input.sampled,
+        input.directions,
+        &zero,
+        &reference_data,
+        input.channels,
+        &s,
+    )?
+    .residual
+        * assumed;
+    let mut channels = Vec::with_capacity(p);
+    for c in 0..p {
+        let ratios = band_ratios(&residual, &reference, c, bands);
+        let rms = (input.measured.row(c).norm_squared() / len as f64).sqrt();
+        channels.push(channel_noise(input, c, &ratios, assumed, rms));
+    }
+    if channels.iter().any(|c| !c.std.is_finite()) {
+        return Err(TacitError::Numerical(
+            "noise measurement: the smoother's residual is not finite".into(),
+        ));
+    }
+    let level = (channels.iter().map(|c| c.fraction.powi(2)).sum::<f64>() / p as f64).sqrt();
+    let status = status_of(&channels);
+    Ok(NoiseEstimate {
+        channels,
+        level,
+        assumed,
+        bands,
+        status,
+    })
+}
+
+/// The noise of channel `c` from its band ratios.
+fn channel_noise(
+    input: &NoiseInput<'_>,
+    c: usize,
+    ratios: &[f64],
+    assumed: f64,
+    rms: f64,
+) -> ChannelNoise {
+    let med = median(ratios);
+    let (worst, &max) = ratios
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .unwrap_or((0, &f64::NAN));
+    let width = 0.5 * input.fs / ratios.len() as f64;
+    let fraction = assumed * med.sqrt();
+    ChannelNoise {
+        channel: input.names.get(c).cloned().unwrap_or_else(|| format!("#{c}")),
+        std: fraction * rms,
+        unit: input.channels[c].0.si_unit().to_string(),
+        fraction,
+        colour: if med > 0.0 { max / med } else { f64::INFINITY },
+        band_hz: (worst as f64 * width, (worst + 1) as f64 * width),
+    }
+}
+
+fn status_of(channels: &[ChannelNoise]) -> NoiseStatus {
+    match channels
+        .iter()
+        .filter(|c| c.colour > COLOURED)
+        .max_by(|a, b| a.colour.total_cmp(&b.colour))
+    {
+        None => NoiseStatus::White,
+        Some(c) => NoiseStatus::Coloured {
+            channel: c.channel.clone(),
+            band_hz: c.band_hz,
+            ratio: c.colour,
+        },
+    }
+}
+
+/// Seeded white noise with exactly each row's RMS of `measured` (so the
+/// smoother weighs it as it weighs the data): its weighted standard
+/// deviation is `1/assumed`.
+fn reference_noise(measured: &DMatrix<f64>) -> DMatrix<f64> {
+    let (p, len) = (measured.nrows(), measured.ncols());
+    let mut g = crate::signal::rng(REFERENCE_SEED);
+    let mut z: DMatrix<f64> = DMatrix::from_fn(p, len, |_, _| StandardNormal.sample(&mut g));
+    for c in 0..p {
+        let target = (measured.row(c).norm_squared() / len as f64).sqrt();
+        let have = (z.row(c).norm_squared() / len as f64).sqrt();
+        z.row_mut(c).scale_mut(target / have);
+    }
+    z
+}
+
+/// Per band, the power of row `c` of `residual` over that of `reference`
+/// (Hann window, `bands` equal bands of the one-sided spectrum without
+/// the mean).
+fn band_ratios(residual: &DMatrix<f64>, reference: &DMatrix<f64>, c: usize, bands: usize) -> Vec<f64> {
+    let a = band_powers(&residual.row(c).iter().copied().collect::<Vec<_>>(), bands);
+    let b = band_powers(&reference.row(c).iter().copied().collect::<Vec<_>>(), bands);
+    a.iter()
+        .zip(&b)
+        .map(|(x, y)| if *y > 0.0 { x / y } else { f64::INFINITY })
+        .collect()
+}
+
+/// Power of `x` (Hann-windowed periodogram) summed over `bands` equal
+/// bands of lines 1..=N/2.
+fn band_powers(x: &[f64], bands: usize) -> Vec<f64> {
+    let n = x.len();
+    let mean = x.iter().sum::<f64>() / n as f64;
+    let mut buf: Vec<Complex<f64>> = x
+        .iter()
+        .enumerate()
+        .map(|(k, v)| {
+            let w = 0.5 - 0.5 * (2.0 * std::f64::consts::PI * k as f64 / n as f64).cos();
+            Complex::new((v - mean) * w, 0.0)
+        })
+        .collect();
+    FftPlanner::new().plan_fft_forward(n).process(&mut buf);
+    let lines = n / 2;
+    let mut out = vec![0.0; bands];
+    for (l, z) in buf.iter().enumerate().take(lines + 1).skip(1) {
+        let b = ((l - 1) * bands / lines).min(bands - 1);
+        out[b] += z.norm_sqr();
+    }
+    out
+}
+
+fn median(x: &[f64]) -> f64 {
+    let mut v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Band powers of white noise are equal within their scatter, and a
+    /// sine adds to its band only.
+    #[test]
+    fn band_powers_put_a_sine_in_its_band() {
+        let mut g = crate::signal::rng(3);
+        let n = 4096;
+        let noise: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut g)).collect();
+        let white = band_powers(&noise, 16);
+        let m = median(&white);
+        assert!(white.iter().all(|w| (w / m - 1.0).abs() < 0.4), "{white:?}");
+        // 100 Hz at fs 512: band 100 / 16 = 6
+        let sine: Vec<f64> = (0..n)
+            .map(|k| noise[k] + 5.0 * (2.0 * std::f64::consts::PI * 100.0 * k as f64 / 512.0).sin())
+            .collect();
+        let p = band_powers(&sine, 16);
+        assert!(p[6] / m > 50.0, "{}", p[6] / m);
+        assert!((median(&p) / m - 1.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn median_of_even_and_odd() {
+        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert!(median(&[]).is_nan());
+    }
+}
