@@ -17,7 +17,8 @@
 //! Numerical core (no files written):
 //! - [`integrate`]: time integration of the nonlinear model (Newmark,
 //!   HHT-α) with forward sensitivities; [`simulate`]: simulated records;
-//! - [`linear`]: the sampled linear model; [`modal`]: real modes;
+//! - [`linear`]: the sampled linear model; [`modal`]: real modes
+//!   ([`conditioning`]: which are rigid, and whether they are resolved);
 //!   [`reduce`]: reduction onto kept DOFs; [`metrics`]: correlation
 //!   metrics;
 //! - [`correlate`]: linear modal correlation and modal updating;
@@ -55,6 +56,7 @@
 // `!(x > 0.0)` is the idiom that also rejects NaN; it is used on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod conditioning;
 pub mod error;
 pub mod integrate;
 pub mod io;

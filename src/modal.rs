@@ -17,7 +17,8 @@ pub struct Modes {
     /// Mass-normalized shapes, one column per mode (n × n).
     #[serde(skip)]
     pub shapes: DMatrix<f64>,
-    /// True for rigid-body modes (ω² below 1e-9 of the largest).
+    /// True for rigid-body modes (ω² below 1e-9 of the largest and a shape
+    /// that strains no element; [`crate::conditioning`]).
     pub rigid: Vec<bool>,
 }
 
@@ -59,13 +60,13 @@ pub fn solve(m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result<Modes> {
         .solve_lower_triangular(&x.transpose())
         .ok_or_else(|| TacitError::Numerical("eigenproblem: singular mass factor".into()))?;
     let a = (&a + a.transpose()) * 0.5;
+    crate::conditioning::finite(m, k, a.as_slice())?;
     let (vals, y) = sym_eigen(&a)?;
     let shapes = l
         .transpose()
         .solve_upper_triangular(&y)
         .ok_or_else(|| TacitError::Numerical("eigenproblem: singular mass factor".into()))?;
-    let lmax = vals.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
-    let rigid: Vec<bool> = vals.iter().map(|&l| l.abs() <= 1e-9 * lmax).collect();
+    let rigid = crate::conditioning::rigid_modes(m, k, &vals, &shapes)?;
     let omega: Vec<f64> = vals
         .iter()
         .zip(&rigid)

@@ -103,7 +103,10 @@ pub fn simulate_seeded(
                 .run_sensitivities(force, &seg.u0, &seg.v0, &seeds)
                 .map_err(|e| fail(Some(i), e.to_string()))?;
             if !sim.completed() {
-                let reason = format!("simulation stopped: {:?}", sim.status);
+                let reason = format!(
+                    "simulation stopped: {}",
+                    crate::simulate::describe_status(&sim.status)
+                );
                 return Err(fail(Some(i), reason));
             }
             if let Some(t) = sens.singular_tangent {
