@@ -58,6 +58,7 @@
 
 pub mod conditioning;
 pub mod error;
+pub mod lsq;
 pub mod integrate;
 pub mod io;
 pub mod metrics;

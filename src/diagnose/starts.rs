@@ -495,11 +495,12 @@ impl Stepping<'_> {
             .copied()
             .filter(|&i| step_of[i].is_some())
             .collect();
-        let mut t = 1.0;
         let mut improved = vec![false; self.segs.len()];
-        for _ in 0..5 {
+        // the driver's halving schedule, all pending segments at one t:
+        // 1, 1/2, …, 1/16
+        crate::lsq::halving(1.0, 1.0 / 16.0, |t| {
             if pending.is_empty() {
-                break;
+                return crate::lsq::Halve::Stop;
             }
             let trial: Vec<Segment> = pending
                 .iter()
@@ -528,9 +529,9 @@ impl Stepping<'_> {
                     _ => still.push(i),
                 }
             }
-            pending = still;
-            t *= 0.5;
-        }
+            pending = std::mem::take(&mut still);
+            crate::lsq::Halve::Again
+        });
         improved
     }
 }
