@@ -22,6 +22,9 @@
 //!   [`reduce`]: reduction onto kept DOFs; [`metrics`]: correlation
 //!   metrics;
 //! - [`correlate`]: linear modal correlation and modal updating;
+//! - [`lsq`]: the bounded least-squares driver (Levenberg–Marquardt,
+//!   Gauss–Newton) of the updating, the joint fit and the start-state
+//!   refinement; [`riccati`]: the Riccati core of the two smoothers;
 //! - [`update`]: time-domain parametric model updating (multiple shooting,
 //!   Levenberg–Marquardt and other optimizers);
 //! - [`identify`], [`horizon`]: internal-force identification (sliding
@@ -66,6 +69,7 @@ pub mod modal;
 pub mod model;
 pub mod plot;
 pub mod record;
+pub mod riccati;
 pub mod signal;
 pub mod simulate;
 
