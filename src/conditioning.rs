@@ -48,8 +48,10 @@ pub fn rigid_modes(
     let n = vals.len();
     let lmax = vals.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
     let floor = DIGITS_LOST * n as f64 * f64::EPSILON * lmax;
-    let rigid: Vec<bool> = (0..n)
-        .map(|r| vals[r].abs() <= RIGID_SHARE * lmax && moves_rigidly(k, shapes, r))
+    let rigid: Vec<bool> = negligible(vals)
+        .into_iter()
+        .enumerate()
+        .map(|(r, small)| small && moves_rigidly(k, shapes, r))
         .collect();
     let lost: Vec<usize> = (0..n)
         .filter(|&r| !rigid[r] && vals[r].abs() <= floor)
@@ -58,6 +60,12 @@ pub fn rigid_modes(
         return Err(ill_conditioned(m, k, &lost, floor, lmax));
     }
     Ok(rigid)
+}
+
+/// Modes whose `|ω²|` is at most [`RIGID_SHARE`] of the largest.
+pub fn negligible(vals: &[f64]) -> Vec<bool> {
+    let lmax = vals.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
+    vals.iter().map(|l| l.abs() <= RIGID_SHARE * lmax).collect()
 }
 
 /// An error stating the stiffness spread when `values` (the scaled

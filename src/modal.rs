@@ -36,8 +36,22 @@ pub fn sym_eigen(a: &DMatrix<f64>) -> Result<(Vec<f64>, DMatrix<f64>)> {
     Ok((vals, vecs))
 }
 
-/// Solve `K φ = ω² M φ` for symmetric K and symmetric positive definite M.
+/// Solve `K φ = ω² M φ` for symmetric K and symmetric positive definite M
+/// of a model: rigid modes and modes lost in round-off as
+/// [`crate::conditioning::rigid_modes`] decides.
 pub fn solve(m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result<Modes> {
+    solve_with(m, k, false)
+}
+
+/// [`solve`] for matrices projected on a basis (a Rayleigh–Ritz step),
+/// whose rows are round-off along a basis vector that moves rigidly: a
+/// mode is rigid when its ω² is below 1e-9 of the largest, without the
+/// model's row test.
+pub fn solve_projected(m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result<Modes> {
+    solve_with(m, k, true)
+}
+
+fn solve_with(m: &DMatrix<f64>, k: &DMatrix<f64>, projected: bool) -> Result<Modes> {
     let n = m.nrows();
     if m.ncols() != n || k.nrows() != n || k.ncols() != n {
         return Err(TacitError::Numerical(format!(
@@ -66,7 +80,12 @@ pub fn solve(m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result<Modes> {
         .transpose()
         .solve_upper_triangular(&y)
         .ok_or_else(|| TacitError::Numerical("eigenproblem: singular mass factor".into()))?;
-    let rigid = crate::conditioning::rigid_modes(m, k, &vals, &shapes)?;
+    let rigid = if projected {
+        crate::conditioning::finite(m, k, shapes.as_slice())?;
+        crate::conditioning::negligible(&vals)
+    } else {
+        crate::conditioning::rigid_modes(m, k, &vals, &shapes)?
+    };
     let omega: Vec<f64> = vals
         .iter()
         .zip(&rigid)

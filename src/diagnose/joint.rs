@@ -26,8 +26,9 @@
 //! ([`crate::linear::SampledModel::state_scale`]) and `D_i` is floored at
 //! `1e-10` of its largest entry, so directions the outputs never see (a
 //! free-free model's rigid-body position under acceleration data) take no
-//! step. A step is accepted when the cost falls (λ ÷ 3), else λ × 4 and the
-//! step is recomputed; the fit stops when an accepted step with light
+//! step. The iterations are the least-squares driver's ([`crate::lsq`],
+//! the Schur-complement solve plugged in as its step): a step is accepted
+//! when the cost falls (λ ÷ 3), else λ × 4 and the step is recomputed; the fit stops when an accepted step with light
 //! damping (λ ≤ 0.01 after it) lowers the cost by less than the relative
 //! `f_tol` (at least 1e-4), when λ exceeds 1e6 (stalled: the cost
 //! is rough at the sub-step scale), or at the iteration limit.

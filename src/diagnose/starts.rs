@@ -16,7 +16,10 @@
 //! ([`Integrator::run_sensitivities`], the exact derivative of the discrete
 //! solution: one simulation of every segment per iteration, with 2n seeds),
 //! and the iterations go on; a step that does not lower `J_s` is halved, up
-//! to four times, else the segment keeps its state. `J⁺` is the
+//! to four times (the halving schedule of the least-squares driver,
+//! [`crate::lsq::halving`], every segment still pending at one step
+//! fraction so that their simulations run together), else the segment
+//! keeps its state. `J⁺` is the
 //! pseudo-inverse in states scaled to a common unit (displacements × ω,
 //! [`SampledModel::state_scale`]), singular values below 1e-8 of the
 //! largest dropped: directions the outputs never see (a free-free model's

@@ -12,9 +12,11 @@
 //! searches shorten the step, the simplex contracts) and counted in
 //! `failed_trials`.
 //!
-//! Why not `argmin` / `levenberg-marquardt`: neither has bounds, and both
-//! abort the whole run when one evaluation fails; the methods are short
-//! enough to write here with the same counters and termination reasons.
+//! Levenberg–Marquardt and Gauss–Newton run on the crate's bounded
+//! least-squares driver ([`crate::lsq`]; this module supplies the
+//! residual, its Jacobian and the normal-equation solves); BFGS and the
+//! simplex are here. Why not the `levenberg-marquardt` crate: it has no
+//! bounds and aborts the whole run when one evaluation fails.
 //! References: Nocedal & Wright, *Numerical Optimization* (2006): ch. 10
 //! (Gauss–Newton, Levenberg–Marquardt), ch. 6 (BFGS), ch. 9 (Nelder–Mead);
 //! Lagarias et al. (1998) for the simplex coefficients.
