@@ -180,7 +180,11 @@ mod tests {
     fn chain(k5: f64, mass: f64, k: f64) -> Model {
         let mut s = format!("name = \"c\"\nmasses = [{mass:e}, {mass:e}, {mass:e}, {mass:e}]\n");
         for (i, kk) in [k, k5, k].iter().enumerate() {
-            s += &format!("[[spring]]\ndofs = [{}, {}]\nstiffness = {kk:e}\n", i + 1, i + 2);
+            s += &format!(
+                "[[spring]]\ndofs = [{}, {}]\nstiffness = {kk:e}\n",
+                i + 1,
+                i + 2
+            );
         }
         Model::from_toml_str(&s, "t").unwrap()
     }
@@ -216,6 +220,9 @@ mod tests {
         let e = crate::modal::solve(&m.mass_matrix(), &m.stiffness_matrix())
             .unwrap_err()
             .to_string();
-        assert!(e.contains("not finite") && e.contains("DOF 1 is 1.000e300 / 1.000e-300 = inf"), "{e}");
+        assert!(
+            e.contains("not finite") && e.contains("DOF 1 is 1.000e300 / 1.000e-300 = inf"),
+            "{e}"
+        );
     }
 }

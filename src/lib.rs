@@ -61,9 +61,9 @@
 
 pub mod conditioning;
 pub mod error;
-pub mod lsq;
 pub mod integrate;
 pub mod io;
+pub mod lsq;
 pub mod metrics;
 pub mod modal;
 pub mod model;

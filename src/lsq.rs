@@ -396,7 +396,10 @@ mod tests {
         type Step = DVector<f64>;
         fn evaluate(&mut self, p: &[f64; 2]) -> Option<DVector<f64>> {
             self.evaluations += 1;
-            Some(DVector::from_vec(vec![10.0 * (p[1] - p[0] * p[0]), 1.0 - p[0]]))
+            Some(DVector::from_vec(vec![
+                10.0 * (p[1] - p[0] * p[0]),
+                1.0 - p[0],
+            ]))
         }
         fn cost(&self, e: &DVector<f64>) -> f64 {
             e.norm_squared()
@@ -410,7 +413,9 @@ mod tests {
             for i in 0..2 {
                 a[(i, i)] *= 1.0 + lambda;
             }
-            a.cholesky().map(|c| c.solve(&(-j.tr_mul(r)))).ok_or("singular".into())
+            a.cholesky()
+                .map(|c| c.solve(&(-j.tr_mul(r))))
+                .ok_or("singular".into())
         }
         fn trial(&self, p: &[f64; 2], d: &DVector<f64>, t: f64) -> [f64; 2] {
             [0, 1].map(|i| (p[i] + t * d[i]).clamp(self.lo[i], self.hi[i]))
@@ -440,14 +445,22 @@ mod tests {
             floor: 1e-12,
             ceiling: 1e12,
         };
-        for method in [Method::Damped(damping), Method::LineSearch { min_t: 1.0 / 1024.0 }] {
+        for method in [
+            Method::Damped(damping),
+            Method::LineSearch {
+                min_t: 1.0 / 1024.0,
+            },
+        ] {
             let mut q = Rosen {
                 lo: [-2.0, -2.0],
                 hi: [2.0, 2.0],
                 evaluations: 0,
             };
             let out = minimize(&mut q, [-1.2, 1.0], method, &stopping());
-            assert!(matches!(out.termination, Termination::Converged(_)), "{out:?}");
+            assert!(
+                matches!(out.termination, Termination::Converged(_)),
+                "{out:?}"
+            );
             assert!((out.point[0] - 1.0).abs() < 1e-6 && (out.point[1] - 1.0).abs() < 1e-6);
             assert!(out.history.windows(2).all(|w| w[1] < w[0]));
             // a box that excludes the minimum: it ends on the bound x₁ = 0.5

@@ -72,7 +72,10 @@ mod tests {
     fn symmetrize_averages_the_triangles_and_rel_change_divides_as_asked() {
         let mut p = DMatrix::from_row_slice(3, 3, &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
         symmetrize(&mut p);
-        assert_eq!(p, DMatrix::from_row_slice(3, 3, &[1.0, 3.0, 5.0, 3.0, 5.0, 7.0, 5.0, 7.0, 9.0]));
+        assert_eq!(
+            p,
+            DMatrix::from_row_slice(3, 3, &[1.0, 3.0, 5.0, 3.0, 5.0, 7.0, 5.0, 7.0, 9.0])
+        );
         let a = DMatrix::from_element(3, 3, 4.0);
         let b = DMatrix::from_element(3, 3, 2.0);
         assert_eq!(rel_change(&a, &b, RelativeTo::Second), 1.0);

@@ -751,7 +751,12 @@ fn stiff_model(dir: &Path, name: &str, stiffness: &str, damping: &str) -> PathBu
 #[test]
 fn stiff_spring_modes_are_an_error_with_the_stiffness_ratio() {
     let d = tempfile::tempdir().unwrap();
-    let m = stiff_model(d.path(), "stiff.toml", "1e20", "kind = \"modal\"\nratio = 0.01");
+    let m = stiff_model(
+        d.path(),
+        "stiff.toml",
+        "1e20",
+        "kind = \"modal\"\nratio = 0.01",
+    );
     let o = tacit(&["modal", "--model", p(&m)]);
     fails_with(
         &o,
@@ -765,7 +770,12 @@ fn stiff_spring_modes_are_an_error_with_the_stiffness_ratio() {
     );
     assert!(!String::from_utf8_lossy(&o.stdout).contains("rigid"));
     // 1e12 N/m (a ratio of 1.8e7) still resolves: the 22 Hz mode is not rigid
-    let m = stiff_model(d.path(), "firm.toml", "1e12", "kind = \"modal\"\nratio = 0.01");
+    let m = stiff_model(
+        d.path(),
+        "firm.toml",
+        "1e12",
+        "kind = \"modal\"\nratio = 0.01",
+    );
     let o = tacit(&["modal", "--model", p(&m), "--json"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
@@ -799,7 +809,13 @@ fn declared_stiff_contact_is_not_diagnosed() {
     std::fs::write(&m, c.replace("stiffness = 2.0e6", "stiffness = 1e20")).unwrap();
     let out = d.path().join("d");
     let o = tacit(&[
-        "diagnose", "--model", p(&m), "--record", BUMPER, "-o", p(&out),
+        "diagnose",
+        "--model",
+        p(&m),
+        "--record",
+        BUMPER,
+        "-o",
+        p(&out),
     ]);
     fails_with(
         &o,
@@ -823,7 +839,10 @@ fn tiny_masses_with_huge_springs_are_an_error_not_nan_shapes() {
     let path = d.path().join("tiny.toml");
     std::fs::write(&path, tiny).unwrap();
     let o = tacit(&["modal", "--model", p(&path)]);
-    let e = fails_with(&o, &["modes are not finite", "DOF 1 is 1.000e300 / 1.000e-300"]);
+    let e = fails_with(
+        &o,
+        &["modes are not finite", "DOF 1 is 1.000e300 / 1.000e-300"],
+    );
     assert!(!e.contains("NaN") && !String::from_utf8_lossy(&o.stdout).contains("NaN"));
 }
 
@@ -835,15 +854,34 @@ fn values_beyond_1e100_are_refused_by_every_command() {
         c.data.iter_mut().for_each(|x| *x *= 1e300);
     }
     let big = save(&rec, d.path(), "big.h5");
-    let want = ["cannot be used as it is", "beyond 1e100", "other channels too"];
+    let want = [
+        "cannot be used as it is",
+        "beyond 1e100",
+        "other channels too",
+    ];
     fails_with(&identify(&big, &d.path().join("i"), &[]), &want);
     let o = tacit(&[
-        "diagnose", "--model", MODEL, "--record", p(&big), "-o", p(&d.path().join("d")),
+        "diagnose",
+        "--model",
+        MODEL,
+        "--record",
+        p(&big),
+        "-o",
+        p(&d.path().join("d")),
     ]);
     fails_with(&o, &want);
     let o = tacit(&[
-        "update", "--model", MODEL, "--record", p(&big), "--free", "k5", "--data", "accel",
-        "-o", p(&d.path().join("u")),
+        "update",
+        "--model",
+        MODEL,
+        "--record",
+        p(&big),
+        "--free",
+        "k5",
+        "--data",
+        "accel",
+        "-o",
+        p(&d.path().join("u")),
     ]);
     fails_with(&o, &want);
 }

@@ -116,7 +116,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let rec = super::read_record(&a.record)?;
     rec.validate(Some(model.ndof()))?;
     if let Some(f) = tacit::record::checks::magnitudes(&rec) {
-        anyhow::bail!("record {}: cannot be used as it is: {f}", rec.source.display());
+        anyhow::bail!(
+            "record {}: cannot be used as it is: {f}",
+            rec.source.display()
+        );
     }
     if let Some(len) = a.segment {
         check::count(

@@ -153,13 +153,11 @@ impl Comparison {
             .collect();
         let relative_error = seg.as_ref().map(|y| self.total_error(y));
         let simulation_error = whole.as_ref().map(|y| self.total_error(y));
-        let finite = |e: Option<f64>, p: &[ChannelError], which: fn(&ChannelError) -> Option<f64>| {
-            e.is_none_or(f64::is_finite) && p.iter().all(|c| which(c).is_none_or(f64::is_finite))
-        };
-        if !finite(relative_error, &per_channel, |c| c.relative_error) {
+        let finite = |e: Option<f64>| e.is_none_or(f64::is_finite);
+        if !finite(relative_error) || !per_channel.iter().all(|c| finite(c.relative_error)) {
             status.multiple_shooting = Some(ShotError::NotFinite);
         }
-        if !finite(simulation_error, &per_channel, |c| c.simulation_error) {
+        if !finite(simulation_error) || !per_channel.iter().all(|c| finite(c.simulation_error)) {
             status.open_loop = Some(ShotError::NotFinite);
         }
         let set = ErrorSet {

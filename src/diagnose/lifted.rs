@@ -456,7 +456,6 @@ struct Gain {
     phit: DMatrix<f64>,
 }
 
-
 /// One Riccati step from `P' = pn`: the gains and `P`. `None` when `Q_uu`
 /// is not positive definite.
 fn riccati_step(sp: &Scaled, pn: &DMatrix<f64>, k: usize) -> Option<(Gain, DMatrix<f64>)> {
@@ -512,7 +511,6 @@ fn riccati_step(sp: &Scaled, pn: &DMatrix<f64>, k: usize) -> Option<(Gain, DMatr
         pk,
     ))
 }
-
 
 /// The backward pass.
 struct Backward {

@@ -28,8 +28,8 @@ mod sensitivity;
 mod stability;
 use dense::{chol_solve, cholesky_in_place, dim, lu_solve, mat_vec_axpy, max_abs};
 pub use sensitivity::{ElementSeed, ParamSeed, Seeds, Sensitivities};
-pub use stability::{Divergence, MAX_SUBSTEPS};
 use serde::Serialize;
+pub use stability::{Divergence, MAX_SUBSTEPS};
 
 /// Integrator settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

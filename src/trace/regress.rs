@@ -266,7 +266,6 @@ fn stack(m: &DMatrix<f64>, w: &[f64]) -> DVector<f64> {
     DVector::from_fn(p * ns, |i, _| w[i % p] * m[(i % p, i / p)])
 }
 
-
 /// The current selection: the column blocks of the selected effects
 /// (strength column first, then its hidden-state columns), an orthonormal
 /// basis of them, the residual energy and the parameter count.

@@ -144,7 +144,11 @@ mod tests {
     }
 
     fn force(n: usize, ns: usize) -> DMatrix<f64> {
-        DMatrix::from_fn(n, ns, |i, k| if i == 0 { (k as f64 * 0.3).sin() } else { 0.0 })
+        DMatrix::from_fn(
+            n,
+            ns,
+            |i, k| if i == 0 { (k as f64 * 0.3).sin() } else { 0.0 },
+        )
     }
 
     #[test]
@@ -167,7 +171,10 @@ mod tests {
         let at = text.find("name = \"k5\"").unwrap();
         let k = at + text[at..].find("56700.0").unwrap();
         let text = format!("{}1e20{}", &text[..k], &text[k + 7..]);
-        let text = format!("{}[damping]\nkind = \"none\"\n", &text[..text.find("[damping]").unwrap()]);
+        let text = format!(
+            "{}[damping]\nkind = \"none\"\n",
+            &text[..text.find("[damping]").unwrap()]
+        );
         let model = Model::from_toml_str(&text, "t").unwrap();
         let integ = Integrator::new(&model, 512.0, SimSettings::default()).unwrap();
         let f = force(8, 4096);
@@ -177,6 +184,9 @@ mod tests {
         assert!(d.dof == 5 || d.dof == 6, "{d:?}");
         let s = integ.describe_step();
         // ω_max ≤ √((2e20 + 2·56700)/0.4194) = 2.184e10 rad/s: 3.476e9 Hz
-        assert!(s.contains("3.476e9 Hz") && s.contains("42651158 sub-steps"), "{s}");
+        assert!(
+            s.contains("3.476e9 Hz") && s.contains("42651158 sub-steps"),
+            "{s}"
+        );
     }
 }
