@@ -462,6 +462,61 @@ impl From<f64> for MatRate {
     }
 }
 
+/// A warm-up: the first part of a record, not scored (the transient of a
+/// periodic excitation started from rest).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum WarmUp {
+    /// A number of samples.
+    Samples(usize),
+    /// A duration, s.
+    Seconds(f64),
+}
+
+impl WarmUp {
+    /// Parse `8192` (samples) or `20.48s` (seconds); the error repeats the
+    /// value and the rule.
+    pub fn parse(s: &str) -> std::result::Result<WarmUp, String> {
+        let t = s.trim();
+        if let Some(sec) = t.strip_suffix('s') {
+            return match sec.trim().parse::<f64>() {
+                Ok(v) if v.is_finite() && v >= 0.0 => Ok(WarmUp::Seconds(v)),
+                _ => Err(format!("warm-up '{s}': seconds must be a number >= 0, e.g. 20.48s")),
+            };
+        }
+        t.parse::<usize>().map(WarmUp::Samples).map_err(|_| {
+            format!("warm-up '{s}': give whole samples (8192) or seconds with an s (20.48s)")
+        })
+    }
+
+    /// Samples at rate `fs` (seconds rounded to the nearest sample).
+    pub fn samples(self, fs: f64) -> usize {
+        match self {
+            WarmUp::Samples(n) => n,
+            WarmUp::Seconds(t) => (t * fs).round() as usize,
+        }
+    }
+}
+
+impl Record {
+    /// The record without its first `warm_up` (a new record whose `t0`
+    /// is the time of the first sample kept); an error naming the record
+    /// when nothing would be left.
+    pub fn without_warm_up(&self, warm_up: WarmUp) -> Result<Record> {
+        let k = warm_up.samples(self.fs);
+        if k == 0 {
+            return Ok(self.clone());
+        }
+        let n = self.len();
+        if k >= n {
+            return Err(TacitError::record(
+                self.source.clone(),
+                format!("the warm-up of {k} samples leaves nothing of the record's {n} samples"),
+            ));
+        }
+        self.slice(k, n)
+    }
+}
+
 /// Read a record (HDF5 or CSV; `.mat` needs [`read_mat`]), convert its
 /// channels to SI by their `unit` and validate it.
 pub fn read(path: &Path) -> Result<Record> {
@@ -595,6 +650,28 @@ mod band_tests {
             ..rec
         };
         assert_eq!(band_top(&none), None);
+    }
+
+    #[test]
+    fn warm_up_parses_and_cuts() {
+        assert_eq!(WarmUp::parse("8192"), Ok(WarmUp::Samples(8192)));
+        assert_eq!(WarmUp::parse("20.48s"), Ok(WarmUp::Seconds(20.48)));
+        assert_eq!(WarmUp::Seconds(20.48).samples(400.0), 8192);
+        assert!(WarmUp::parse("-1s").is_err() && WarmUp::parse("1.5").is_err());
+        let rec = Record {
+            t0: 0.0,
+            fs: 10.0,
+            inputs: vec![Channel::new(Quantity::Force, 1, (0..10).map(f64::from).collect())],
+            outputs: vec![],
+            truth: None,
+            source: "r.h5".into(),
+        };
+        let cut = rec.without_warm_up(WarmUp::Seconds(0.3)).unwrap();
+        assert_eq!(cut.len(), 7);
+        assert_eq!(cut.inputs[0].data[0], 3.0);
+        assert!((cut.t0 - 0.3).abs() < 1e-12);
+        let e = rec.without_warm_up(WarmUp::Samples(10)).unwrap_err().to_string();
+        assert!(e.contains("r.h5") && e.contains("warm-up"), "{e}");
     }
 
     #[test]

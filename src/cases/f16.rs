@@ -1,0 +1,294 @@
+//! The F-16 ground vibration test (Noël & Schoukens 2017) closed end to
+//! end: a linear modal model identified from the low-level record
+//! ([`crate::correlate::modelfit`]), the close-the-loop diagnosis with the
+//! linear part calibrated on a high-level record, and the open-loop
+//! simulation error per channel over the steady-state periods, before and
+//! after, on the record and on a validation record (`docs/f16.md`).
+//!
+//! The records are the benchmark's full-grid multisine files read as they
+//! are: `Force` at the driving point, `Acceleration` rows 1–3 at the
+//! driving point (`exc`), on the wing (`wing`) and on the payload
+//! (`payload`) next to the interface, `Fs` (uint16). Nine periods of 8192
+//! samples; the first is the transient ([`Settings::warm_up`]).
+
+use crate::correlate::modelfit::{identify_model, ModelFit, ModelFitSettings};
+use crate::correlate::{FitSettings, FrfSettings, Window};
+use crate::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
+use crate::diagnose::{DiagnoseSettings, EffectReport};
+use crate::error::{Result, TacitError};
+use crate::integrate::{Integrator, SimSettings};
+use crate::model::{modal, Model};
+use crate::record::{self, MatChannel, MatMapping, MatRate, Quantity, Record, WarmUp};
+use nalgebra::DMatrix;
+use serde::Serialize;
+use std::path::Path;
+
+/// The points, in the order of the `Acceleration` rows.
+pub const POINTS: [&str; 3] = ["exc", "wing", "payload"];
+
+/// Settings of the F-16 case.
+#[derive(Debug, Clone, Serialize)]
+pub struct Settings {
+    /// Samples of one period of the multisine.
+    pub period: usize,
+    /// Samples left out at the start of every record (the transient first
+    /// period).
+    pub warm_up: usize,
+    /// Band of the modal model, Hz (the excited band).
+    pub band_hz: (f64, f64),
+    /// Curve-fit orders.
+    pub orders: (usize, usize),
+    /// Sub-steps per sample of the open-loop simulations.
+    pub substeps: usize,
+    /// The diagnosis.
+    #[serde(skip)]
+    pub diagnose: DiagnoseSettings,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            period: 8192,
+            warm_up: 8192,
+            band_hz: (2.0, 15.0),
+            orders: (10, 100),
+            substeps: 10,
+            diagnose: DiagnoseSettings::default(),
+        }
+    }
+}
+
+/// The mapping of a benchmark file: force and the three accelerations
+/// at named points, the rate from `Fs`.
+pub fn mapping() -> MatMapping {
+    let mut channels = vec![MatChannel {
+        point: Some(POINTS[0].into()),
+        ..MatChannel::at_dof("Force", Quantity::Force, 0)
+    }];
+    for (r, p) in POINTS.iter().enumerate() {
+        channels.push(MatChannel {
+            variable: "Acceleration".into(),
+            signal: Some(r + 1),
+            quantity: Quantity::Accel,
+            dof: 0,
+            point: Some((*p).into()),
+        });
+    }
+    MatMapping {
+        channels,
+        fs: MatRate::Variable("Fs".into()),
+        remove_mean: false,
+    }
+}
+
+/// Read a benchmark file as it is.
+pub fn read(path: &Path) -> Result<Record> {
+    record::read_mat(path, &mapping())
+}
+
+/// The modal model identified from the low-level record (its
+/// steady-state periods, whole-period segments, no window).
+pub fn linear_model(rec: &Record, s: &Settings) -> Result<(ModelFit, String)> {
+    let steady = rec.without_warm_up(WarmUp::Samples(s.warm_up))?;
+    let settings = ModelFitSettings {
+        frf: FrfSettings {
+            segment: s.period,
+            overlap: 0.0,
+            window: Window::Rectangular,
+        },
+        fit: FitSettings {
+            band_hz: s.band_hz,
+            orders: s.orders,
+            ..Default::default()
+        },
+        residuals: true,
+    };
+    let fit = identify_model(std::slice::from_ref(&steady), &settings)?;
+    let text = modal::to_toml_string(
+        "f16-linear",
+        &format!(
+            "F-16 GVT (Noël & Schoukens 2017), modal model identified from {}",
+            rec.source.display()
+        ),
+        &fit.section,
+    );
+    Ok((fit, text))
+}
+
+/// Open-loop simulation of `model` from rest under the record's force;
+/// the RMS error per output channel (m/s²) over the samples after
+/// `warm_up`, in the order of the record's outputs.
+pub fn rms_per_channel(model: &Model, rec: &Record, warm_up: usize, substeps: usize) -> Result<Vec<f64>> {
+    let n = rec.len();
+    let nd = model.ndof();
+    let mut force = DMatrix::zeros(nd, n);
+    for c in &rec.inputs {
+        for (k, v) in c.data.iter().enumerate() {
+            force[(c.dof - 1, k)] += v;
+        }
+    }
+    let sim = SimSettings {
+        substeps,
+        ..Default::default()
+    };
+    let run = Integrator::new(model, rec.fs, sim)?.run(force.as_view(), &vec![0.0; nd], &vec![0.0; nd]);
+    if !run.completed() || run.len() < n {
+        return Err(TacitError::Numerical(format!(
+            "open-loop simulation of {} stopped: {}",
+            rec.source.display(),
+            crate::simulate::describe_status(&run.status)
+        )));
+    }
+    let mut out = Vec::with_capacity(rec.outputs.len());
+    for c in &rec.outputs {
+        if c.quantity != Quantity::Accel {
+            return Err(TacitError::record(rec.source.clone(), format!("channel {} is not an acceleration", c.name())));
+        }
+        let d = c.dof - 1;
+        let ss: f64 = (warm_up..n).map(|k| (run.a[(d, k)] - c.data[k]).powi(2)).sum();
+        out.push((ss / (n - warm_up) as f64).sqrt());
+    }
+    Ok(out)
+}
+
+/// Per-channel RMS errors, m/s², before and after.
+#[derive(Debug, Clone, Serialize)]
+pub struct BeforeAfter {
+    /// The record.
+    pub record: String,
+    /// Channel names, in the order of the errors.
+    pub channels: Vec<String>,
+    /// RMS of the measured channels over the steady-state periods, m/s².
+    pub rms_measured: Vec<f64>,
+    /// The linear (low-level) model.
+    pub before: Errors,
+    /// The diagnosed model.
+    pub after: Errors,
+}
+
+/// Errors of one model on one record.
+#[derive(Debug, Clone, Serialize)]
+pub struct Errors {
+    /// Open-loop simulation RMS error per channel over the steady-state
+    /// periods, m/s².
+    pub rms_per_channel: Vec<f64>,
+}
+
+/// What came out.
+#[derive(Debug, Clone, Serialize)]
+pub struct F16Result {
+    /// The linear model (modes, fit errors, notes).
+    pub linear: ModelFit,
+    /// On the diagnosed record.
+    pub estimation: BeforeAfter,
+    /// On the validation record.
+    pub validation: BeforeAfter,
+    /// The diagnosis's verdict.
+    pub verdict: String,
+    /// Effects found (kind, points, parameters).
+    pub effects: Vec<EffectReport>,
+    /// The points the effects join, by label.
+    pub effect_points: Vec<Vec<String>>,
+    /// Linear corrections of the calibration (name, declared, final).
+    pub linear_corrections: Vec<(String, f64, f64)>,
+    /// Seconds: identification, diagnosis, scoring.
+    pub seconds: (f64, f64, f64),
+    /// Settings.
+    pub settings: Settings,
+}
+
+fn rms(x: &[f64], from: usize) -> f64 {
+    let s: f64 = x[from..].iter().map(|v| v * v).sum();
+    (s / (x.len() - from) as f64).sqrt()
+}
+
+fn before_after(rec: &Record, before: &Model, after: &Model, s: &Settings) -> Result<BeforeAfter> {
+    Ok(BeforeAfter {
+        record: rec.source.display().to_string(),
+        channels: rec.outputs.iter().map(|c| c.name()).collect(),
+        rms_measured: rec.outputs.iter().map(|c| rms(&c.data, s.warm_up)).collect(),
+        before: Errors {
+            rms_per_channel: rms_per_channel(before, rec, s.warm_up, s.substeps)?,
+        },
+        after: Errors {
+            rms_per_channel: rms_per_channel(after, rec, s.warm_up, s.substeps)?,
+        },
+    })
+}
+
+/// The whole case: identify on `linear`, diagnose `estimate` (without
+/// its warm-up), score on `estimate` and `validate`. With `out`, writes
+/// the linear model file and the diagnosis report there.
+pub fn run(linear: &Path, estimate: &Path, validate: &Path, s: &Settings, progress: &dyn Fn(&str)) -> Result<(F16Result, Model, String)> {
+    let t0 = std::time::Instant::now();
+    let lin = read(linear)?;
+    let (fit, text) = linear_model(&lin, s)?;
+    let mut est = read(estimate)?;
+    let mut val = read(validate)?;
+    let model = modal::from_toml_str(&text, "f16-linear")?;
+    model.resolve_channels(&mut est)?;
+    model.resolve_channels(&mut val)?;
+    let t1 = t0.elapsed().as_secs_f64();
+    let est_ss = est.without_warm_up(WarmUp::Samples(s.warm_up))?;
+    let val_ss = val.without_warm_up(WarmUp::Samples(s.warm_up))?;
+    let d = diagnose_calibrated(
+        &model,
+        &est_ss,
+        Some(&val_ss),
+        &[],
+        None,
+        &s.diagnose,
+        &CalibratedSettings::default(),
+        progress,
+    )?;
+    let t2 = t0.elapsed().as_secs_f64();
+    let estimation = before_after(&est, &model, &d.model, s)?;
+    let validation = before_after(&val, &model, &d.model, s)?;
+    let t3 = t0.elapsed().as_secs_f64();
+    let effect_points = d
+        .effects
+        .iter()
+        .map(|e| e.dofs.iter().map(|&k| d.model.dof_name(k)).collect())
+        .collect();
+    let linear_corrections = d
+        .calibration
+        .as_ref()
+        .map(|c| c.corrections.iter().map(|x| (x.name.clone(), x.declared, x.value)).collect())
+        .unwrap_or_default();
+    let r = F16Result {
+        linear: fit,
+        estimation,
+        validation,
+        verdict: d.verdict.clone(),
+        effects: d.effects.clone(),
+        effect_points,
+        linear_corrections,
+        seconds: (t1, t2 - t1, t3 - t2),
+        settings: s.clone(),
+    };
+    Ok((r, d.model, text))
+}
+
+impl F16Result {
+    /// The per-channel table for people.
+    pub fn summary(&self) -> String {
+        let mut s = format!("verdict: {}\n", self.verdict);
+        for (e, pts) in self.effects.iter().zip(&self.effect_points) {
+            s += &format!("effect {} between {}\n", e.label, pts.join(" and "));
+        }
+        for (what, ba) in [("record", &self.estimation), ("validation", &self.validation)] {
+            s += &format!("{what} {}\n", ba.record);
+            for (c, ch) in ba.channels.iter().enumerate() {
+                s += &format!(
+                    "  {ch:<14} measured RMS {:.3}  before {:.3}  after {:.3} m/s^2\n",
+                    ba.rms_measured[c], ba.before.rms_per_channel[c], ba.after.rms_per_channel[c]
+                );
+            }
+        }
+        s += &format!(
+            "seconds: identification {:.1}, diagnosis {:.1}, scoring {:.1}\n",
+            self.seconds.0, self.seconds.1, self.seconds.2
+        );
+        s
+    }
+}
