@@ -12,7 +12,9 @@
 //!
 //! Defaults: the shared data set beside the checkout, Level 1, Level 7,
 //! Level 5, out/f16_close_the_loop. A FILE that does not exist as given is
-//! looked up in DIR.
+//! looked up in DIR. `--calibration reidentify|diagnosis` chooses how the
+//! linear part is calibrated on the estimation record (default
+//! reidentify: the modal model identified again at that level).
 
 use std::path::{Path, PathBuf};
 use tacit::cases::f16;
@@ -23,6 +25,7 @@ struct Args {
     estimate: PathBuf,
     validate: PathBuf,
     out: PathBuf,
+    calibration: f16::Calibration,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -32,6 +35,7 @@ fn args() -> anyhow::Result<Args> {
         estimate: "F16Data_FullMSine_Level7.mat".into(),
         validate: "F16Data_FullMSine_Level5.mat".into(),
         out: "out/f16_close_the_loop".into(),
+        calibration: f16::Calibration::Reidentify,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let mut it = argv.iter();
@@ -39,6 +43,14 @@ fn args() -> anyhow::Result<Args> {
         let value = it
             .next()
             .ok_or_else(|| anyhow::anyhow!("{flag} needs a value"))?;
+        if flag == "--calibration" {
+            a.calibration = match value.as_str() {
+                "reidentify" => f16::Calibration::Reidentify,
+                "diagnosis" => f16::Calibration::Diagnosis,
+                _ => anyhow::bail!("--calibration {value}: expected reidentify or diagnosis"),
+            };
+            continue;
+        }
         let slot = match flag.as_str() {
             "--data" => &mut a.data,
             "--linear" => &mut a.linear,
@@ -64,7 +76,10 @@ fn args() -> anyhow::Result<Args> {
 
 fn main() -> anyhow::Result<()> {
     let a = args()?;
-    let settings = f16::Settings::default();
+    let settings = f16::Settings {
+        calibration: a.calibration,
+        ..Default::default()
+    };
     let (r, fitted, linear_text) =
         f16::run(&a.linear, &a.estimate, &a.validate, &settings, &|m| {
             eprintln!("{m}")
@@ -72,10 +87,7 @@ fn main() -> anyhow::Result<()> {
     tacit::io::ensure_dir(&a.out)?;
     std::fs::write(a.out.join("f16-linear.toml"), linear_text)?;
     std::fs::write(a.out.join("model-fitted.toml"), fitted.to_toml_string())?;
-    std::fs::write(
-        a.out.join("report.json"),
-        serde_json::to_string_pretty(&r)?,
-    )?;
+    std::fs::write(a.out.join("report.json"), serde_json::to_string_pretty(&r)?)?;
     println!("{}", r.summary());
     println!("report: {}", a.out.join("report.json").display());
     Ok(())

@@ -40,6 +40,8 @@ pub struct Settings {
     pub orders: (usize, usize),
     /// Sub-steps per sample of the open-loop simulations.
     pub substeps: usize,
+    /// How the linear part is calibrated on the record diagnosed.
+    pub calibration: Calibration,
     /// The diagnosis.
     #[serde(skip)]
     pub diagnose: DiagnoseSettings,
@@ -53,9 +55,29 @@ impl Default for Settings {
             band_hz: (2.0, 15.0),
             orders: (10, 100),
             substeps: 10,
-            diagnose: DiagnoseSettings::default(),
+            calibration: Calibration::Reidentify,
+            diagnose: DiagnoseSettings {
+                // the lifted smoother stops on this model ("the
+                // initial-state system is not positive definite"); the
+                // full-horizon smoother reconstructs its states
+                states: crate::diagnose::StatesSource::Reconstructed,
+                ..Default::default()
+            },
         }
     }
+}
+
+/// How the linear part is calibrated on the record diagnosed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Calibration {
+    /// The modal model identified again, the same way, on the record's
+    /// steady-state periods (its modes at the record's level); the
+    /// diagnosis then trusts it.
+    Reidentify,
+    /// The diagnosis's own calibration of springs and modal damping
+    /// ([`crate::diagnose::calibrated`]) on the Level-1 model.
+    Diagnosis,
 }
 
 /// The mapping of a benchmark file: force and the three accelerations
@@ -118,7 +140,12 @@ pub fn linear_model(rec: &Record, s: &Settings) -> Result<(ModelFit, String)> {
 /// Open-loop simulation of `model` from rest under the record's force;
 /// the RMS error per output channel (m/s²) over the samples after
 /// `warm_up`, in the order of the record's outputs.
-pub fn rms_per_channel(model: &Model, rec: &Record, warm_up: usize, substeps: usize) -> Result<Vec<f64>> {
+pub fn rms_per_channel(
+    model: &Model,
+    rec: &Record,
+    warm_up: usize,
+    substeps: usize,
+) -> Result<Vec<f64>> {
     let n = rec.len();
     let nd = model.ndof();
     let mut force = DMatrix::zeros(nd, n);
@@ -131,7 +158,8 @@ pub fn rms_per_channel(model: &Model, rec: &Record, warm_up: usize, substeps: us
         substeps,
         ..Default::default()
     };
-    let run = Integrator::new(model, rec.fs, sim)?.run(force.as_view(), &vec![0.0; nd], &vec![0.0; nd]);
+    let run =
+        Integrator::new(model, rec.fs, sim)?.run(force.as_view(), &vec![0.0; nd], &vec![0.0; nd]);
     if !run.completed() || run.len() < n {
         return Err(TacitError::Numerical(format!(
             "open-loop simulation of {} stopped: {}",
@@ -142,16 +170,22 @@ pub fn rms_per_channel(model: &Model, rec: &Record, warm_up: usize, substeps: us
     let mut out = Vec::with_capacity(rec.outputs.len());
     for c in &rec.outputs {
         if c.quantity != Quantity::Accel {
-            return Err(TacitError::record(rec.source.clone(), format!("channel {} is not an acceleration", c.name())));
+            return Err(TacitError::record(
+                rec.source.clone(),
+                format!("channel {} is not an acceleration", c.name()),
+            ));
         }
         let d = c.dof - 1;
-        let ss: f64 = (warm_up..n).map(|k| (run.a[(d, k)] - c.data[k]).powi(2)).sum();
+        let ss: f64 = (warm_up..n)
+            .map(|k| (run.a[(d, k)] - c.data[k]).powi(2))
+            .sum();
         out.push((ss / (n - warm_up) as f64).sqrt());
     }
     Ok(out)
 }
 
-/// Per-channel RMS errors, m/s², before and after.
+/// Per-channel RMS errors, m/s², before, with the linear part calibrated,
+/// and after.
 #[derive(Debug, Clone, Serialize)]
 pub struct BeforeAfter {
     /// The record.
@@ -162,6 +196,8 @@ pub struct BeforeAfter {
     pub rms_measured: Vec<f64>,
     /// The linear (low-level) model.
     pub before: Errors,
+    /// The linear model calibrated on the record diagnosed, without effects.
+    pub calibrated: Errors,
     /// The diagnosed model.
     pub after: Errors,
 }
@@ -191,6 +227,9 @@ pub struct F16Result {
     pub effect_points: Vec<Vec<String>>,
     /// Linear corrections of the calibration (name, declared, final).
     pub linear_corrections: Vec<(String, f64, f64)>,
+    /// The modes re-identified on the record diagnosed
+    /// ([`Calibration::Reidentify`]).
+    pub calibrated_modes: Vec<crate::model::modal::ModalMode>,
     /// Seconds: identification, diagnosis, scoring.
     pub seconds: (f64, f64, f64),
     /// Settings.
@@ -202,13 +241,21 @@ fn rms(x: &[f64], from: usize) -> f64 {
     (s / (x.len() - from) as f64).sqrt()
 }
 
-fn before_after(rec: &Record, before: &Model, after: &Model, s: &Settings) -> Result<BeforeAfter> {
+fn before_after(rec: &Record, models: [&Model; 3], s: &Settings) -> Result<BeforeAfter> {
+    let [before, calibrated, after] = models;
     Ok(BeforeAfter {
         record: rec.source.display().to_string(),
         channels: rec.outputs.iter().map(|c| c.name()).collect(),
-        rms_measured: rec.outputs.iter().map(|c| rms(&c.data, s.warm_up)).collect(),
+        rms_measured: rec
+            .outputs
+            .iter()
+            .map(|c| rms(&c.data, s.warm_up))
+            .collect(),
         before: Errors {
             rms_per_channel: rms_per_channel(before, rec, s.warm_up, s.substeps)?,
+        },
+        calibrated: Errors {
+            rms_per_channel: rms_per_channel(calibrated, rec, s.warm_up, s.substeps)?,
         },
         after: Errors {
             rms_per_channel: rms_per_channel(after, rec, s.warm_up, s.substeps)?,
@@ -219,7 +266,13 @@ fn before_after(rec: &Record, before: &Model, after: &Model, s: &Settings) -> Re
 /// The whole case: identify on `linear`, diagnose `estimate` (without
 /// its warm-up), score on `estimate` and `validate`. With `out`, writes
 /// the linear model file and the diagnosis report there.
-pub fn run(linear: &Path, estimate: &Path, validate: &Path, s: &Settings, progress: &dyn Fn(&str)) -> Result<(F16Result, Model, String)> {
+pub fn run(
+    linear: &Path,
+    estimate: &Path,
+    validate: &Path,
+    s: &Settings,
+    progress: &dyn Fn(&str),
+) -> Result<(F16Result, Model, String)> {
     let t0 = std::time::Instant::now();
     let lin = read(linear)?;
     let (fit, text) = linear_model(&lin, s)?;
@@ -231,19 +284,35 @@ pub fn run(linear: &Path, estimate: &Path, validate: &Path, s: &Settings, progre
     let t1 = t0.elapsed().as_secs_f64();
     let est_ss = est.without_warm_up(WarmUp::Samples(s.warm_up))?;
     let val_ss = val.without_warm_up(WarmUp::Samples(s.warm_up))?;
+    let (declared, calibrated_modes, off) = match s.calibration {
+        Calibration::Reidentify => {
+            let (fit7, text7) = linear_model(&est, s)?;
+            let m = modal::from_toml_str(&text7, "f16-calibrated")?;
+            (m, fit7.section.modes, true)
+        }
+        Calibration::Diagnosis => (model.clone(), vec![], false),
+    };
+    let cal = CalibratedSettings {
+        off,
+        ..Default::default()
+    };
     let d = diagnose_calibrated(
-        &model,
+        &declared,
         &est_ss,
         Some(&val_ss),
         &[],
         None,
         &s.diagnose,
-        &CalibratedSettings::default(),
+        &cal,
         progress,
     )?;
     let t2 = t0.elapsed().as_secs_f64();
-    let estimation = before_after(&est, &model, &d.model, s)?;
-    let validation = before_after(&val, &model, &d.model, s)?;
+    let linear_cal = match s.calibration {
+        Calibration::Reidentify => declared.clone(),
+        Calibration::Diagnosis => d.model.linear_part(),
+    };
+    let estimation = before_after(&est, [&model, &linear_cal, &d.model], s)?;
+    let validation = before_after(&val, [&model, &linear_cal, &d.model], s)?;
     let t3 = t0.elapsed().as_secs_f64();
     let effect_points = d
         .effects
@@ -253,7 +322,12 @@ pub fn run(linear: &Path, estimate: &Path, validate: &Path, s: &Settings, progre
     let linear_corrections = d
         .calibration
         .as_ref()
-        .map(|c| c.corrections.iter().map(|x| (x.name.clone(), x.declared, x.value)).collect())
+        .map(|c| {
+            c.corrections
+                .iter()
+                .map(|x| (x.name.clone(), x.declared, x.value))
+                .collect()
+        })
         .unwrap_or_default();
     let r = F16Result {
         linear: fit,
@@ -263,6 +337,7 @@ pub fn run(linear: &Path, estimate: &Path, validate: &Path, s: &Settings, progre
         effects: d.effects.clone(),
         effect_points,
         linear_corrections,
+        calibrated_modes,
         seconds: (t1, t2 - t1, t3 - t2),
         settings: s.clone(),
     };
@@ -276,12 +351,18 @@ impl F16Result {
         for (e, pts) in self.effects.iter().zip(&self.effect_points) {
             s += &format!("effect {} between {}\n", e.label, pts.join(" and "));
         }
-        for (what, ba) in [("record", &self.estimation), ("validation", &self.validation)] {
+        for (what, ba) in [
+            ("record", &self.estimation),
+            ("validation", &self.validation),
+        ] {
             s += &format!("{what} {}\n", ba.record);
             for (c, ch) in ba.channels.iter().enumerate() {
                 s += &format!(
-                    "  {ch:<14} measured RMS {:.3}  before {:.3}  after {:.3} m/s^2\n",
-                    ba.rms_measured[c], ba.before.rms_per_channel[c], ba.after.rms_per_channel[c]
+                    "  {ch:<14} measured RMS {:.3}  before {:.3}  calibrated {:.3}  after {:.3} m/s^2\n",
+                    ba.rms_measured[c],
+                    ba.before.rms_per_channel[c],
+                    ba.calibrated.rms_per_channel[c],
+                    ba.after.rms_per_channel[c]
                 );
             }
         }

@@ -126,7 +126,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some(out) = &a.write_model {
         return write_model(&a, out);
     }
-    let path = a.model.as_ref().expect("clap requires --model without --write-model");
+    let path = a
+        .model
+        .as_ref()
+        .expect("clap requires --model without --write-model");
     let model = Model::from_file(path)?;
     if a.test_modes.is_none() && a.record.is_empty() {
         if a.update.is_some() || a.dofs.is_some() || a.modes.is_some() {
@@ -234,11 +237,21 @@ fn write_model(a: &Args, out: &Path) -> anyhow::Result<()> {
     let window = a.window.unwrap_or_default();
     let mut frf = FrfSettings {
         window,
-        overlap: if window == Window::Rectangular { 0.0 } else { 0.5 },
+        overlap: if window == Window::Rectangular {
+            0.0
+        } else {
+            0.5
+        },
         ..Default::default()
     };
     if let Some(s) = a.segment {
-        check::count("--segment", s, 16, shortest.max(16), "FRF segment length, samples, at most the record's length")?;
+        check::count(
+            "--segment",
+            s,
+            16,
+            shortest.max(16),
+            "FRF segment length, samples, at most the record's length",
+        )?;
         frf.segment = s;
     }
     let mut fit = FitSettings::default();
@@ -269,7 +282,9 @@ fn write_model(a: &Args, out: &Path) -> anyhow::Result<()> {
         id.frf.averages,
         fit.band_hz
     );
-    let name = out.file_stem().map_or("modal".into(), |s| s.to_string_lossy().to_string());
+    let name = out
+        .file_stem()
+        .map_or("modal".into(), |s| s.to_string_lossy().to_string());
     let text = tacit::model::modal::to_toml_string(&name, &description, &id.section);
     // the file must load as a model before it is written
     tacit::model::modal::from_toml_str(&text, &out.display().to_string())?;
@@ -278,14 +293,34 @@ fn write_model(a: &Args, out: &Path) -> anyhow::Result<()> {
         outln!("{}", serde_json::to_string_pretty(&id)?);
         return Ok(());
     }
-    outln!("modal model: {} ({} points: {})", out.display(), id.section.points.len(), id.section.points.join(", "));
-    outln!("{:>4} {:>10} {:>9}  shape at the points (mass-normalised)", "mode", "freq (Hz)", "damping");
+    outln!(
+        "modal model: {} ({} points: {})",
+        out.display(),
+        id.section.points.len(),
+        id.section.points.join(", ")
+    );
+    outln!(
+        "{:>4} {:>10} {:>9}  shape at the points (mass-normalised)",
+        "mode",
+        "freq (Hz)",
+        "damping"
+    );
     for (r, m) in id.section.modes.iter().enumerate() {
         let shape: Vec<String> = m.shape.iter().map(|v| format!("{v:>10.4e}")).collect();
         let tag = if m.residual { "  (residual)" } else { "" };
-        outln!("{:>4} {:>10.4} {:>9.4}  {}{tag}", r + 1, m.frequency_hz, m.damping, shape.join(" "));
+        outln!(
+            "{:>4} {:>10.4} {:>9.4}  {}{tag}",
+            r + 1,
+            m.frequency_hz,
+            m.damping,
+            shape.join(" ")
+        );
     }
-    let pct: Vec<String> = id.fit_error.iter().map(|e| format!("{:.2} %", 100.0 * e)).collect();
+    let pct: Vec<String> = id
+        .fit_error
+        .iter()
+        .map(|e| format!("{:.2} %", 100.0 * e))
+        .collect();
     outln!("FRF fit error per point: {}", pct.join(", "));
     Ok(())
 }

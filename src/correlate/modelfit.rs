@@ -74,11 +74,8 @@ pub struct ModelFit {
 /// acceleration channel, and the index of the force's point among them.
 fn points(rec: &Record) -> Result<(Vec<(String, usize)>, usize)> {
     let err = |m: String| TacitError::record(rec.source.clone(), m);
-    let label = |c: &crate::record::Channel| {
-        c.point
-            .clone()
-            .unwrap_or_else(|| format!("dof{}", c.dof))
-    };
+    let label =
+        |c: &crate::record::Channel| c.point.clone().unwrap_or_else(|| format!("dof{}", c.dof));
     let pts: Vec<(String, usize)> = rec
         .outputs
         .iter()
@@ -86,12 +83,19 @@ fn points(rec: &Record) -> Result<(Vec<(String, usize)>, usize)> {
         .map(|c| (label(c), c.dof))
         .collect();
     if pts.is_empty() {
-        return Err(err("no acceleration channel: a modal model is identified from accelerations".into()));
+        return Err(err(
+            "no acceleration channel: a modal model is identified from accelerations".into(),
+        ));
     }
     let force = match rec.inputs.as_slice() {
         [f] => f,
         [] => return Err(err("no force channel".into())),
-        _ => return Err(err(format!("{} force channels: the identification takes one shaker", rec.inputs.len()))),
+        _ => {
+            return Err(err(format!(
+                "{} force channels: the identification takes one shaker",
+                rec.inputs.len()
+            )))
+        }
     };
     let dp = pts.iter().position(|p| p.0 == label(force)).ok_or_else(|| {
         err(format!(
@@ -134,7 +138,13 @@ pub fn identify_model(records: &[Record], settings: &ModelFitSettings) -> Result
     let (pts, dp) = points(first)?;
     let recs = renumbered(records, &pts)?;
     let sensors: Vec<usize> = (1..=pts.len()).collect();
-    let frf = h1_records(&recs, Some(dp + 1), &sensors, Quantity::Accel, &settings.frf)?;
+    let frf = h1_records(
+        &recs,
+        Some(dp + 1),
+        &sensors,
+        Quantity::Accel,
+        &settings.frf,
+    )?;
     let curve = fit::identify(&frf, &settings.fit)?;
     let mut diagnostics = curve.diagnostics.clone();
     if curve.modes.is_empty() {
@@ -159,7 +169,9 @@ pub fn identify_model(records: &[Record], settings: &ModelFitSettings) -> Result
         } else {
             (modes.clone(), c0, e0.clone())
         };
-        let bad: Vec<usize> = (0..modes.len()).filter(|&r| !(consts[(dp, r)] > 0.0)).collect();
+        let bad: Vec<usize> = (0..modes.len())
+            .filter(|&r| !(consts[(dp, r)] > 0.0))
+            .collect();
         if bad.is_empty() {
             break (groups, consts, err, e0);
         }

@@ -100,7 +100,9 @@ impl ModalSection {
         }
         if let Some(d) = &self.driving_point {
             if !self.points.contains(d) {
-                return err(format!("modal.driving_point \"{d}\" is not in modal.points"));
+                return err(format!(
+                    "modal.driving_point \"{d}\" is not in modal.points"
+                ));
             }
         }
         if self.modes.len() < p {
@@ -164,9 +166,9 @@ impl ModalSection {
                 ),
             ));
         }
-        let gram_inv = gram.try_inverse().ok_or_else(|| {
-            TacitError::Numerical("modal model: Φ Φᵀ cannot be inverted".into())
-        })?;
+        let gram_inv = gram
+            .try_inverse()
+            .ok_or_else(|| TacitError::Numerical("modal model: Φ Φᵀ cannot be inverted".into()))?;
         let t1 = phi.transpose() * &gram_inv;
         // null space of Φ: eigenvectors of I − Φ⁺ Φ with eigenvalue 1
         let proj = DMatrix::identity(n, n) - &t1 * &phi;
@@ -210,7 +212,9 @@ pub fn from_toml_str(text: &str, src: &str) -> Result<Model> {
         if rest.contains_key(key) {
             return Err(TacitError::model(
                 src,
-                format!("{key}: a modal model takes its masses, stiffness and damping from [modal]"),
+                format!(
+                    "{key}: a modal model takes its masses, stiffness and damping from [modal]"
+                ),
             ));
         }
     }
@@ -337,7 +341,11 @@ mod tests {
             assert!((got - want).abs() < 1e-9 * want, "{got} vs {want}");
         }
         // the shapes at the points, up to sign
-        let s = &section().sorted().iter().map(|m| m.shape.clone()).collect::<Vec<_>>();
+        let s = &section()
+            .sorted()
+            .iter()
+            .map(|m| m.shape.clone())
+            .collect::<Vec<_>>();
         for r in 0..3 {
             let sign = modes.shapes[(0, r)].signum() * s[r][0].signum();
             for i in 0..2 {
@@ -360,16 +368,23 @@ mod tests {
         let e = from_toml_str(&to_toml_string("t", "", &s), "f.toml")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("modal.mode[1].shape") && e.contains("f.toml"), "{e}");
+        assert!(
+            e.contains("modal.mode[1].shape") && e.contains("f.toml"),
+            "{e}"
+        );
         let mut s = section();
         s.modes.truncate(1);
-        let e = from_toml_str(&to_toml_string("t", "", &s), "f").unwrap_err().to_string();
+        let e = from_toml_str(&to_toml_string("t", "", &s), "f")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("at least as many modes as points"), "{e}");
         let mut s = section();
         for m in &mut s.modes {
             m.shape = vec![m.shape[0], 2.0 * m.shape[0]];
         }
-        let e = from_toml_str(&to_toml_string("t", "", &s), "f").unwrap_err().to_string();
+        let e = from_toml_str(&to_toml_string("t", "", &s), "f")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("linearly dependent"), "{e}");
         let text = to_toml_string("t", "", &section()) + "\nmasses = [1.0]\n";
         assert!(from_toml_str(&text, "f").is_err());

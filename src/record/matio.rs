@@ -307,7 +307,8 @@ mod tests {
             return;
         };
         let mut m = mapping(false);
-        m.channels.push(MatChannel::at_dof("V3", Quantity::Accel, 2));
+        m.channels
+            .push(MatChannel::at_dof("V3", Quantity::Accel, 2));
         let e = read(&silverbox, &m).unwrap_err().to_string();
         assert!(e.contains("variable V3 not found"), "{e}");
         assert!(e.contains("V1") && e.contains("V2"), "{e}");
@@ -435,6 +436,9 @@ mod tests {
         let mut m = f16_mapping();
         m.fs = MatRate::Variable("fs".into());
         let e = read(&p, &m).unwrap_err().to_string();
-        assert!(e.contains("variable fs not found") && e.contains("Fs"), "{e}");
+        assert!(
+            e.contains("variable fs not found") && e.contains("Fs"),
+            "{e}"
+        );
     }
 }

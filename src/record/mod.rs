@@ -379,12 +379,10 @@ impl MatChannel {
         let var = var.trim();
         let (variable, signal) = match var.strip_suffix(']').and_then(|v| v.split_once('[')) {
             Some((v, k)) => {
-                let k: usize = k
-                    .trim()
-                    .parse()
-                    .ok()
-                    .filter(|k| *k >= 1)
-                    .ok_or_else(|| bad("the signal index in [k] must be a whole number from 1"))?;
+                let k: usize =
+                    k.trim().parse().ok().filter(|k| *k >= 1).ok_or_else(|| {
+                        bad("the signal index in [k] must be a whole number from 1")
+                    })?;
                 (v.trim(), Some(k))
             }
             None => (var, None),
@@ -480,7 +478,9 @@ impl WarmUp {
         if let Some(sec) = t.strip_suffix('s') {
             return match sec.trim().parse::<f64>() {
                 Ok(v) if v.is_finite() && v >= 0.0 => Ok(WarmUp::Seconds(v)),
-                _ => Err(format!("warm-up '{s}': seconds must be a number >= 0, e.g. 20.48s")),
+                _ => Err(format!(
+                    "warm-up '{s}': seconds must be a number >= 0, e.g. 20.48s"
+                )),
             };
         }
         t.parse::<usize>().map(WarmUp::Samples).map_err(|_| {
@@ -661,7 +661,11 @@ mod band_tests {
         let rec = Record {
             t0: 0.0,
             fs: 10.0,
-            inputs: vec![Channel::new(Quantity::Force, 1, (0..10).map(f64::from).collect())],
+            inputs: vec![Channel::new(
+                Quantity::Force,
+                1,
+                (0..10).map(f64::from).collect(),
+            )],
             outputs: vec![],
             truth: None,
             source: "r.h5".into(),
@@ -670,7 +674,10 @@ mod band_tests {
         assert_eq!(cut.len(), 7);
         assert_eq!(cut.inputs[0].data[0], 3.0);
         assert!((cut.t0 - 0.3).abs() < 1e-12);
-        let e = rec.without_warm_up(WarmUp::Samples(10)).unwrap_err().to_string();
+        let e = rec
+            .without_warm_up(WarmUp::Samples(10))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("r.h5") && e.contains("warm-up"), "{e}");
     }
 
@@ -682,7 +689,13 @@ mod band_tests {
         assert_eq!(c.name(), "accel:wing");
         let c = MatChannel::parse(" V1 = force_1").unwrap();
         assert_eq!((c.variable.as_str(), c.signal, c.dof), ("V1", None, 1));
-        for bad in ["A[0]=accel_1", "A[x]=accel_1", "A=strain_1", "A", "A=accel_0"] {
+        for bad in [
+            "A[0]=accel_1",
+            "A[x]=accel_1",
+            "A=strain_1",
+            "A",
+            "A=accel_0",
+        ] {
             let e = MatChannel::parse(bad).unwrap_err();
             assert!(e.contains(bad), "{e}");
         }
