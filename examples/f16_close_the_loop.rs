@@ -14,7 +14,9 @@
 //! Level 5, out/f16_close_the_loop. A FILE that does not exist as given is
 //! looked up in DIR. `--calibration reidentify|diagnosis` chooses how the
 //! linear part is calibrated on the estimation record (default
-//! reidentify: the modal model identified again at that level).
+//! reidentify: the modal model identified again at that level);
+//! `--min-gain G` sets the share of the residual an effect must remove to
+//! be selected and kept (default the diagnosis's 0.05).
 
 use std::path::{Path, PathBuf};
 use tacit::cases::f16;
@@ -26,6 +28,7 @@ struct Args {
     validate: PathBuf,
     out: PathBuf,
     calibration: f16::Calibration,
+    min_gain: Option<f64>,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -36,6 +39,7 @@ fn args() -> anyhow::Result<Args> {
         validate: "F16Data_FullMSine_Level5.mat".into(),
         out: "out/f16_close_the_loop".into(),
         calibration: f16::Calibration::Reidentify,
+        min_gain: None,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let mut it = argv.iter();
@@ -43,6 +47,10 @@ fn args() -> anyhow::Result<Args> {
         let value = it
             .next()
             .ok_or_else(|| anyhow::anyhow!("{flag} needs a value"))?;
+        if flag == "--min-gain" {
+            a.min_gain = Some(value.parse()?);
+            continue;
+        }
         if flag == "--calibration" {
             a.calibration = match value.as_str() {
                 "reidentify" => f16::Calibration::Reidentify,
@@ -76,10 +84,16 @@ fn args() -> anyhow::Result<Args> {
 
 fn main() -> anyhow::Result<()> {
     let a = args()?;
-    let settings = f16::Settings {
+    let mut settings = f16::Settings {
         calibration: a.calibration,
         ..Default::default()
     };
+    if let Some(g) = a.min_gain {
+        // the share of the residual an effect must remove to be selected
+        // and kept (`trace.min_gain`, `screen.min_improvement`)
+        settings.diagnose.trace.min_gain = g;
+        settings.diagnose.screen.min_improvement = g;
+    }
     let (r, fitted, linear_text) =
         f16::run(&a.linear, &a.estimate, &a.validate, &settings, &|m| {
             eprintln!("{m}")

@@ -223,6 +223,9 @@ pub struct F16Result {
     pub verdict: String,
     /// Effects found (kind, points, parameters).
     pub effects: Vec<EffectReport>,
+    /// Best candidates of the first trace round (label, share of the
+    /// residual removed), with the points each joins.
+    pub ranking: Vec<(String, f64, Vec<String>)>,
     /// The points the effects join, by label.
     pub effect_points: Vec<Vec<String>>,
     /// Linear corrections of the calibration (name, declared, final).
@@ -319,6 +322,19 @@ pub fn run(
         .iter()
         .map(|e| e.dofs.iter().map(|&k| d.model.dof_name(k)).collect())
         .collect();
+    let ranking = d
+        .ranking
+        .iter()
+        .map(|r| {
+            let pts = r
+                .candidate
+                .dofs
+                .iter()
+                .map(|&k| d.model.dof_name(k + 1))
+                .collect();
+            (r.label.clone(), r.residual_explained, pts)
+        })
+        .collect();
     let linear_corrections = d
         .calibration
         .as_ref()
@@ -336,6 +352,7 @@ pub fn run(
         verdict: d.verdict.clone(),
         effects: d.effects.clone(),
         effect_points,
+        ranking,
         linear_corrections,
         calibrated_modes,
         seconds: (t1, t2 - t1, t3 - t2),

@@ -346,10 +346,10 @@ mod tests {
             .iter()
             .map(|m| m.shape.clone())
             .collect::<Vec<_>>();
-        for r in 0..3 {
-            let sign = modes.shapes[(0, r)].signum() * s[r][0].signum();
-            for i in 0..2 {
-                let d = (modes.shapes[(i, r)] * sign - s[r][i]).abs();
+        for (r, want) in s.iter().enumerate() {
+            let sign = modes.shapes[(0, r)].signum() * want[0].signum();
+            for (i, w) in want.iter().enumerate() {
+                let d = (modes.shapes[(i, r)] * sign - w).abs();
                 assert!(d < 1e-9, "mode {r} point {i}: {}", modes.shapes[(i, r)]);
             }
         }
