@@ -148,3 +148,44 @@ fn cli_writes_a_modal_model_that_commands_accept() {
     );
     assert!(!dir.path().join("bad.toml").exists());
 }
+
+/// Torsion mode (near 7.3 Hz) of a set of modes: frequency, damping.
+fn torsion(modes: &[tacit::model::modal::ModalMode]) -> (f64, f64) {
+    let m = modes
+        .iter()
+        .filter(|m| !m.residual && (m.frequency_hz - 7.25).abs() < 0.3)
+        .max_by(|a, b| a.shape[1].abs().total_cmp(&b.shape[1].abs()))
+        .expect("a torsion mode near 7.3 Hz");
+    (m.frequency_hz, m.damping)
+}
+
+#[test]
+fn closed_loop_level7_validated_on_level5() {
+    let (Some(l1), Some(l7), Some(l5)) = (level(1), level(7), level(5)) else {
+        return;
+    };
+    let s = f16::Settings::default();
+    let (r, _, _) = f16::run(&l1, &l7, &l5, &s, &|_| {}).unwrap();
+    let v = &r.validation;
+    assert_eq!(v.channels, ["accel:exc", "accel:wing", "accel:payload"]);
+    for c in 0..3 {
+        let (b, a) = (v.before.rms_per_channel[c], v.after.rms_per_channel[c]);
+        // measured: 0.996 -> 0.299, 2.068 -> 0.422, 1.968 -> 0.559 m/s²
+        assert!(b > 0.8 && b < 2.5, "before {c}: {b}");
+        assert!(a <= b / 3.0, "channel {c}: after {a} vs before {b}");
+        let e = &r.estimation;
+        assert!(e.after.rms_per_channel[c] < 0.5 * e.before.rms_per_channel[c]);
+    }
+    // the interface softens and dissipates more at Level 7
+    let (f1, z1) = torsion(&r.linear.section.modes);
+    let (f7, z7) = torsion(&r.calibrated_modes);
+    assert!(f7 < f1 - 0.08, "torsion {f1} Hz at Level 1, {f7} Hz at Level 7");
+    assert!(z7 > 2.0 * z1, "torsion damping {z1} at Level 1, {z7} at Level 7");
+    // the best localized candidate joins the wing and the payload
+    let local = r
+        .ranking
+        .iter()
+        .find(|c| c.2.len() == 2)
+        .expect("a candidate between two points");
+    assert_eq!(local.2, ["wing", "payload"], "{:?}", r.ranking);
+}
