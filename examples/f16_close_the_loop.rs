@@ -16,7 +16,11 @@
 //! linear part is calibrated on the estimation record (default
 //! reidentify: the modal model identified again at that level);
 //! `--min-gain G` sets the share of the residual an effect must remove to
-//! be selected and kept (default the diagnosis's 0.05).
+//! be selected and kept (default the diagnosis's 0.05); `--interface-fit`
+//! also fits the Level-1 model with a cubic spring and a quadratic damper
+//! between wing and payload by open-loop output error on the estimation
+//! record and scores it on every level file in DIR (report.json
+//! `interface_fit`, OUT/model-interface.toml).
 
 use std::path::{Path, PathBuf};
 use tacit::cases::f16;
@@ -29,6 +33,7 @@ struct Args {
     out: PathBuf,
     calibration: f16::Calibration,
     min_gain: Option<f64>,
+    interface_fit: bool,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -40,10 +45,15 @@ fn args() -> anyhow::Result<Args> {
         out: "out/f16_close_the_loop".into(),
         calibration: f16::Calibration::Reidentify,
         min_gain: None,
+        interface_fit: false,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let mut it = argv.iter();
     while let Some(flag) = it.next() {
+        if flag == "--interface-fit" {
+            a.interface_fit = true;
+            continue;
+        }
         let value = it
             .next()
             .ok_or_else(|| anyhow::anyhow!("{flag} needs a value"))?;
@@ -103,6 +113,24 @@ fn main() -> anyhow::Result<()> {
     std::fs::write(a.out.join("model-fitted.toml"), fitted.to_toml_string())?;
     std::fs::write(a.out.join("report.json"), serde_json::to_string_pretty(&r)?)?;
     println!("{}", r.summary());
+    let mut json = serde_json::to_value(&r)?;
+    if a.interface_fit {
+        let levels: Vec<PathBuf> = (1..=7)
+            .map(|n| a.data.join(format!("F16Data_FullMSine_Level{n}.mat")))
+            .filter(|p| p.exists())
+            .collect();
+        let refs: Vec<&Path> = levels.iter().map(|p| p.as_path()).collect();
+        let (fit, model) = f16::interface_study(&a.linear, &a.estimate, &refs, &settings)?;
+        for (file, before, after) in &fit.errors {
+            println!("interface model on {file}: Level-1 model {before:.3?}, interface model {after:.3?} m/s^2");
+        }
+        std::fs::write(a.out.join("model-interface.toml"), model.to_toml_string())?;
+        json["interface_fit"] = serde_json::to_value(&fit)?;
+    }
+    std::fs::write(
+        a.out.join("report.json"),
+        serde_json::to_string_pretty(&json)?,
+    )?;
     println!("report: {}", a.out.join("report.json").display());
     Ok(())
 }

@@ -179,8 +179,14 @@ fn closed_loop_level7_validated_on_level5() {
     // the interface softens and dissipates more at Level 7
     let (f1, z1) = torsion(&r.linear.section.modes);
     let (f7, z7) = torsion(&r.calibrated_modes);
-    assert!(f7 < f1 - 0.08, "torsion {f1} Hz at Level 1, {f7} Hz at Level 7");
-    assert!(z7 > 2.0 * z1, "torsion damping {z1} at Level 1, {z7} at Level 7");
+    assert!(
+        f7 < f1 - 0.08,
+        "torsion {f1} Hz at Level 1, {f7} Hz at Level 7"
+    );
+    assert!(
+        z7 > 2.0 * z1,
+        "torsion damping {z1} at Level 1, {z7} at Level 7"
+    );
     // the best localized candidate joins the wing and the payload
     let local = r
         .ranking

@@ -390,3 +390,133 @@ impl F16Result {
         s
     }
 }
+
+/// The Level-1 model with a softening-or-stiffening cubic spring and a
+/// quadratic damper between `a` and `b` (DOFs from 1), their coefficients
+/// (and the coupling spring between the two points, when the model has
+/// one) fitted by open-loop output error on the whole record from rest.
+/// `starts`: (k3, c2) to start from (the trace's estimates);
+/// `ratios_near_hz`: the modal damping ratios of the modes nearest these
+/// frequencies are fitted with them.
+pub fn interface_fit(
+    model: &Model,
+    rec: &Record,
+    pair: [usize; 2],
+    starts: (f64, f64),
+    ratios_near_hz: &[f64],
+    substeps: usize,
+) -> Result<Model> {
+    use crate::model::{Cubic, QuadraticDamper};
+    use crate::update::{
+        self, optimize::FitSettings, param::Parameter, param::Target, problem::Problem,
+    };
+    let mut m = model.clone();
+    m.cubics.push(Cubic {
+        dofs: pair.to_vec(),
+        k3: starts.0,
+    });
+    m.quadratic_dampers.push(QuadraticDamper {
+        dofs: pair.to_vec(),
+        c2: starts.1.max(1.0),
+    });
+    let mut params = vec![
+        Parameter::relative(&m, Target::CubicK3(m.cubics.len() - 1))?
+            .with_relative_bounds(-1.0, 5.0),
+        Parameter::relative(&m, Target::DamperC2(m.quadratic_dampers.len() - 1))?
+            .with_relative_bounds(-0.999, 20.0),
+    ];
+    if let Some(i) = m
+        .springs
+        .iter()
+        .position(|s| s.dofs.len() == 2 && s.dofs.contains(&pair[0]) && s.dofs.contains(&pair[1]))
+    {
+        params.push(
+            Parameter::relative(&m, Target::SpringStiffness(i))?.with_relative_bounds(-0.9, 1.0),
+        );
+    }
+    let modes = crate::modal::solve(&m.mass_matrix(), &m.stiffness_matrix())?;
+    let flex: Vec<f64> = (0..modes.freq_hz.len())
+        .filter(|&r| !modes.rigid[r])
+        .map(|r| modes.freq_hz[r])
+        .collect();
+    for f in ratios_near_hz {
+        let r = (0..flex.len())
+            .min_by(|&a, &b| (flex[a] - f).abs().total_cmp(&(flex[b] - f).abs()))
+            .ok_or_else(|| TacitError::Numerical("the model has no flexible mode".into()))?;
+        params
+            .push(Parameter::relative(&m, Target::ModalRatio(r))?.with_relative_bounds(-0.9, 10.0));
+    }
+    let n = m.ndof();
+    let mut p = Problem::from_record(
+        &m,
+        rec,
+        &[Quantity::Accel],
+        None,
+        params,
+        vec![0.0; n],
+        vec![0.0; n],
+    )?;
+    p.sim = SimSettings {
+        substeps,
+        ..Default::default()
+    };
+    Ok(update::fit(&p, &FitSettings::default())?.model)
+}
+
+/// The interface fit ([`interface_fit`]) scored on several records.
+#[derive(Debug, Clone, Serialize)]
+pub struct InterfaceFit {
+    /// Cubic spring between `wing` and `payload`, N/m³.
+    pub k3: f64,
+    /// Quadratic damper between them, N s²/m².
+    pub c2: f64,
+    /// The coupling spring `wing`–`payload`: Level-1 value and fitted, N/m.
+    pub coupling: Option<(f64, f64)>,
+    /// Per record: file, the Level-1 model's and the interface model's
+    /// open-loop RMS error per channel (m/s², steady-state periods).
+    pub errors: Vec<(String, Vec<f64>, Vec<f64>)>,
+    /// Seconds of the fit.
+    pub seconds: f64,
+}
+
+/// Fit the interface model on `estimate` (wing bending and torsion
+/// damping freed with it) and score it with the Level-1 model on `records`.
+pub fn interface_study(
+    linear: &Path,
+    estimate: &Path,
+    records: &[&Path],
+    s: &Settings,
+) -> Result<(InterfaceFit, Model)> {
+    let lin = read(linear)?;
+    let (_, text) = linear_model(&lin, s)?;
+    let l1 = modal::from_toml_str(&text, "f16-linear")?;
+    let mut est = read(estimate)?;
+    l1.resolve_channels(&mut est)?;
+    let t = std::time::Instant::now();
+    let m = interface_fit(&l1, &est, [2, 3], (-3.0e12, 1.5e5), &[5.2, 7.3], s.substeps)?;
+    let seconds = t.elapsed().as_secs_f64();
+    let mut errors = vec![];
+    for p in records {
+        let mut r = read(p)?;
+        l1.resolve_channels(&mut r)?;
+        errors.push((
+            p.display().to_string(),
+            rms_per_channel(&l1, &r, s.warm_up, s.substeps)?,
+            rms_per_channel(&m, &r, s.warm_up, s.substeps)?,
+        ));
+    }
+    let coupling = |mm: &Model| {
+        mm.springs
+            .iter()
+            .find(|sp| sp.dofs == [2, 3])
+            .map(|sp| sp.stiffness)
+    };
+    let fit = InterfaceFit {
+        k3: m.cubics.last().map_or(0.0, |c| c.k3),
+        c2: m.quadratic_dampers.last().map_or(0.0, |d| d.c2),
+        coupling: coupling(&l1).zip(coupling(&m)),
+        errors,
+        seconds,
+    };
+    Ok((fit, m))
+}
