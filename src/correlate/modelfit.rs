@@ -50,6 +50,14 @@ pub struct ModelFitSettings {
     pub residuals: bool,
 }
 
+impl ModelFitSettings {
+    /// Check the FRF and curve-fit settings against a sample rate.
+    pub fn validate(&self, fs: f64) -> Result<()> {
+        self.frf.validate()?;
+        self.fit.validate(fs)
+    }
+}
+
 /// What came out of [`identify_model`].
 #[derive(Debug, Clone, Serialize)]
 pub struct ModelFit {
@@ -135,6 +143,7 @@ pub fn identify_model(records: &[Record], settings: &ModelFitSettings) -> Result
     let first = records
         .first()
         .ok_or_else(|| TacitError::Setting("the identification needs a record".into()))?;
+    settings.validate(first.fs)?;
     let (pts, dp) = points(first)?;
     let recs = renumbered(records, &pts)?;
     let sensors: Vec<usize> = (1..=pts.len()).collect();

@@ -441,4 +441,79 @@ mod tests {
             "{e}"
         );
     }
+
+    /// A MATLAB v5 file (uncompressed, little-endian) holding real double
+    /// matrices `(name, rows, cols, column-major data)`, built byte by byte
+    /// after the MAT-file format description.
+    fn v5_file(vars: &[(&str, usize, usize, Vec<f64>)]) -> Vec<u8> {
+        let mut b = b"MATLAB 5.0 MAT-file, written by a tacit test".to_vec();
+        b.resize(116, b' ');
+        b.extend_from_slice(&[0; 8]);
+        b.extend_from_slice(&0x0100u16.to_le_bytes());
+        b.extend_from_slice(b"IM");
+        let tag = |t: u32, n: usize| [t.to_le_bytes(), (n as u32).to_le_bytes()].concat();
+        for (name, r, c, data) in vars {
+            let mut e = tag(6, 8);
+            e.extend_from_slice(&6u32.to_le_bytes()); // mxDOUBLE_CLASS
+            e.extend_from_slice(&0u32.to_le_bytes());
+            e.extend(tag(5, 8));
+            e.extend_from_slice(&(*r as i32).to_le_bytes());
+            e.extend_from_slice(&(*c as i32).to_le_bytes());
+            e.extend(tag(1, name.len()));
+            e.extend_from_slice(name.as_bytes());
+            e.resize(e.len().div_ceil(8) * 8, 0);
+            e.extend(tag(9, 8 * data.len()));
+            data.iter()
+                .for_each(|v| e.extend_from_slice(&v.to_le_bytes()));
+            b.extend(tag(14, e.len()));
+            b.extend(e);
+        }
+        b
+    }
+
+    #[test]
+    fn tall_matrices_map_columns_and_wide_ones_rows() {
+        let n = 6;
+        // column-major: a tall N x 2 matrix, column j holds 10 j + k
+        let tall: Vec<f64> = (0..2)
+            .flat_map(|j| (0..n).map(move |k| (10 * j + k) as f64))
+            .collect();
+        // a wide 2 x N matrix, row i holds 100 i + k
+        let wide: Vec<f64> = (0..n)
+            .flat_map(|k| (0..2).map(move |i| (100 * i + k) as f64))
+            .collect();
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("m.mat");
+        let bytes = v5_file(&[
+            ("T", n, 2, tall),
+            ("W", 2, n, wide),
+            ("fs", 1, 1, vec![50.0]),
+        ]);
+        std::fs::write(&p, bytes).unwrap();
+        let ch = |v: &str, k: usize, d: usize| MatChannel {
+            signal: Some(k),
+            ..MatChannel::at_dof(v, Quantity::Accel, d)
+        };
+        let m = MatMapping {
+            channels: vec![ch("T", 2, 1), ch("W", 2, 2)],
+            fs: MatRate::Variable("fs".into()),
+            remove_mean: false,
+        };
+        let rec = read(&p, &m).unwrap();
+        assert_eq!(rec.fs, 50.0);
+        assert_eq!(rec.outputs[0].data, [10.0, 11.0, 12.0, 13.0, 14.0, 15.0]);
+        assert_eq!(
+            rec.outputs[1].data,
+            [100.0, 101.0, 102.0, 103.0, 104.0, 105.0]
+        );
+        let m = MatMapping {
+            channels: vec![ch("T", 3, 1)],
+            ..m
+        };
+        let e = read(&p, &m).unwrap_err().to_string();
+        assert!(
+            e.contains("variable T column 3") && e.contains("2 columns"),
+            "{e}"
+        );
+    }
 }
