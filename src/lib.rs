@@ -75,6 +75,7 @@ pub mod simulate;
 
 pub use error::{Result, TacitError};
 pub mod calibrate;
+pub mod campaign;
 pub mod cases;
 pub mod correlate;
 pub mod diagnose;

@@ -223,7 +223,7 @@ fn window_longer_than_the_record_is_blamed_on_window() {
     let o = identify(
         Path::new(BUMPER),
         &d.path().join("o"),
-        &["--window", "30", "--horizon", "10"],
+        &["--method", "mhe", "--window", "30", "--horizon", "10"],
     );
     fails_with(&o, &["--horizon 10", "30..=4096"]);
 }

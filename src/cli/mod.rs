@@ -1,5 +1,6 @@
 //! Command-line front end: one file per subcommand.
 
+mod campaign;
 pub mod check;
 mod diagnose;
 mod identify;
@@ -33,6 +34,8 @@ enum Command {
     Update(update::Args),
     /// Find what the model misses, trace it to an effect, add and fit it, report before/after.
     Diagnose(diagnose::Args),
+    /// Diagnose many records against one model, summarize, fit shared parameters.
+    Campaign(campaign::Args),
 }
 
 /// Run the parsed command.
@@ -43,6 +46,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Identify(a) => identify::run(a),
         Command::Update(a) => update::run(a),
         Command::Diagnose(a) => diagnose::run(a),
+        Command::Campaign(a) => campaign::run(a),
     }
 }
 

@@ -15,6 +15,7 @@ pub mod checks;
 pub mod csvio;
 pub mod hdf5io;
 pub mod matio;
+pub mod uff;
 pub mod units;
 
 /// What a channel measures.
@@ -304,6 +305,8 @@ pub enum Format {
     Csv,
     /// `.mat` (MATLAB v5).
     Mat,
+    /// `.uff` / `.unv` (universal file, ASCII datasets 58; read only).
+    Uff,
 }
 
 impl Format {
@@ -318,9 +321,10 @@ impl Format {
             Some("h5") | Some("hdf5") => Ok(Format::Hdf5),
             Some("csv") => Ok(Format::Csv),
             Some("mat") => Ok(Format::Mat),
+            Some("uff") | Some("unv") => Ok(Format::Uff),
             _ => Err(TacitError::record(
                 path,
-                "unknown extension: expected .h5, .hdf5, .csv or .mat",
+                "unknown extension: expected .h5, .hdf5, .csv, .mat, .uff or .unv",
             )),
         }
     }
@@ -517,7 +521,8 @@ impl Record {
     }
 }
 
-/// Read a record (HDF5 or CSV; `.mat` needs [`read_mat`]), convert its
+/// Read a record (HDF5, CSV or universal file dataset 58; `.mat` needs
+/// [`read_mat`]), convert its
 /// channels to SI by their `unit` and validate it.
 pub fn read(path: &Path) -> Result<Record> {
     read_with_conversions(path).map(|(rec, _)| rec)
@@ -528,6 +533,7 @@ pub fn read_with_conversions(path: &Path) -> Result<(Record, Vec<units::Conversi
     let mut rec = match Format::from_path(path)? {
         Format::Hdf5 => hdf5io::read(path)?,
         Format::Csv => csvio::read(path)?,
+        Format::Uff => uff::read(path)?,
         Format::Mat => {
             return Err(TacitError::record(
                 path,
@@ -556,6 +562,10 @@ pub fn write(rec: &Record, path: &Path) -> Result<()> {
         Format::Hdf5 => hdf5io::write(rec, tmp),
         Format::Csv => csvio::write(rec, tmp),
         Format::Mat => Err(TacitError::record(path, "writing .mat is not supported")),
+        Format::Uff => Err(TacitError::record(
+            path,
+            "writing universal files is not supported: write .h5 or .csv",
+        )),
     })
 }
 
