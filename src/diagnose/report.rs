@@ -464,7 +464,7 @@ fn force_figures(dir: &Path, d: &Diagnosis, t: &[f64]) -> Vec<(Figure, PathBuf)>
     jobs
 }
 
-/// A percentage of an error, `NaN` when missing.
+/// An error (a fraction) to four decimals, `NaN` when missing.
 fn p4(x: Option<f64>) -> String {
     format!("{:.4}", x.unwrap_or(f64::NAN))
 }
