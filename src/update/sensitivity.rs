@@ -249,7 +249,7 @@ fn unit_damping(model: &Model, target: Target) -> std::result::Result<Damping, S
             },
             Target::DampingRatio,
         ) if !ratios.is_empty() => {
-            let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
+            let mean = super::param::mean_ratio(ratios);
             ratios.iter().map(|z| z / mean.max(1e-300)).collect()
         }
         (
