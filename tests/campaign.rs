@@ -3,27 +3,13 @@
 //! stiffness fitted to the three records at once; a second run keeps the
 //! records done; bad manifests are refused with the key named.
 
+mod common;
+
+use common::{tacit, text};
 use std::path::Path;
-use std::process::{Command, Output};
 use tacit::integrate::SimSettings;
 use tacit::model::Model;
 use tacit::simulate::{simulate_record, InputSpec, RecordSpec};
-
-fn tacit(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tacit"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap()
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
 
 fn data(name: &str) -> String {
     format!("{}/data/{name}", env!("CARGO_MANIFEST_DIR"))

@@ -4,6 +4,9 @@
 //! spiky, offset channels, missing force), messages without internals.
 //! Each test holds one row of docs/reliability.md.
 
+mod common;
+
+use common::{stderr, tacit};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -12,18 +15,6 @@ use tacit::record::{self, Channel, Record};
 const MODEL: &str = "data/lanl8dof.toml";
 const CONTACT: &str = "data/lanl8dof-contact.toml";
 const BUMPER: &str = "data/lanl8dof-bumper.h5";
-
-fn tacit(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tacit"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// Exit 1, the message holds every `needle`, no panic, no Rust debug text.
 fn fails_with(o: &Output, needles: &[&str]) -> String {
@@ -73,6 +64,21 @@ fn identify(rec: &Path, out: &Path, extra: &[&str]) -> Output {
     tacit(&args)
 }
 
+/// `diagnose` of a record against the declared model.
+fn diagnose(rec: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "diagnose",
+        "--model",
+        MODEL,
+        "--record",
+        p(rec),
+        "-o",
+        p(out),
+    ];
+    args.extend_from_slice(extra);
+    tacit(&args)
+}
+
 fn hidden_entries(dir: &Path) -> Vec<String> {
     std::fs::read_dir(dir)
         .unwrap()
@@ -99,17 +105,7 @@ fn huge_substeps_are_refused_by_every_command() {
         p(&d.path().join("r.h5")),
     ]);
     fails_with(&o, &["--substeps 1000000000", "1..=1000"]);
-    let o = tacit(&[
-        "diagnose",
-        "--model",
-        MODEL,
-        "--record",
-        BUMPER,
-        "--substeps",
-        "1000000000",
-        "-o",
-        p(&out),
-    ]);
+    let o = diagnose(Path::new(BUMPER), &out, &["--substeps", "1000000000"]);
     fails_with(&o, &["--substeps 1000000000"]);
     let o = identify(Path::new(BUMPER), &out, &["--substeps", "1000000000"]);
     fails_with(&o, &["--substeps 1000000000"]);
@@ -170,19 +166,7 @@ fn alpha_grid_count_is_bounded() {
 fn segment_inf_tiny_and_max_effects_zero_are_refused() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("o");
-    let run = |extra: &[&str]| {
-        let mut a = vec![
-            "diagnose",
-            "--model",
-            MODEL,
-            "--record",
-            BUMPER,
-            "-o",
-            p(&out),
-        ];
-        a.extend_from_slice(extra);
-        tacit(&a)
-    };
+    let run = |extra: &[&str]| diagnose(Path::new(BUMPER), &out, extra);
     fails_with(&run(&["--segment", "inf"]), &["--segment inf"]);
     let e = fails_with(&run(&["--segment", "1e-9"]), &["--segment 0.000000001 s"]);
     assert!(e.contains("0.015625 to 4.000000 s"), "{e}");
@@ -594,29 +578,13 @@ fn missing_force_and_dead_selected_channel_are_errors_naming_the_channel() {
     rec.inputs.clear();
     let nf = save(&rec, d.path(), "noforce.h5");
     let out = d.path().join("o");
-    let o = tacit(&[
-        "diagnose",
-        "--model",
-        MODEL,
-        "--record",
-        p(&nf),
-        "-o",
-        p(&out),
-    ]);
+    let o = diagnose(&nf, &out, &[]);
     fails_with(&o, &["no force channel", "noforce.h5"]);
     assert!(!out.exists());
     let mut rec = bumper();
     output_mut(&mut rec, "accel_6").data.fill(0.0);
     let dead = save(&rec, d.path(), "dead.h5");
-    let o = tacit(&[
-        "diagnose",
-        "--model",
-        MODEL,
-        "--record",
-        p(&dead),
-        "-o",
-        p(&out),
-    ]);
+    let o = diagnose(&dead, &out, &[]);
     let e = fails_with(&o, &["channel accel_6 is dead"]);
     assert!(!e.contains("channel 5"), "{e}");
     let o = identify(&dead, &out, &[]);
@@ -681,17 +649,7 @@ fn diagnose_report_carries_the_record_warnings() {
     output_mut(&mut rec, "accel_2").data[2000] = 1e6;
     let path = save(&rec, d.path(), "spike.h5");
     let out = d.path().join("o");
-    let o = tacit(&[
-        "diagnose",
-        "--model",
-        MODEL,
-        "--record",
-        p(&path),
-        "--sensors",
-        "1,5,6",
-        "-o",
-        p(&out),
-    ]);
+    let o = diagnose(&path, &out, &["--sensors", "1,5,6"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
@@ -860,15 +818,7 @@ fn values_beyond_1e100_are_refused_by_every_command() {
         "other channels too",
     ];
     fails_with(&identify(&big, &d.path().join("i"), &[]), &want);
-    let o = tacit(&[
-        "diagnose",
-        "--model",
-        MODEL,
-        "--record",
-        p(&big),
-        "-o",
-        p(&d.path().join("d")),
-    ]);
+    let o = diagnose(&big, &d.path().join("d"), &[]);
     fails_with(&o, &want);
     let o = tacit(&[
         "update",

@@ -3,7 +3,9 @@
 //! the true internal force): the force comes back at the contact DOFs and
 //! nowhere else.
 
-use std::process::Command;
+mod common;
+
+use common::{tacit, text};
 use tacit::identify::{identify_located, LocatedSettings, Problem};
 use tacit::model::Model;
 
@@ -58,27 +60,19 @@ fn lifted_default_finds_the_contact_force_on_the_shipped_record() {
 fn the_cli_default_is_the_lifted_method() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("id");
-    let o = Command::new(env!("CARGO_BIN_EXE_tacit"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args([
-            "identify",
-            "--model",
-            "data/lanl8dof.toml",
-            "--record",
-            "data/lanl8dof-bumper.h5",
-            "--sensors",
-            "1,5,6",
-            "--no-figures",
-            "-o",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let o = tacit(&[
+        "identify",
+        "--model",
+        "data/lanl8dof.toml",
+        "--record",
+        "data/lanl8dof-bumper.h5",
+        "--sensors",
+        "1,5,6",
+        "--no-figures",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let text = text(&o);
     assert!(o.status.success(), "{text}");
     let s: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
@@ -86,23 +80,19 @@ fn the_cli_default_is_the_lifted_method() {
     let c5 = s["truth"]["correlation"][4].as_f64().unwrap();
     assert!(c5 >= 0.9, "correlation at DOF 5: {c5}");
     // a reduction is refused with the option named
-    let o = Command::new(env!("CARGO_BIN_EXE_tacit"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args([
-            "identify",
-            "--model",
-            "data/lanl8dof.toml",
-            "--record",
-            "data/lanl8dof-bumper.h5",
-            "--sensors",
-            "1,5,6",
-            "--reduce",
-            "serep",
-            "-o",
-            dir.path().join("bad").to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
+    let o = tacit(&[
+        "identify",
+        "--model",
+        "data/lanl8dof.toml",
+        "--record",
+        "data/lanl8dof-bumper.h5",
+        "--sensors",
+        "1,5,6",
+        "--reduce",
+        "serep",
+        "-o",
+        dir.path().join("bad").to_str().unwrap(),
+    ]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--reduce"));
     assert!(!dir.path().join("bad").exists());

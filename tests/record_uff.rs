@@ -4,6 +4,9 @@
 //! DOF 6 along −X) read back against the HDF5 record it was made from,
 //! through the CLI too.
 
+mod common;
+
+use common::{tacit, text};
 use std::path::Path;
 
 fn root(rel: &str) -> std::path::PathBuf {
@@ -38,23 +41,20 @@ fn pyuff_file_reads_as_the_hdf5_record() {
 #[test]
 fn identify_reads_a_universal_file() {
     let d = tempfile::tempdir().unwrap();
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_tacit"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args([
-            "identify",
-            "--model",
-            "data/lanl8dof.toml",
-            "--record",
-            "tests/data/bumper-512.uff",
-            "--sensors",
-            "1,5,6",
-            "--no-figures",
-            "-o",
-        ])
-        .arg(d.path().join("id"))
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    let out = d.path().join("id");
+    let o = tacit(&[
+        "identify",
+        "--model",
+        "data/lanl8dof.toml",
+        "--record",
+        "tests/data/bumper-512.uff",
+        "--sensors",
+        "1,5,6",
+        "--no-figures",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let text = text(&o);
     assert!(o.status.success(), "{text}");
     assert!(text.contains("force located at pair 5–6"), "{text}");
 }

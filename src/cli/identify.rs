@@ -9,7 +9,6 @@ use tacit::identify::{
     self, Constraints, IdentifySettings, Method, Problem, Reduce, Regularization, Solver, Status,
 };
 use tacit::model::Model;
-use tacit::record;
 
 /// Identification method on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -283,11 +282,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         (Some(v), None) => Regularization::Fixed(v),
         (None, None) => IdentifySettings::default().regularization,
     };
+    let prob = Problem::new(&model.linear_part(), &rec, &a.sensors.0)?;
     if a.method == CliMethod::Horizon {
-        return run_horizon(&a, &model, &rec, staging);
+        return run_horizon(&a, &prob, staging);
     }
     if a.method == CliMethod::Lifted {
-        return run_lifted(&a, &model, &rec, staging);
+        return run_lifted(&a, &model, &prob, staging);
     }
     let settings = IdentifySettings {
         method: if a.method == CliMethod::Paper {
@@ -315,7 +315,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         },
         ..Default::default()
     };
-    let prob = Problem::new(&model.linear_part(), &rec, &a.sensors.0)?;
     let bar = if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
         let b = indicatif::ProgressBar::new(1);
         b.set_style(
@@ -363,15 +362,9 @@ fn finish(
 
 /// `--method horizon`: the full-horizon formulation through the same
 /// outputs as the window methods.
-fn run_horizon(
-    a: &Args,
-    model: &Model,
-    rec: &record::Record,
-    staging: super::output::Staging,
-) -> anyhow::Result<()> {
+fn run_horizon(a: &Args, prob: &Problem, staging: super::output::Staging) -> anyhow::Result<()> {
     use tacit::horizon;
-    let prob = Problem::new(&model.linear_part(), rec, &a.sensors.0)?;
-    let sys = identify::System::new(&prob, a.reduce.unwrap_or(Reduce::Serep), a.substeps)?;
+    let sys = identify::System::new(prob, a.reduce.unwrap_or(Reduce::Serep), a.substeps)?;
     let mut bounds: Vec<(usize, f64, f64)> = vec![];
     for &(d, v) in &a.lower {
         bounds.push((d - 1, v, f64::INFINITY));
@@ -407,7 +400,7 @@ fn run_horizon(
         },
         ..Default::default()
     };
-    let (_, est) = horizon::convert::identify_problem(&prob, &sys, &[], &hs)?;
+    let (_, est) = horizon::convert::identify_problem(prob, &sys, &[], &hs)?;
     finish(a, &est, staging)
 }
 
@@ -415,10 +408,9 @@ fn run_horizon(
 fn run_lifted(
     a: &Args,
     model: &Model,
-    rec: &record::Record,
+    prob: &Problem,
     staging: super::output::Staging,
 ) -> anyhow::Result<()> {
-    let prob = Problem::new(&model.linear_part(), rec, &a.sensors.0)?;
     let defaults = identify::LocatedSettings::default();
     let settings = identify::LocatedSettings {
         lifted: tacit::diagnose::lifted::LiftedSettings {
@@ -437,7 +429,7 @@ fn run_lifted(
         },
         substeps: a.substeps,
     };
-    let est = identify::identify_located(model, &prob, &settings)?;
+    let est = identify::identify_located(model, prob, &settings)?;
     finish(a, &est, staging)
 }
 

@@ -233,7 +233,6 @@ fn write_model(a: &Args, out: &Path) -> anyhow::Result<()> {
         r.source = p.clone();
         recs.push(r);
     }
-    let shortest = recs.iter().map(|r| r.len()).min().unwrap_or(0);
     let window = a.window.unwrap_or_default();
     let mut frf = FrfSettings {
         window,
@@ -244,21 +243,7 @@ fn write_model(a: &Args, out: &Path) -> anyhow::Result<()> {
         },
         ..Default::default()
     };
-    if let Some(s) = a.segment {
-        check::count(
-            "--segment",
-            s,
-            16,
-            shortest.max(16),
-            "FRF segment length, samples, at most the record's length",
-        )?;
-        frf.segment = s;
-    }
-    let mut fit = FitSettings::default();
-    if let Some(b) = a.band {
-        check::band("--band", b, recs[0].fs)?;
-        fit.band_hz = b;
-    }
+    let mut fit = segment_and_band(a, &recs, &mut frf)?;
     if let Some((lo, hi)) = a.orders {
         let ok = |v: f64| v.fract() == 0.0 && (2.0..=200.0).contains(&v);
         if !(ok(lo) && ok(hi) && lo <= hi) {
@@ -325,6 +310,33 @@ fn write_model(a: &Args, out: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `--segment` (checked against the shortest record) into `frf`; the
+/// curve-fit settings with `--band` (checked against the first record's
+/// Nyquist frequency).
+fn segment_and_band(
+    a: &Args,
+    recs: &[tacit::record::Record],
+    frf: &mut FrfSettings,
+) -> anyhow::Result<FitSettings> {
+    if let Some(s) = a.segment {
+        let shortest = recs.iter().map(|r| r.len()).min().unwrap_or(0);
+        check::count(
+            "--segment",
+            s,
+            16,
+            shortest.max(16),
+            "FRF segment length, samples, at most the record's length",
+        )?;
+        frf.segment = s;
+    }
+    let mut fit = FitSettings::default();
+    if let Some(b) = a.band {
+        check::band("--band", b, recs[0].fs)?;
+        fit.band_hz = b;
+    }
+    Ok(fit)
+}
+
 /// Test modes from a file or identified from records; the curve-fit
 /// summary for JSON.
 fn test_modes(a: &Args, model: &Model) -> anyhow::Result<(TestModes, Option<serde_json::Value>)> {
@@ -363,22 +375,7 @@ fn test_modes(a: &Args, model: &Model) -> anyhow::Result<(TestModes, Option<serd
         super::records::check(r, model, Some(&sensors))?;
     }
     let mut frf = FrfSettings::default();
-    let shortest = recs.iter().map(|r| r.len()).min().unwrap_or(0);
-    if let Some(s) = a.segment {
-        check::count(
-            "--segment",
-            s,
-            16,
-            shortest.max(16),
-            "FRF segment length, samples, at most the record's length",
-        )?;
-        frf.segment = s;
-    }
-    let mut fit = FitSettings::default();
-    if let Some(b) = a.band {
-        check::band("--band", b, recs[0].fs)?;
-        fit.band_hz = b;
-    }
+    let fit = segment_and_band(a, &recs, &mut frf)?;
     if let Some(d) = a.input_dof {
         super::check_dofs(&[d], model.ndof(), "--input-dof")?;
     }

@@ -453,14 +453,6 @@ pub fn scale(pairs: &[(String, f64, f64)], s: &CheckSettings) -> Option<Finding>
     })
 }
 
-/// RMS of a signal.
-pub fn rms(x: &[f64]) -> f64 {
-    if x.is_empty() {
-        return 0.0;
-    }
-    (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

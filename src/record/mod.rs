@@ -110,10 +110,16 @@ impl Channel {
     }
     /// Channel name: `accel_5`, or `accel:n12:uy` for a labelled point.
     pub fn name(&self) -> String {
-        match &self.point {
-            Some(p) => format!("{}:{p}", self.quantity.prefix()),
-            None => format!("{}_{}", self.quantity.prefix(), self.dof),
-        }
+        channel_name(self.quantity, self.dof, self.point.as_deref())
+    }
+}
+
+/// A channel's name: `<quantity>_<dof>`, or `<quantity>:<label>` at a
+/// labelled point.
+fn channel_name(quantity: Quantity, dof: usize, point: Option<&str>) -> String {
+    match point {
+        Some(p) => format!("{}:{p}", quantity.prefix()),
+        None => format!("{}_{dof}", quantity.prefix()),
     }
 }
 
@@ -422,10 +428,7 @@ impl MatChannel {
 
     /// The channel's name (`force_1`, `accel:wing`).
     pub fn name(&self) -> String {
-        match &self.point {
-            Some(p) => format!("{}:{p}", self.quantity.prefix()),
-            None => format!("{}_{}", self.quantity.prefix(), self.dof),
-        }
+        channel_name(self.quantity, self.dof, self.point.as_deref())
     }
 
     /// The variable and the signal, for messages: `Acceleration row 2`
