@@ -2,6 +2,7 @@
 //! `report.json`, the spread of every parameter across records, and the
 //! writers (CSV, JSON, Markdown).
 
+use crate::diagnose::report::pct;
 use crate::error::{Result, TacitError};
 use serde::Serialize;
 use serde_json::Value;
@@ -162,11 +163,6 @@ pub fn spreads(rows: &[Row]) -> Vec<Spread> {
             }
         })
         .collect()
-}
-
-/// A fraction as a percentage, or `failed`.
-pub fn pct(x: Option<f64>) -> String {
-    x.map_or("failed".into(), |v| format!("{:.2} %", 100.0 * v))
 }
 
 /// A parameter value with its unit (gaps in mm).

@@ -367,8 +367,8 @@ fn joint_markdown(joint: &Option<Result<joint::JointFit, String>>) -> String {
         s.push_str(&format!(
             "| {} | {} | {} |\n",
             r.name,
-            summary::pct(r.own),
-            summary::pct(r.joint)
+            tacit::diagnose::report::pct(r.own),
+            tacit::diagnose::report::pct(r.joint)
         ));
     }
     s

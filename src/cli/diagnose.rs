@@ -190,7 +190,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     staging.commit()?;
     outln!("{}", d.verdict);
-    let pct = |x: Option<f64>| x.map_or("failed".to_string(), |v| format!("{:.2} %", 100.0 * v));
+    let pct = report::pct;
     outln!(
         "relative_error {} -> {}   simulation_error {} -> {}",
         pct(d.before.relative_error),

@@ -29,6 +29,7 @@
 //! apart from the effects.
 
 use super::fit::spread;
+use super::report::pct;
 use super::{effects, joint, prepare_located, DiagnoseSettings, Diagnosis, ErrorSet};
 use crate::calibrate::{self, params, Calibration, CalibrationSettings, LinearParam};
 use crate::error::Result;
@@ -432,8 +433,4 @@ fn lower(a: Option<f64>, b: Option<f64>) -> bool {
         (Some(_), None) => true,
         _ => false,
     }
-}
-
-fn pct(x: Option<f64>) -> String {
-    x.map_or("failed".into(), |v| format!("{:.2} %", 100.0 * v))
 }

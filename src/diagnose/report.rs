@@ -75,7 +75,9 @@ pub fn write(
     Ok(out)
 }
 
-fn pct(x: Option<f64>) -> String {
+/// A fraction as a percentage with two decimals, or `failed` (an error
+/// that could not be computed).
+pub fn pct(x: Option<f64>) -> String {
     x.map_or("failed".into(), |v| format!("{:.2} %", 100.0 * v))
 }
 
