@@ -30,14 +30,18 @@
 //! - [`identify`], [`horizon`]: internal-force identification (sliding
 //!   windows; the full-horizon smoother);
 //! - [`trace`]: the residual traced to candidate effects;
-//! - [`diagnose`]: the close-the-loop diagnosis, tacit's main job.
+//! - [`diagnose`]: the close-the-loop diagnosis, tacit's main job;
+//!   [`calibrate`]: the declared model's linear part calibrated on
+//!   records; [`campaign`]: many records of one structure diagnosed and
+//!   fitted together.
 //!
 //! Output: [`plot`] (figures), [`io`] (atomic writes), [`diagnose::report`]
 //! (the diagnosis's files).
 //!
 //! Applications and the paper's case set-ups, outside the core:
 //! [`cases`] (Table 4's cubic chain, the bumper shooting check, the
-//! Silverbox benchmark run end to end).
+//! Silverbox benchmark and the F-16 ground vibration test run end to
+//! end).
 //!
 //! # The diagnosis pipeline
 //!

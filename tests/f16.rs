@@ -12,6 +12,14 @@ fn level(n: u32) -> Option<PathBuf> {
     tacit::record::shared_data(&format!("f16/F16Data_FullMSine_Level{n}.mat"))
 }
 
+/// RMS of each output channel over the samples after `warm_up`.
+fn steady_rms(rec: &tacit::record::Record, warm_up: usize) -> Vec<f64> {
+    rec.outputs
+        .iter()
+        .map(|c| tacit::signal::rms_of(&c.data[warm_up..]))
+        .collect()
+}
+
 const MAP: &str =
     "Force=force:exc,Acceleration[1]=accel:exc,Acceleration[2]=accel:wing,Acceleration[3]=accel:payload";
 
@@ -44,14 +52,7 @@ fn level1_modal_model_has_the_benchmark_modes_and_simulates_the_record() {
     let mut rec = rec;
     model.resolve_channels(&mut rec).unwrap();
     let err = f16::rms_per_channel(&model, &rec, s.warm_up, s.substeps).unwrap();
-    let rms: Vec<f64> = rec
-        .outputs
-        .iter()
-        .map(|c| {
-            let x = &c.data[s.warm_up..];
-            (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
-        })
-        .collect();
+    let rms = steady_rms(&rec, s.warm_up);
     for c in 0..3 {
         assert!(
             err[c] < 0.3 * rms[c],
@@ -63,14 +64,7 @@ fn level1_modal_model_has_the_benchmark_modes_and_simulates_the_record() {
     let mut r7 = f16::read(&l7).unwrap();
     model.resolve_channels(&mut r7).unwrap();
     let err7 = f16::rms_per_channel(&model, &r7, s.warm_up, s.substeps).unwrap();
-    let rms7: Vec<f64> = r7
-        .outputs
-        .iter()
-        .map(|c| {
-            let x = &c.data[s.warm_up..];
-            (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
-        })
-        .collect();
+    let rms7 = steady_rms(&r7, s.warm_up);
     for c in 1..3 {
         assert!(
             err7[c] / rms7[c] > 2.0 * err[c] / rms[c],

@@ -19,7 +19,6 @@ use crate::error::{Result, TacitError};
 use crate::integrate::{Integrator, SimSettings};
 use crate::model::{modal, Model};
 use crate::record::{self, MatChannel, MatMapping, MatRate, Quantity, Record, WarmUp};
-use nalgebra::DMatrix;
 use serde::Serialize;
 use std::path::Path;
 
@@ -139,7 +138,8 @@ pub fn linear_model(rec: &Record, s: &Settings) -> Result<(ModelFit, String)> {
 
 /// Open-loop simulation of `model` from rest under the record's force;
 /// the RMS error per output channel (m/s²) over the samples after
-/// `warm_up`, in the order of the record's outputs.
+/// `warm_up`, in the order of the record's outputs. The record's channels
+/// are resolved to the model's DOFs ([`Model::resolve_channels`]).
 pub fn rms_per_channel(
     model: &Model,
     rec: &Record,
@@ -148,12 +148,7 @@ pub fn rms_per_channel(
 ) -> Result<Vec<f64>> {
     let n = rec.len();
     let nd = model.ndof();
-    let mut force = DMatrix::zeros(nd, n);
-    for c in &rec.inputs {
-        for (k, v) in c.data.iter().enumerate() {
-            force[(c.dof - 1, k)] += v;
-        }
-    }
+    let force = crate::signal::force_matrix(rec, nd);
     let sim = SimSettings {
         substeps,
         ..Default::default()
@@ -239,11 +234,6 @@ pub struct F16Result {
     pub settings: Settings,
 }
 
-fn rms(x: &[f64], from: usize) -> f64 {
-    let s: f64 = x[from..].iter().map(|v| v * v).sum();
-    (s / (x.len() - from) as f64).sqrt()
-}
-
 fn before_after(rec: &Record, models: [&Model; 3], s: &Settings) -> Result<BeforeAfter> {
     let [before, calibrated, after] = models;
     Ok(BeforeAfter {
@@ -252,7 +242,7 @@ fn before_after(rec: &Record, models: [&Model; 3], s: &Settings) -> Result<Befor
         rms_measured: rec
             .outputs
             .iter()
-            .map(|c| rms(&c.data, s.warm_up))
+            .map(|c| crate::signal::rms_of(&c.data[s.warm_up..]))
             .collect(),
         before: Errors {
             rms_per_channel: rms_per_channel(before, rec, s.warm_up, s.substeps)?,
@@ -456,10 +446,7 @@ pub fn interface_fit(
         vec![0.0; n],
         vec![0.0; n],
     )?;
-    p.sim = SimSettings {
-        substeps,
-        ..Default::default()
-    };
+    p.sim.substeps = substeps;
     Ok(update::fit(&p, &FitSettings::default())?.model)
 }
 

@@ -180,8 +180,8 @@ impl FitResult {
 /// ratio, number of stable poles behind it.
 pub(crate) type Group = (f64, f64, usize);
 
-/// Lines of the FRF inside the band.
-fn band_lines(frf: &Frf, band: (f64, f64)) -> Vec<usize> {
+/// Lines of the FRF inside the band (Hz).
+pub(crate) fn band_lines(frf: &Frf, band: (f64, f64)) -> Vec<usize> {
     (0..frf.freq_hz.len())
         .filter(|&l| frf.freq_hz[l] >= band.0 && frf.freq_hz[l] <= band.1)
         .collect()
@@ -404,11 +404,6 @@ fn median(v: &mut [f64]) -> f64 {
     } else {
         0.5 * (v[n / 2 - 1] + v[n / 2])
     }
-}
-
-/// Lines of the FRF inside `band` (Hz).
-pub(crate) fn lines_in(frf: &Frf, band: (f64, f64)) -> Vec<usize> {
-    band_lines(frf, band)
 }
 
 /// LSFD: real modal constants (outputs × modes) and the relative fit error

@@ -32,7 +32,7 @@ use super::fit::{self, FitSettings, Group};
 use super::frf::{h1_records, Frf, FrfSettings};
 use crate::error::{Result, TacitError};
 use crate::model::modal::{ModalMode, ModalSection};
-use crate::record::{Quantity, Record};
+use crate::record::{Channel, Quantity, Record};
 use nalgebra::DMatrix;
 use serde::Serialize;
 
@@ -78,12 +78,15 @@ pub struct ModelFit {
     pub diagnostics: Vec<String>,
 }
 
+/// A channel's point label: its point, or `dof<k>` for a channel by DOF.
+fn label(c: &Channel) -> String {
+    c.point.clone().unwrap_or_else(|| format!("dof{}", c.dof))
+}
+
 /// The measured points of a record: (label, record DOF) of each
 /// acceleration channel, and the index of the force's point among them.
 fn points(rec: &Record) -> Result<(Vec<(String, usize)>, usize)> {
     let err = |m: String| TacitError::record(rec.source.clone(), m);
-    let label =
-        |c: &crate::record::Channel| c.point.clone().unwrap_or_else(|| format!("dof{}", c.dof));
     let pts: Vec<(String, usize)> = rec
         .outputs
         .iter()
@@ -122,7 +125,7 @@ fn renumbered(records: &[Record], pts: &[(String, usize)]) -> Result<Vec<Record>
     for r in records {
         let mut r = r.clone();
         for c in r.inputs.iter_mut().chain(r.outputs.iter_mut()) {
-            let l = c.point.clone().unwrap_or_else(|| format!("dof{}", c.dof));
+            let l = label(c);
             let i = pts.iter().position(|p| p.0 == l).ok_or_else(|| {
                 TacitError::record(
                     r.source.clone(),
@@ -163,7 +166,7 @@ pub fn identify_model(records: &[Record], settings: &ModelFitSettings) -> Result
             diagnostics.join("; ")
         )));
     }
-    let lines = fit::lines_in(&frf, settings.fit.band_hz);
+    let lines = fit::band_lines(&frf, settings.fit.band_hz);
     let mut modes: Vec<Group> = curve
         .modes
         .iter()

@@ -29,7 +29,6 @@ use super::{Damping, Model, Spring};
 use crate::error::{Result, TacitError};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
-use std::path::Path;
 use std::sync::Arc;
 
 /// One mode of a modal model.
@@ -188,14 +187,9 @@ impl ModalSection {
     }
 }
 
-/// Read a model file with a `[modal]` section as the dense [`Model`]
-/// (module documentation); elements are placed by point label.
-pub fn from_file(path: &Path) -> Result<Model> {
-    let text = std::fs::read_to_string(path).map_err(|e| TacitError::io(path, e))?;
-    from_toml_str(&text, &path.display().to_string())
-}
-
-/// [`from_file`] on text; `src` names the source in errors.
+/// Read the text of a model file with a `[modal]` section as the dense
+/// [`Model`] (module documentation; [`Model::from_file`] reads the file);
+/// elements are placed by point label; `src` names the source in errors.
 pub fn from_toml_str(text: &str, src: &str) -> Result<Model> {
     let mut rest: toml::Table = text
         .parse()
