@@ -3,7 +3,7 @@ SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 PKGS := build-essential pkg-config libhdf5-dev fonts-dejavu-core
 TACIT := ./target/release/tacit
 
-.PHONY: setup demo test bench check
+.PHONY: setup demo test python bench check
 
 ## Install the system packages tacit needs (only those missing).
 setup:
@@ -23,6 +23,15 @@ demo: setup
 ## The test suite (what CI runs), on the release build `make demo` made.
 test: setup
 	cargo test --release
+
+## The Python package (python/): a virtual environment in .venv, the
+## extension built on the release build (maturin), its tests (pytest).
+python: setup
+	@dpkg -s python3-venv python3-dev >/dev/null 2>&1 || { $(SUDO) apt-get update && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y python3-venv python3-dev; }
+	python3 -m venv .venv
+	.venv/bin/pip install -q maturin pytest numpy
+	. .venv/bin/activate && maturin develop --release -m python/Cargo.toml
+	.venv/bin/python -m pytest -q python/tests
 
 ## Benchmarks (release, criterion).
 bench: setup

@@ -8,15 +8,13 @@
 //! With `TACIT_MATRIX_JSON=DIR` set, each diagnosis is also written whole
 //! to `DIR/case-K.json` (K counts the rows), for comparing runs.
 
+mod matrix_common;
+
+use matrix_common::{effects_cell, lanl, sensors_cell};
 use tacit::diagnose::{diagnose, DiagnoseSettings};
 use tacit::integrate::SimSettings;
 use tacit::model::{Contact, Cubic, Friction, Model, Spring};
 use tacit::simulate::{simulate_record, RecordSpec};
-
-fn lanl() -> Model {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
-    Model::from_file(std::path::Path::new(p)).unwrap()
-}
 
 fn cases() -> Vec<(&'static str, Model, String)> {
     let mut out = vec![];
@@ -146,28 +144,12 @@ fn main() {
                 std::fs::write(dir.join(format!("case-{row}.json")), json).unwrap();
             }
             let pct = |x: Option<f64>| x.map_or("failed".into(), |v| format!("{:.1} %", 100.0 * v));
-            let params: Vec<String> = d
-                .effects
-                .iter()
-                .map(|e| {
-                    let p: Vec<String> = e
-                        .parameters
-                        .iter()
-                        .map(|(k, v)| format!("{k} {v:.4e}"))
-                        .collect();
-                    format!("{} {:?}: {}", e.kind.name(), e.dofs, p.join(", "))
-                })
-                .collect();
             let v = d.validation.as_ref().unwrap();
             println!(
                 "| {name} | {} | {truth_text} | {} | {} | {} → {} | {} → {} | {:.1} s |",
-                if sensors.len() == 8 {
-                    "1–8".to_string()
-                } else {
-                    "1, 5, 6".to_string()
-                },
+                sensors_cell(&sensors),
                 d.verdict,
-                params.join("; "),
+                effects_cell(&d.effects),
                 pct(d.before.relative_error),
                 pct(d.after.relative_error),
                 pct(v.before.relative_error),

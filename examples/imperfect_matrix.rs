@@ -9,6 +9,9 @@
 //!
 //! `cargo run --release --example imperfect_matrix [-- --seed N] [--only TEXT]`
 
+mod matrix_common;
+
+use matrix_common::{effects_cell, lanl, sensors_cell};
 use rand::Rng;
 use tacit::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
 use tacit::diagnose::DiagnoseSettings;
@@ -16,11 +19,6 @@ use tacit::integrate::SimSettings;
 use tacit::model::{Contact, Cubic, Damping, Friction, Model, Spring};
 use tacit::record::Record;
 use tacit::simulate::{simulate_record, RecordSpec};
-
-fn lanl() -> Model {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
-    Model::from_file(std::path::Path::new(p)).unwrap()
-}
 
 /// The declared model with springs within ±`spread` and the damping given.
 fn structure(seed: u64, spread: f64, damping: Damping, friction: f64) -> Model {
@@ -84,14 +82,16 @@ fn cases(seed: u64) -> Vec<Case> {
                 running,
             });
         };
+    // the data file's bumper: contact 5→6, gap 0.381 mm, 2e6 N/m
+    let bumper = |m: &mut Model| {
+        m.contacts = vec![contact(5, 6, 0.381e-3, 2e6)];
+        "contact 5→6 gap 0.381 mm, 2e6 N/m".to_string()
+    };
     let s = seed;
     add(
         "bumper 5→6, modal 3 %, springs ±4 %",
         structure(s, 0.04, modal(0.03), 0.0),
-        &|m| {
-            m.contacts = vec![contact(5, 6, 0.381e-3, 2e6)];
-            "contact 5→6 gap 0.381 mm, 2e6 N/m".into()
-        },
+        &bumper,
         &all,
         0.01,
         false,
@@ -143,10 +143,7 @@ fn cases(seed: u64) -> Vec<Case> {
     add(
         "bumper 5→6, 3 % noise, modal 2 %",
         structure(s + 4, 0.03, modal(0.02), 0.0),
-        &|m| {
-            m.contacts = vec![contact(5, 6, 0.381e-3, 2e6)];
-            "contact 5→6 gap 0.381 mm, 2e6 N/m".into()
-        },
+        &bumper,
         &all,
         0.03,
         false,
@@ -154,10 +151,7 @@ fn cases(seed: u64) -> Vec<Case> {
     add(
         "bumper 5→6 from a running test, modal 2.5 %",
         structure(s + 5, 0.03, modal(0.025), 0.0),
-        &|m| {
-            m.contacts = vec![contact(5, 6, 0.381e-3, 2e6)];
-            "contact 5→6 gap 0.381 mm, 2e6 N/m".into()
-        },
+        &bumper,
         &all,
         0.01,
         true,
@@ -181,10 +175,7 @@ fn cases(seed: u64) -> Vec<Case> {
     add(
         "bumper 5→6, sensors 1, 5, 6, modal 2 %",
         structure(s + 7, 0.03, modal(0.02), 0.0),
-        &|m| {
-            m.contacts = vec![contact(5, 6, 0.381e-3, 2e6)];
-            "contact 5→6 gap 0.381 mm, 2e6 N/m".into()
-        },
+        &bumper,
         &[1, 5, 6],
         0.01,
         false,
@@ -309,18 +300,6 @@ fn main() {
                     continue;
                 }
             };
-            let params: Vec<String> = d
-                .effects
-                .iter()
-                .map(|e| {
-                    let p: Vec<String> = e
-                        .parameters
-                        .iter()
-                        .map(|(k, v)| format!("{k} {v:.4e}"))
-                        .collect();
-                    format!("{} {:?}: {}", e.kind.name(), e.dofs, p.join(", "))
-                })
-                .collect();
             let sig: Vec<String> = d
                 .calibration
                 .as_ref()
@@ -338,15 +317,11 @@ fn main() {
                 "| {} | {} | {} | {:.1} % | {} | {} | {} | {} → {} | {} → {} | {} | {:.1} s |",
                 c.name,
                 c.effects,
-                if c.sensors.len() == 8 {
-                    "1–8".to_string()
-                } else {
-                    "1, 5, 6".to_string()
-                },
+                sensors_cell(&c.sensors),
                 100.0 * c.noise,
                 if with_low { "yes" } else { "no" },
                 d.verdict,
-                params.join("; "),
+                effects_cell(&d.effects),
                 pct(d.before.relative_error),
                 pct(d.after.relative_error),
                 pct(v.before.relative_error),

@@ -2,8 +2,8 @@
 //! 2013): fit a linear m, d, k model to the estimation segment by output
 //! error, run the close-the-loop diagnosis on it, and report the open-loop
 //! RMS simulation error on the standard test segment before (linear) and
-//! after (with the effect found). Reads the Silverbox data set (Wigren & Schoukens, ECC 2013) from the
-//! shared data set beside the checkout.
+//! after (with the effect found). Reads the data from the shared data set
+//! beside the checkout.
 //!
 //! `cargo run --release --example silverbox_close_the_loop`
 

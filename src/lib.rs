@@ -17,23 +17,31 @@
 //! Numerical core (no files written):
 //! - [`integrate`]: time integration of the nonlinear model (Newmark,
 //!   HHT-α) with forward sensitivities; [`simulate`]: simulated records;
-//! - [`linear`]: the sampled linear model; [`modal`]: real modes;
+//! - [`linear`]: the sampled linear model; [`modal`]: real modes
+//!   ([`conditioning`]: which are rigid, and whether they are resolved);
 //!   [`reduce`]: reduction onto kept DOFs; [`metrics`]: correlation
 //!   metrics;
 //! - [`correlate`]: linear modal correlation and modal updating;
+//! - [`lsq`]: the bounded least-squares driver (Levenberg–Marquardt,
+//!   Gauss–Newton) of the updating, the joint fit and the start-state
+//!   refinement; [`riccati`]: the Riccati core of the two smoothers;
 //! - [`update`]: time-domain parametric model updating (multiple shooting,
 //!   Levenberg–Marquardt and other optimizers);
 //! - [`identify`], [`horizon`]: internal-force identification (sliding
 //!   windows; the full-horizon smoother);
 //! - [`trace`]: the residual traced to candidate effects;
-//! - [`diagnose`]: the close-the-loop diagnosis, tacit's main job.
+//! - [`diagnose`]: the close-the-loop diagnosis, tacit's main job;
+//!   [`calibrate`]: the declared model's linear part calibrated on
+//!   records; [`campaign`]: many records of one structure diagnosed and
+//!   fitted together.
 //!
 //! Output: [`plot`] (figures), [`io`] (atomic writes), [`diagnose::report`]
 //! (the diagnosis's files).
 //!
 //! Applications and the paper's case set-ups, outside the core:
 //! [`cases`] (Table 4's cubic chain, the bumper shooting check, the
-//! Silverbox benchmark run end to end).
+//! Silverbox benchmark and the F-16 ground vibration test run end to
+//! end).
 //!
 //! # The diagnosis pipeline
 //!
@@ -55,19 +63,23 @@
 // `!(x > 0.0)` is the idiom that also rejects NaN; it is used on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod conditioning;
 pub mod error;
 pub mod integrate;
 pub mod io;
+pub mod lsq;
 pub mod metrics;
 pub mod modal;
 pub mod model;
 pub mod plot;
 pub mod record;
+pub mod riccati;
 pub mod signal;
 pub mod simulate;
 
 pub use error::{Result, TacitError};
 pub mod calibrate;
+pub mod campaign;
 pub mod cases;
 pub mod correlate;
 pub mod diagnose;

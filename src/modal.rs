@@ -17,7 +17,8 @@ pub struct Modes {
     /// Mass-normalized shapes, one column per mode (n × n).
     #[serde(skip)]
     pub shapes: DMatrix<f64>,
-    /// True for rigid-body modes (ω² below 1e-9 of the largest).
+    /// True for rigid-body modes (ω² below 1e-9 of the largest and a shape
+    /// that strains no element; [`crate::conditioning`]).
     pub rigid: Vec<bool>,
 }
 
@@ -35,8 +36,22 @@ pub fn sym_eigen(a: &DMatrix<f64>) -> Result<(Vec<f64>, DMatrix<f64>)> {
     Ok((vals, vecs))
 }
 
-/// Solve `K φ = ω² M φ` for symmetric K and symmetric positive definite M.
+/// Solve `K φ = ω² M φ` for symmetric K and symmetric positive definite M
+/// of a model: rigid modes and modes lost in round-off as
+/// [`crate::conditioning::rigid_modes`] decides.
 pub fn solve(m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result<Modes> {
+    solve_with(m, k, false)
+}
+
+/// [`solve`] for matrices projected on a basis (a Rayleigh–Ritz step),
+/// whose rows are round-off along a basis vector that moves rigidly: a
+/// mode is rigid when its ω² is below 1e-9 of the largest, without the
+/// model's row test.
+pub fn solve_projected(m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result<Modes> {
+    solve_with(m, k, true)
+}
+
+fn solve_with(m: &DMatrix<f64>, k: &DMatrix<f64>, projected: bool) -> Result<Modes> {
     let n = m.nrows();
     if m.ncols() != n || k.nrows() != n || k.ncols() != n {
         return Err(TacitError::Numerical(format!(
@@ -59,13 +74,18 @@ pub fn solve(m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result<Modes> {
         .solve_lower_triangular(&x.transpose())
         .ok_or_else(|| TacitError::Numerical("eigenproblem: singular mass factor".into()))?;
     let a = (&a + a.transpose()) * 0.5;
+    crate::conditioning::finite(m, k, a.as_slice())?;
     let (vals, y) = sym_eigen(&a)?;
     let shapes = l
         .transpose()
         .solve_upper_triangular(&y)
         .ok_or_else(|| TacitError::Numerical("eigenproblem: singular mass factor".into()))?;
-    let lmax = vals.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
-    let rigid: Vec<bool> = vals.iter().map(|&l| l.abs() <= 1e-9 * lmax).collect();
+    let rigid = if projected {
+        crate::conditioning::finite(m, k, shapes.as_slice())?;
+        crate::conditioning::negligible(&vals)
+    } else {
+        crate::conditioning::rigid_modes(m, k, &vals, &shapes)?
+    };
     let omega: Vec<f64> = vals
         .iter()
         .zip(&rigid)

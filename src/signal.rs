@@ -12,6 +12,18 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rustfft::{num_complex::Complex, FftPlanner};
 
+/// Channel weights `1 / (fraction · RMS)` of each row of `y` (a channel
+/// over samples), the one rule every weighted fit uses (the noise assumed
+/// a fraction of each channel's RMS); None for a channel whose RMS is 0.
+pub fn channel_weights(y: &DMatrix<f64>, fraction: f64) -> Vec<Option<f64>> {
+    (0..y.nrows())
+        .map(|r| {
+            let rms = (y.row(r).norm_squared() / y.ncols().max(1) as f64).sqrt();
+            (rms > 0.0).then(|| 1.0 / (fraction * rms))
+        })
+        .collect()
+}
+
 /// A seeded generator.
 pub fn rng(seed: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(seed)

@@ -152,13 +152,7 @@ pub fn simulate_record(model: &Model, spec: &RecordSpec) -> Result<(Record, Simu
         )));
     }
     let sim = integ.run(force.as_view(), u0, v0);
-    if !sim.completed() {
-        return Err(TacitError::Numerical(format!(
-            "simulation of {} stopped: {}",
-            model.name,
-            describe_status(&sim.status)
-        )));
-    }
+    check_run(model, &integ, force.as_view(), &sim)?;
     let mut g = signal::rng(spec.seed ^ 0x9e37_79b9_7f4a_7c15);
     let mut outputs = Vec::new();
     for &kind in &spec.kinds {
@@ -194,6 +188,40 @@ pub fn simulate_record(model: &Model, spec: &RecordSpec) -> Result<(Record, Simu
         source: Default::default(),
     };
     Ok((rec, sim))
+}
+
+/// An error with the facts when `sim` stopped early or diverged (its
+/// energy above what the force can put in: [`Integrator::divergence`]).
+pub fn check_run(
+    model: &Model,
+    integ: &Integrator,
+    force: nalgebra::DMatrixView<'_, f64>,
+    sim: &Simulation,
+) -> Result<()> {
+    if !sim.completed() {
+        let step = match sim.status {
+            SimStatus::NonFinite { .. } => format!("; {}", integ.describe_step()),
+            _ => String::new(),
+        };
+        return Err(TacitError::Numerical(format!(
+            "simulation of {} stopped: {}{step}",
+            model.name,
+            describe_status(&sim.status)
+        )));
+    }
+    match integ.divergence(force, sim) {
+        None => Ok(()),
+        Some(d) => Err(TacitError::Numerical(format!(
+            "simulation of {} diverged from sample {} (t = {:.6} s) on: its energy is {:.3e} times what the force can put in (DOF {} at {:.3e} m/s^2); {}",
+            model.name,
+            d.sample,
+            d.sample as f64 * integ.substep() * integ.settings().substeps as f64,
+            d.growth.powi(2),
+            d.dof,
+            d.accel,
+            integ.describe_step()
+        ))),
+    }
 }
 
 /// How a simulation ended, in words with its facts.

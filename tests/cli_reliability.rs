@@ -4,6 +4,9 @@
 //! spiky, offset channels, missing force), messages without internals.
 //! Each test holds one row of docs/reliability.md.
 
+mod common;
+
+use common::{stderr, tacit};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -12,18 +15,6 @@ use tacit::record::{self, Channel, Record};
 const MODEL: &str = "data/lanl8dof.toml";
 const CONTACT: &str = "data/lanl8dof-contact.toml";
 const BUMPER: &str = "data/lanl8dof-bumper.h5";
-
-fn tacit(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tacit"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// Exit 1, the message holds every `needle`, no panic, no Rust debug text.
 fn fails_with(o: &Output, needles: &[&str]) -> String {
@@ -73,6 +64,21 @@ fn identify(rec: &Path, out: &Path, extra: &[&str]) -> Output {
     tacit(&args)
 }
 
+/// `diagnose` of a record against the declared model.
+fn diagnose(rec: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "diagnose",
+        "--model",
+        MODEL,
+        "--record",
+        p(rec),
+        "-o",
+        p(out),
+    ];
+    args.extend_from_slice(extra);
+    tacit(&args)
+}
+
 fn hidden_entries(dir: &Path) -> Vec<String> {
     std::fs::read_dir(dir)
         .unwrap()
@@ -99,17 +105,7 @@ fn huge_substeps_are_refused_by_every_command() {
         p(&d.path().join("r.h5")),
     ]);
     fails_with(&o, &["--substeps 1000000000", "1..=1000"]);
-    let o = tacit(&[
-        "diagnose",
-        "--model",
-        MODEL,
-        "--record",
-        BUMPER,
-        "--substeps",
-        "1000000000",
-        "-o",
-        p(&out),
-    ]);
+    let o = diagnose(Path::new(BUMPER), &out, &["--substeps", "1000000000"]);
     fails_with(&o, &["--substeps 1000000000"]);
     let o = identify(Path::new(BUMPER), &out, &["--substeps", "1000000000"]);
     fails_with(&o, &["--substeps 1000000000"]);
@@ -170,19 +166,7 @@ fn alpha_grid_count_is_bounded() {
 fn segment_inf_tiny_and_max_effects_zero_are_refused() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("o");
-    let run = |extra: &[&str]| {
-        let mut a = vec![
-            "diagnose",
-            "--model",
-            MODEL,
-            "--record",
-            BUMPER,
-            "-o",
-            p(&out),
-        ];
-        a.extend_from_slice(extra);
-        tacit(&a)
-    };
+    let run = |extra: &[&str]| diagnose(Path::new(BUMPER), &out, extra);
     fails_with(&run(&["--segment", "inf"]), &["--segment inf"]);
     let e = fails_with(&run(&["--segment", "1e-9"]), &["--segment 0.000000001 s"]);
     assert!(e.contains("0.015625 to 4.000000 s"), "{e}");
@@ -223,7 +207,7 @@ fn window_longer_than_the_record_is_blamed_on_window() {
     let o = identify(
         Path::new(BUMPER),
         &d.path().join("o"),
-        &["--window", "30", "--horizon", "10"],
+        &["--method", "mhe", "--window", "30", "--horizon", "10"],
     );
     fails_with(&o, &["--horizon 10", "30..=4096"]);
 }
@@ -594,29 +578,13 @@ fn missing_force_and_dead_selected_channel_are_errors_naming_the_channel() {
     rec.inputs.clear();
     let nf = save(&rec, d.path(), "noforce.h5");
     let out = d.path().join("o");
-    let o = tacit(&[
-        "diagnose",
-        "--model",
-        MODEL,
-        "--record",
-        p(&nf),
-        "-o",
-        p(&out),
-    ]);
+    let o = diagnose(&nf, &out, &[]);
     fails_with(&o, &["no force channel", "noforce.h5"]);
     assert!(!out.exists());
     let mut rec = bumper();
     output_mut(&mut rec, "accel_6").data.fill(0.0);
     let dead = save(&rec, d.path(), "dead.h5");
-    let o = tacit(&[
-        "diagnose",
-        "--model",
-        MODEL,
-        "--record",
-        p(&dead),
-        "-o",
-        p(&out),
-    ]);
+    let o = diagnose(&dead, &out, &[]);
     let e = fails_with(&o, &["channel accel_6 is dead"]);
     assert!(!e.contains("channel 5"), "{e}");
     let o = identify(&dead, &out, &[]);
@@ -681,17 +649,7 @@ fn diagnose_report_carries_the_record_warnings() {
     output_mut(&mut rec, "accel_2").data[2000] = 1e6;
     let path = save(&rec, d.path(), "spike.h5");
     let out = d.path().join("o");
-    let o = tacit(&[
-        "diagnose",
-        "--model",
-        MODEL,
-        "--record",
-        p(&path),
-        "--sensors",
-        "1,5,6",
-        "-o",
-        p(&out),
-    ]);
+    let o = diagnose(&path, &out, &["--sensors", "1,5,6"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
@@ -731,4 +689,149 @@ fn csv_with_six_decimal_time_stamps_is_read() {
     let back = record::read(&out).unwrap();
     assert!((back.fs - 512.0).abs() < 1e-3, "{}", back.fs);
     assert_eq!(back.len(), 4096);
+}
+
+/// `M` with spring `k5` at `stiffness`, the damping `damping` (a TOML
+/// table body), written to `dir/name`.
+fn stiff_model(dir: &Path, name: &str, stiffness: &str, damping: &str) -> PathBuf {
+    let m = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(MODEL)).unwrap();
+    let at = m.find("name = \"k5\"").unwrap();
+    let k = at + m[at..].find("56700.0").unwrap();
+    let mut s = format!("{}{stiffness}{}", &m[..k], &m[k + 7..]);
+    let d = s.find("[damping]").unwrap();
+    s.truncate(d);
+    s += &format!("[damping]\n{damping}\n");
+    let path = dir.join(name);
+    std::fs::write(&path, s).unwrap();
+    path
+}
+
+#[test]
+fn stiff_spring_modes_are_an_error_with_the_stiffness_ratio() {
+    let d = tempfile::tempdir().unwrap();
+    let m = stiff_model(
+        d.path(),
+        "stiff.toml",
+        "1e20",
+        "kind = \"modal\"\nratio = 0.01",
+    );
+    let o = tacit(&["modal", "--model", p(&m)]);
+    fails_with(
+        &o,
+        &[
+            "too ill-conditioned",
+            "stiffness ratio of 2.352e15",
+            "DOF 5",
+            "mode(s) 1, 2, 3, 4, 5, 6, 7",
+            "without moving as rigid bodies",
+        ],
+    );
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("rigid"));
+    // 1e12 N/m (a ratio of 1.8e7) still resolves: the 22 Hz mode is not rigid
+    let m = stiff_model(
+        d.path(),
+        "firm.toml",
+        "1e12",
+        "kind = \"modal\"\nratio = 0.01",
+    );
+    let o = tacit(&["modal", "--model", p(&m), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rigid = j.to_string().matches("\"rigid\":true").count();
+    assert_eq!(rigid, 1, "{j}");
+}
+
+#[test]
+fn stiff_spring_simulation_diverges_with_the_facts() {
+    let d = tempfile::tempdir().unwrap();
+    let m = stiff_model(d.path(), "stiff.toml", "1e20", "kind = \"none\"");
+    let out = d.path().join("s.csv");
+    let o = tacit(&["simulate", "--model", p(&m), "-o", p(&out)]);
+    fails_with(
+        &o,
+        &[
+            "diverged from sample 65",
+            "DOF 5",
+            "3.476e9 Hz",
+            "42651158 sub-steps per sample, beyond the 1000 allowed",
+        ],
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn declared_stiff_contact_is_not_diagnosed() {
+    let d = tempfile::tempdir().unwrap();
+    let c = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(CONTACT)).unwrap();
+    let m = d.path().join("contact20.toml");
+    std::fs::write(&m, c.replace("stiffness = 2.0e6", "stiffness = 1e20")).unwrap();
+    let out = d.path().join("d");
+    let o = tacit(&[
+        "diagnose",
+        "--model",
+        p(&m),
+        "--record",
+        BUMPER,
+        "-o",
+        p(&out),
+    ]);
+    fails_with(
+        &o,
+        &[
+            "the declared model lanl8dof-contact cannot be scored on the record",
+            "the Newton iterations did not converge",
+            "beyond the 1000 allowed",
+        ],
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn tiny_masses_with_huge_springs_are_an_error_not_nan_shapes() {
+    let d = tempfile::tempdir().unwrap();
+    let m = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(MODEL)).unwrap();
+    let masses = m.lines().find(|l| l.starts_with("masses")).unwrap();
+    let tiny = m
+        .replace(masses, &format!("masses = [{}]", ["1e-300"; 8].join(", ")))
+        .replace("56700.0", "1e300");
+    let path = d.path().join("tiny.toml");
+    std::fs::write(&path, tiny).unwrap();
+    let o = tacit(&["modal", "--model", p(&path)]);
+    let e = fails_with(
+        &o,
+        &["modes are not finite", "DOF 1 is 1.000e300 / 1.000e-300"],
+    );
+    assert!(!e.contains("NaN") && !String::from_utf8_lossy(&o.stdout).contains("NaN"));
+}
+
+#[test]
+fn values_beyond_1e100_are_refused_by_every_command() {
+    let d = tempfile::tempdir().unwrap();
+    let mut rec = bumper();
+    for c in rec.inputs.iter_mut().chain(rec.outputs.iter_mut()) {
+        c.data.iter_mut().for_each(|x| *x *= 1e300);
+    }
+    let big = save(&rec, d.path(), "big.h5");
+    let want = [
+        "cannot be used as it is",
+        "beyond 1e100",
+        "other channels too",
+    ];
+    fails_with(&identify(&big, &d.path().join("i"), &[]), &want);
+    let o = diagnose(&big, &d.path().join("d"), &[]);
+    fails_with(&o, &want);
+    let o = tacit(&[
+        "update",
+        "--model",
+        MODEL,
+        "--record",
+        p(&big),
+        "--free",
+        "k5",
+        "--data",
+        "accel",
+        "-o",
+        p(&d.path().join("u")),
+    ]);
+    fails_with(&o, &want);
 }

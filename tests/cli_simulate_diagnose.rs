@@ -1,23 +1,9 @@
 //! End-to-end through the `tacit` binary: simulate, modal, diagnose, and
 //! bad input (clear message, non-zero exit, no output file).
 
-use std::process::Command;
+mod common;
 
-fn tacit(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_tacit"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap()
-}
-
-fn text(o: &std::process::Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
+use common::{tacit, text};
 
 #[test]
 fn simulate_writes_hdf5_and_csv_with_truth() {

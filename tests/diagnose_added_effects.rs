@@ -19,45 +19,19 @@
 //!   alternative from the trace's gap 0.14 mm and 3.4e5 N/m and the gap
 //!   scan, ends at 70 %.
 
-use tacit::diagnose::{diagnose, DiagnoseSettings, Diagnosis};
-use tacit::integrate::SimSettings;
+mod diagnose_common;
+
+use diagnose_common::{assert_improved_by, lanl};
+use tacit::diagnose::Diagnosis;
 use tacit::model::{
     Clearance, Cubic, CubicDamper, Model, Quadratic, QuadraticDamper, RelativeFriction,
 };
-use tacit::simulate::{simulate_record, RecordSpec};
 
-fn lanl() -> Model {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
-    Model::from_file(std::path::Path::new(p)).unwrap()
-}
-
+/// The records of `truth` at all eight sensors diagnosed
+/// ([`diagnose_common::run`]), with the first round's ranking and the
+/// rounds printed.
 fn run(truth: &Model, seed: u64) -> Diagnosis {
-    let spec = |seed| RecordSpec {
-        samples: 2048,
-        sensors: (1..=8).collect(),
-        noise: 0.01,
-        seed,
-        settings: SimSettings {
-            substeps: 40,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    let rec = simulate_record(truth, &spec(seed)).unwrap().0;
-    let val = simulate_record(truth, &spec(seed + 1000)).unwrap().0;
-    let settings = DiagnoseSettings::default();
-    let d = diagnose(&lanl(), &rec, Some(&val), None, &settings, &|_| {}).unwrap();
-    eprintln!(
-        "{} | before {:?} after {:?} | validation {:?} → {:?}",
-        d.verdict,
-        d.before.relative_error,
-        d.after.relative_error,
-        d.validation.as_ref().map(|v| v.before.relative_error),
-        d.validation.as_ref().map(|v| v.after.relative_error)
-    );
-    for e in &d.effects {
-        eprintln!("  {} {:?}", e.label, e.parameters);
-    }
+    let d = diagnose_common::run(truth, &(1..=8).collect::<Vec<_>>(), seed);
     for r in d.ranking.iter().take(6) {
         eprintln!(
             "  ranked {} {:?} gain {:.4} bic {:.1}",
@@ -87,17 +61,7 @@ fn check(d: &Diagnosis, kind: &str, dofs: &[usize], truth: &[(&str, f64)]) {
         let x = e.parameters[*name];
         assert!((x / t - 1.0).abs() <= 0.1, "{name} {x} vs {t}");
     }
-    let (b, a) = (
-        d.before.relative_error.unwrap(),
-        d.after.relative_error.unwrap(),
-    );
-    assert!(a <= b / 5.0, "relative_error {b} → {a}");
-    let v = d.validation.as_ref().unwrap();
-    let (b, a) = (
-        v.before.relative_error.unwrap(),
-        v.after.relative_error.unwrap(),
-    );
-    assert!(a <= b / 5.0, "validation relative_error {b} → {a}");
+    assert_improved_by(d, 5.0, 5.0);
 }
 
 #[test]

@@ -5,77 +5,15 @@
 //! one before, on its validation record too; a linear record must give
 //! "no missing effect found".
 
-use tacit::diagnose::{diagnose, DiagnoseSettings, Diagnosis};
+mod diagnose_common;
+
+use diagnose_common::{assert_improved_by, lanl, run};
+use tacit::diagnose::Diagnosis;
 use tacit::integrate::SimSettings;
-use tacit::model::{Contact, Cubic, Friction, Model, Spring};
-use tacit::simulate::{simulate_record, RecordSpec};
-
-fn lanl() -> Model {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
-    Model::from_file(std::path::Path::new(p)).unwrap()
-}
-
-fn records(
-    truth: &Model,
-    sensors: &[usize],
-    seed: u64,
-) -> (tacit::record::Record, tacit::record::Record) {
-    let spec = |seed| RecordSpec {
-        samples: 2048,
-        sensors: sensors.to_vec(),
-        noise: 0.01,
-        seed,
-        settings: SimSettings {
-            substeps: 40,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    (
-        simulate_record(truth, &spec(seed)).unwrap().0,
-        simulate_record(truth, &spec(seed + 1000)).unwrap().0,
-    )
-}
-
-fn run(truth: &Model, sensors: &[usize], seed: u64) -> Diagnosis {
-    let (rec, val) = records(truth, sensors, seed);
-    let settings = DiagnoseSettings::default();
-    let d = diagnose(&lanl(), &rec, Some(&val), None, &settings, &|_| {}).unwrap();
-    eprintln!(
-        "{} | before {:?} after {:?} | validation {:?} → {:?}",
-        d.verdict,
-        d.before.relative_error,
-        d.after.relative_error,
-        d.validation.as_ref().map(|v| v.before.relative_error),
-        d.validation.as_ref().map(|v| v.after.relative_error)
-    );
-    for e in &d.effects {
-        eprintln!("  {} {:?}", e.label, e.parameters);
-    }
-    d
-}
+use tacit::model::{Contact, Cubic, Friction, Spring};
 
 fn assert_improved(d: &Diagnosis) {
     assert_improved_by(d, 5.0, 5.0);
-}
-
-/// The multiple-shooting error falls by at least `on_record` on the record
-/// and `on_validation` on the validation record.
-fn assert_improved_by(d: &Diagnosis, on_record: f64, on_validation: f64) {
-    let (b, a) = (
-        d.before.relative_error.unwrap(),
-        d.after.relative_error.unwrap(),
-    );
-    assert!(a <= b / on_record, "relative_error {b} → {a}");
-    let v = d.validation.as_ref().unwrap();
-    let (b, a) = (
-        v.before.relative_error.unwrap(),
-        v.after.relative_error.unwrap(),
-    );
-    assert!(
-        a <= b / on_validation,
-        "validation relative_error {b} → {a}"
-    );
 }
 
 fn param(d: &Diagnosis, kind: &str, name: &str) -> f64 {

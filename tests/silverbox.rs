@@ -34,8 +34,12 @@ fn silverbox_bad_mapping_is_a_clear_error() {
     let e = tacit::record::read_mat(
         path,
         &tacit::record::MatMapping {
-            channels: vec![("V9".into(), tacit::record::Quantity::Force, 1)],
-            fs: 610.35,
+            channels: vec![tacit::record::MatChannel::at_dof(
+                "V9",
+                tacit::record::Quantity::Force,
+                1,
+            )],
+            fs: 610.35.into(),
             remove_mean: true,
         },
     )

@@ -398,8 +398,8 @@ pub fn calibrate(
     let corrections = corrections(&base, &free, &p0, &q, std_q.as_ref(), settings);
     let residuals = channel_residuals(&model, data, settings, &prob.eval.lens)?;
     Ok(Calibration {
-        error_before: relative(&r0, data, &prob.eval.lens),
-        error_after: relative(&r, data, &prob.eval.lens),
+        error_before: relative(&r0, &prob.eval),
+        error_after: relative(&r, &prob.eval),
         model: with_elements(declared, model),
         corrections,
         residuals,
@@ -521,11 +521,11 @@ fn corrections(
         .collect()
 }
 
-/// Relative error `‖r‖ / ‖W y‖` over the scored segments of every record.
-fn relative(r: &DVector<f64>, data: &[Data], lens: &[usize]) -> f64 {
+/// Relative error `‖r‖ / ‖W y‖` over the scored segments of every record
+/// (the weights and segment lengths of `eval`).
+fn relative(r: &DVector<f64>, eval: &Eval<'_>) -> f64 {
     let mut ss = 0.0;
-    for (d, &len) in data.iter().zip(lens) {
-        let w = d.weights();
+    for ((d, &len), w) in eval.data.iter().zip(&eval.lens).zip(&eval.weights) {
         for s in d.segment_starts(len) {
             for k in s..s + len {
                 for (c, wc) in w.iter().enumerate() {

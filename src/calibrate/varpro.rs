@@ -110,17 +110,14 @@ fn observability_basis(
 }
 
 /// Weighted output error `W (y − ỹ)` (p × N) of the linear part simulated
-/// from rest.
+/// from rest ([`SampledModel::simulate`]).
 fn output_error(sm: &SampledModel, data: &Data, w: &[f64]) -> Result<DMatrix<f64>> {
     let (cy, dy) = sm.outputs(&data.channels)?;
-    let (n2, ns) = (2 * sm.n, data.force.ncols());
-    let mut x = DVector::zeros(n2);
+    let ns = data.force.ncols();
+    let xs = sm.simulate(&DVector::zeros(2 * sm.n), &data.force);
     let mut e = DMatrix::zeros(cy.nrows(), ns);
     for k in 0..ns {
-        if k > 0 {
-            x = &sm.a * &x + &sm.b0 * data.force.column(k - 1) + &sm.b1 * data.force.column(k);
-        }
-        let y = &cy * &x + &dy * data.force.column(k);
+        let y = &cy * xs.column(k) + &dy * data.force.column(k);
         for (c, wc) in w.iter().enumerate() {
             e[(c, k)] = wc * (data.measured[(c, k)] - y[c]);
         }

@@ -7,9 +7,12 @@
 //!   Figs 5–6);
 //! - [`contact_case`]: the bumper of `data/lanl8dof-contact.toml` fitted
 //!   open loop and by multiple shooting;
+//! - [`f16`]: the F-16 ground vibration test: a modal model from the
+//!   low-level record, diagnosed on a high-level one;
 //! - [`silverbox`]: the Silverbox benchmark (a Duffing-type circuit)
 //!   diagnosed end to end.
 
 pub mod contact_case;
+pub mod f16;
 pub mod silverbox;
 pub mod table4;

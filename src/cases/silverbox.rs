@@ -13,7 +13,7 @@ use crate::diagnose::{self, DiagnoseSettings};
 use crate::error::{Result, TacitError};
 use crate::integrate::SimSettings;
 use crate::model::{Damping, Model, Spring};
-use crate::record::{self, MatMapping, Quantity, Record};
+use crate::record::{self, MatChannel, MatMapping, Quantity, Record};
 use crate::update::{
     self, optimize::FitSettings, param::Parameter, param::Target, problem::Problem,
 };
@@ -109,10 +109,10 @@ pub fn read(path: &Path, fs: f64) -> Result<Record> {
         path,
         &MatMapping {
             channels: vec![
-                ("V1".into(), Quantity::Force, 1),
-                ("V2".into(), Quantity::Disp, 1),
+                MatChannel::at_dof("V1", Quantity::Force, 1),
+                MatChannel::at_dof("V2", Quantity::Disp, 1),
             ],
-            fs,
+            fs: fs.into(),
             remove_mean: true,
         },
     )

@@ -5,7 +5,7 @@
 use anyhow::{bail, Result};
 
 /// Most integration sub-steps per sample any command accepts.
-pub const MAX_SUBSTEPS: usize = 1000;
+pub const MAX_SUBSTEPS: usize = tacit::integrate::newmark::MAX_SUBSTEPS;
 /// Most points of an α grid.
 pub const MAX_GRID: usize = 200;
 /// Most samples a simulated record may hold.

@@ -59,6 +59,14 @@ pub struct Args {
     /// damping, no joint refinement.
     #[arg(long)]
     trust_linear: bool,
+    /// Warm-up left out of every record (the diagnosed, validation and
+    /// linear records): samples (`8192`) or seconds (`20.48s`), e.g. the
+    /// transient first period of a periodic excitation started from rest.
+    /// Those samples are neither fitted nor scored; the open-loop
+    /// simulation starts at the state reconstructed at the first sample
+    /// kept.
+    #[arg(long, value_name = "SAMPLES|SECONDS", value_parser = tacit::record::WarmUp::parse)]
+    warm_up: Option<tacit::record::WarmUp>,
     #[command(flatten)]
     rec: RecordOpts,
     /// Output directory (created with its parents; written whole at the
@@ -103,15 +111,22 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     )?;
     settings.validate()?;
     let staging = super::output::Staging::begin(&a.output, a.force)?;
-    let mut rec = load_record(&a.record, &a.rec)?;
+    let load = |p: &std::path::Path| -> anyhow::Result<tacit::record::Record> {
+        let r = load_record(p, &a.rec)?;
+        Ok(match a.warm_up {
+            Some(w) => r.without_warm_up(w)?,
+            None => r,
+        })
+    };
+    let mut rec = load(&a.record)?;
     let mut val = match &a.validate {
-        Some(p) => Some(load_record(p, &a.rec)?),
+        Some(p) => Some(load(p)?),
         None => None,
     };
     let mut linear = a
         .linear_records
         .iter()
-        .map(|p| load_record(p, &a.rec))
+        .map(|p| load(p))
         .collect::<anyhow::Result<Vec<_>>>()?;
     // a model from matrices is reduced onto the records' points
     let mut recs: Vec<&mut tacit::record::Record> = vec![&mut rec];
@@ -175,7 +190,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     staging.commit()?;
     outln!("{}", d.verdict);
-    let pct = |x: Option<f64>| x.map_or("failed".to_string(), |v| format!("{:.2} %", 100.0 * v));
+    let pct = report::pct;
     outln!(
         "relative_error {} -> {}   simulation_error {} -> {}",
         pct(d.before.relative_error),

@@ -1,6 +1,6 @@
 //! `tacit identify`: reconstruct the internal force a linear model lacks
-//! from a record (moving-horizon estimation, the paper's sequential
-//! windows, or the full-horizon formulation).
+//! from a record (the located, lifted smoother, moving-horizon estimation,
+//! the paper's sequential windows, or the full-horizon formulation).
 
 use super::out::outln;
 use super::{check, check_dofs, DofList};
@@ -9,14 +9,16 @@ use tacit::identify::{
     self, Constraints, IdentifySettings, Method, Problem, Reduce, Regularization, Solver, Status,
 };
 use tacit::model::Model;
-use tacit::record;
 
 /// Identification method on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum CliMethod {
+    /// Locate the force, then reconstruct it with a sub-sample resolution
+    /// (default; what diagnose starts from).
+    Lifted,
     /// The published sequential windows.
     Paper,
-    /// Moving-horizon estimation (default).
+    /// Moving-horizon estimation.
     Mhe,
     /// Full-horizon optimal control (Riccati smoother; QP with constraints).
     Horizon,
@@ -50,9 +52,11 @@ pub struct Args {
     /// them is fitted).
     #[arg(long, value_name = "DOFS")]
     sensors: DofList,
-    /// Reduction onto the sensor DOFs (none = full-order model).
-    #[arg(long, value_enum, default_value = "serep")]
-    reduce: Reduce,
+    /// Reduction onto the sensor DOFs (none = full-order model). Default:
+    /// serep for paper, mhe and horizon; the lifted method works on the
+    /// full-order model only.
+    #[arg(long, value_enum)]
+    reduce: Option<Reduce>,
     /// Window length in samples, from 1 to the record's length (MHE:
     /// samples committed per window).
     #[arg(long, default_value_t = 3, value_name = "SAMPLES")]
@@ -69,23 +73,32 @@ pub struct Args {
     /// constraints).
     #[arg(long, value_enum, default_value = "ls", hide_possible_values = true)]
     solver: Solver,
-    /// Scheme: the published sequential windows, moving-horizon estimation,
-    /// or the full-horizon optimal-control formulation.
-    #[arg(long, value_enum, default_value = "mhe")]
+    /// Scheme: the located, lifted smoother (default), the published
+    /// sequential windows, moving-horizon estimation, or the full-horizon
+    /// optimal-control formulation.
+    #[arg(long, value_enum, default_value = "lifted")]
     method: CliMethod,
+    /// Lifted method: sub-intervals per sample on which the force is
+    /// constant, 1 to 64.
+    #[arg(long, default_value_t = 8, value_name = "R")]
+    resolution: usize,
+    /// Lifted method: skip the location search (an unknown force at every
+    /// DOF).
+    #[arg(long)]
+    no_locate: bool,
     /// Horizon method: weight rule for λ, μ (default: discrepancy principle
     /// with the --noise level).
     #[arg(long, value_enum, default_value = "discrepancy")]
     weights: WeightRule,
-    /// Horizon method: λ > 0, weight of Σ‖f_k‖² (start of the weight
-    /// search).
+    /// Horizon and lifted methods: λ > 0, weight of Σ‖f_k‖² in 1/N²
+    /// relative to the data weight (horizon: start of the weight search).
     #[arg(long, default_value_t = 1e-2)]
     lambda: f64,
     /// Horizon method: μ >= 0, weight of Σ‖f_{k+1} − f_k‖².
     #[arg(long, default_value_t = 0.0)]
     mu: f64,
-    /// Horizon method: channel noise as a fraction of each channel's RMS,
-    /// in (0, 1].
+    /// Horizon and lifted methods: channel noise as a fraction of each
+    /// channel's RMS, in (0, 1].
     #[arg(long, default_value_t = 0.01, value_name = "FRACTION")]
     noise: f64,
     /// Horizon method: the record starts at rest (x0 = 0 instead of estimated).
@@ -195,6 +208,18 @@ fn validate(a: &Args) -> anyhow::Result<()> {
     check::positive("--lambda", a.lambda, 1e12, "weight of the force")?;
     check::in_range("--mu", a.mu, 0.0, 1e12, "weight of the force's differences")?;
     check::positive("--noise", a.noise, 1.0, "fraction of each channel's RMS")?;
+    check::count(
+        "--resolution",
+        a.resolution,
+        1,
+        64,
+        "sub-intervals per sample",
+    )?;
+    if a.method == CliMethod::Lifted && a.reduce.is_some_and(|r| r != Reduce::None) {
+        anyhow::bail!(
+            "--reduce: the lifted method works on the full-order model; leave --reduce out or give --reduce none"
+        );
+    }
     check::in_range("--smoothness", a.smoothness, 0.0, 1e12, "weight")?;
     check::in_range(
         "--prior-weight",
@@ -257,8 +282,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         (Some(v), None) => Regularization::Fixed(v),
         (None, None) => IdentifySettings::default().regularization,
     };
+    let prob = Problem::new(&model.linear_part(), &rec, &a.sensors.0)?;
     if a.method == CliMethod::Horizon {
-        return run_horizon(&a, &model, &rec, staging);
+        return run_horizon(&a, &prob, staging);
+    }
+    if a.method == CliMethod::Lifted {
+        return run_lifted(&a, &model, &prob, staging);
     }
     let settings = IdentifySettings {
         method: if a.method == CliMethod::Paper {
@@ -267,7 +296,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             Method::Mhe
         },
         solver: a.solver,
-        reduce: a.reduce,
+        reduce: a.reduce.unwrap_or(Reduce::Serep),
         window: a.window,
         horizon: a.horizon,
         substeps: a.substeps,
@@ -286,7 +315,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         },
         ..Default::default()
     };
-    let prob = Problem::new(&model.linear_part(), &rec, &a.sensors.0)?;
     let bar = if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
         let b = indicatif::ProgressBar::new(1);
         b.set_style(
@@ -334,15 +362,9 @@ fn finish(
 
 /// `--method horizon`: the full-horizon formulation through the same
 /// outputs as the window methods.
-fn run_horizon(
-    a: &Args,
-    model: &Model,
-    rec: &record::Record,
-    staging: super::output::Staging,
-) -> anyhow::Result<()> {
+fn run_horizon(a: &Args, prob: &Problem, staging: super::output::Staging) -> anyhow::Result<()> {
     use tacit::horizon;
-    let prob = Problem::new(&model.linear_part(), rec, &a.sensors.0)?;
-    let sys = identify::System::new(&prob, a.reduce, a.substeps)?;
+    let sys = identify::System::new(prob, a.reduce.unwrap_or(Reduce::Serep), a.substeps)?;
     let mut bounds: Vec<(usize, f64, f64)> = vec![];
     for &(d, v) in &a.lower {
         bounds.push((d - 1, v, f64::INFINITY));
@@ -378,7 +400,36 @@ fn run_horizon(
         },
         ..Default::default()
     };
-    let (_, est) = horizon::convert::identify_problem(&prob, &sys, &[], &hs)?;
+    let (_, est) = horizon::convert::identify_problem(prob, &sys, &[], &hs)?;
+    finish(a, &est, staging)
+}
+
+/// The located, lifted smoother through the same outputs.
+fn run_lifted(
+    a: &Args,
+    model: &Model,
+    prob: &Problem,
+    staging: super::output::Staging,
+) -> anyhow::Result<()> {
+    let defaults = identify::LocatedSettings::default();
+    let settings = identify::LocatedSettings {
+        lifted: tacit::diagnose::lifted::LiftedSettings {
+            resolution: a.resolution,
+            lambda: a.lambda,
+            noise_fraction: a.noise,
+            ..defaults.lifted.clone()
+        },
+        locate: tacit::diagnose::settings::LocateSettings {
+            ratio: if a.no_locate {
+                0.0
+            } else {
+                defaults.locate.ratio
+            },
+            ..defaults.locate
+        },
+        substeps: a.substeps,
+    };
+    let est = identify::identify_located(model, prob, &settings)?;
     finish(a, &est, staging)
 }
 

@@ -1,5 +1,6 @@
 //! Command-line front end: one file per subcommand.
 
+mod campaign;
 pub mod check;
 mod diagnose;
 mod identify;
@@ -33,6 +34,8 @@ enum Command {
     Update(update::Args),
     /// Find what the model misses, trace it to an effect, add and fit it, report before/after.
     Diagnose(diagnose::Args),
+    /// Diagnose many records against one model, summarize, fit shared parameters.
+    Campaign(campaign::Args),
 }
 
 /// Run the parsed command.
@@ -43,6 +46,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Identify(a) => identify::run(a),
         Command::Update(a) => update::run(a),
         Command::Diagnose(a) => diagnose::run(a),
+        Command::Campaign(a) => campaign::run(a),
     }
 }
 
@@ -125,12 +129,16 @@ pub fn with_suffix(path: &std::path::Path, suffix: &str) -> PathBuf {
 #[derive(Debug, Clone, clap::Args)]
 pub struct RecordOpts {
     /// For .mat records: variable=channel pairs, e.g. `V1=force_1,V2=disp_1`
-    /// (channel = force, disp, vel or accel, then the DOF from 1).
+    /// (channel = force, disp, vel or accel, then the DOF from 1, or
+    /// `accel:LABEL` at a named point); `VAR[k]=...` takes signal k (from 1)
+    /// of a matrix variable: row k of a wide matrix (`Acceleration` 3×N),
+    /// column k of a tall one.
     #[arg(long, value_name = "VAR=CHANNEL,...")]
     pub mat_map: Option<String>,
-    /// For .mat records: sample rate, Hz.
-    #[arg(long, value_name = "HZ")]
-    pub mat_fs: Option<f64>,
+    /// For .mat records: sample rate, Hz, or the name of a scalar variable
+    /// of the file holding it (`Fs`).
+    #[arg(long, value_name = "HZ|VARIABLE")]
+    pub mat_fs: Option<String>,
     /// For .mat records: subtract each channel's mean.
     #[arg(long)]
     pub remove_mean: bool,
@@ -142,7 +150,7 @@ pub fn load_record(
     path: &std::path::Path,
     opts: &RecordOpts,
 ) -> anyhow::Result<tacit::record::Record> {
-    use tacit::record::{self, Format, MatMapping, Quantity};
+    use tacit::record::{self, Format, MatChannel, MatMapping, MatRate};
     if record::Format::from_path(path)? != Format::Mat {
         return read_record(path);
     }
@@ -154,24 +162,16 @@ pub fn load_record(
     })?;
     let fs = opts
         .mat_fs
+        .as_deref()
+        .map(MatRate::parse)
         .ok_or_else(|| anyhow::anyhow!("{}: a .mat record needs --mat-fs", path.display()))?;
-    check::positive("--mat-fs", fs, 1e9, "sample rate, Hz")?;
-    let mut channels = vec![];
-    for pair in map.split(',') {
-        let (var, ch) = pair
-            .split_once('=')
-            .ok_or_else(|| anyhow::anyhow!("--mat-map: '{pair}' is not variable=channel"))?;
-        let (q, d) = ch
-            .trim()
-            .split_once('_')
-            .ok_or_else(|| anyhow::anyhow!("--mat-map: channel '{ch}' is not like force_1"))?;
-        let q = Quantity::from_prefix(q)
-            .ok_or_else(|| anyhow::anyhow!("--mat-map: unknown quantity '{q}'"))?;
-        let d: usize = d
-            .parse()
-            .map_err(|_| anyhow::anyhow!("--mat-map: bad DOF in '{ch}'"))?;
-        channels.push((var.trim().to_string(), q, d));
+    if let MatRate::Hz(hz) = fs {
+        check::positive("--mat-fs", hz, 1e9, "sample rate, Hz")?;
     }
+    let channels = map
+        .split(',')
+        .map(|pair| MatChannel::parse(pair).map_err(|e| anyhow::anyhow!("--mat-map: {e}")))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     Ok(record::read_mat(
         path,
         &MatMapping {

@@ -1,23 +1,45 @@
 //! `tacit modal`: natural frequencies and mode shapes of a model; with
 //! `--test-modes` or `--record`, test-analysis correlation against test
 //! modes (MAC, pairing, frequency error: the paper's Tables 2–3) and, with
-//! `--update`, modal updating of the spring stiffnesses (Figs 2–3).
+//! `--update`, modal updating of the spring stiffnesses (Figs 2–3); with
+//! `--record ... --write-model FILE` and no model, a modal model identified
+//! from the records ([`tacit::correlate::modelfit`]).
 
 use super::out::{out, outln};
 use super::{check, DofList};
 use std::path::{Path, PathBuf};
 use tacit::correlate::{
     self, report, CorrelationSettings, Expansion, FitSettings, FrfSettings, Residue, TestModes,
-    UpdateSettings,
+    UpdateSettings, Window,
 };
 use tacit::model::Model;
 
 /// Arguments of `tacit modal`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Model file (TOML).
-    #[arg(long)]
-    model: PathBuf,
+    /// Model file (TOML); not needed with `--write-model`.
+    #[arg(long, required_unless_present = "write_model")]
+    model: Option<PathBuf>,
+    /// Identify a linear modal model from the records (`--record`, one
+    /// force at a measured point, accelerations) and write it to this
+    /// file: the modes in `--band`, mass-normalised through the driving
+    /// point, residual modes where they matter, the measured points named.
+    #[arg(long, value_name = "FILE", requires = "record", conflicts_with_all = ["model", "test_modes", "update"])]
+    write_model: Option<PathBuf>,
+    /// FRF window for `--write-model`: hann (random excitation, 50 %
+    /// overlap) or rectangular (periodic excitation with a segment of
+    /// whole periods, no overlap).
+    #[arg(long, value_parser = parse_window, requires = "write_model", value_name = "hann|rectangular")]
+    window: Option<Window>,
+    /// Curve-fit orders for `--write-model`, as `lo,hi` (default 8,48).
+    #[arg(long, value_parser = super::parse_pair, requires = "write_model", value_name = "LO,HI")]
+    orders: Option<(f64, f64)>,
+    /// Warm-up left out of every record for `--write-model`: samples
+    /// (`8192`) or seconds (`20.48s`).
+    #[arg(long, value_name = "SAMPLES|SECONDS", value_parser = tacit::record::WarmUp::parse, requires = "write_model")]
+    warm_up: Option<tacit::record::WarmUp>,
+    #[command(flatten)]
+    rec: super::RecordOpts,
     /// Print JSON instead of tables.
     #[arg(long)]
     json: bool,
@@ -75,6 +97,14 @@ pub struct Args {
     save_model: Option<PathBuf>,
 }
 
+fn parse_window(s: &str) -> Result<Window, String> {
+    match s {
+        "hann" => Ok(Window::Hann),
+        "rectangular" | "rect" => Ok(Window::Rectangular),
+        _ => Err(format!("'{s}': expected hann or rectangular")),
+    }
+}
+
 fn parse_residue(s: &str) -> Result<Residue, String> {
     s.parse()
 }
@@ -93,7 +123,14 @@ struct ModeOut {
 
 /// Run `tacit modal`.
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let model = Model::from_file(&a.model)?;
+    if let Some(out) = &a.write_model {
+        return write_model(&a, out);
+    }
+    let path = a
+        .model
+        .as_ref()
+        .expect("clap requires --model without --write-model");
+    let model = Model::from_file(path)?;
     if a.test_modes.is_none() && a.record.is_empty() {
         if a.update.is_some() || a.dofs.is_some() || a.modes.is_some() {
             anyhow::bail!("--update, --dofs and --modes need --test-modes or --record");
@@ -184,6 +221,122 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Identify a modal model from the records and write it.
+fn write_model(a: &Args, out: &Path) -> anyhow::Result<()> {
+    let mut recs = Vec::with_capacity(a.record.len());
+    for p in &a.record {
+        let r = super::load_record(p, &a.rec)?;
+        let mut r = match a.warm_up {
+            Some(w) => r.without_warm_up(w)?,
+            None => r,
+        };
+        r.source = p.clone();
+        recs.push(r);
+    }
+    let window = a.window.unwrap_or_default();
+    let mut frf = FrfSettings {
+        window,
+        overlap: if window == Window::Rectangular {
+            0.0
+        } else {
+            0.5
+        },
+        ..Default::default()
+    };
+    let mut fit = segment_and_band(a, &recs, &mut frf)?;
+    if let Some((lo, hi)) = a.orders {
+        let ok = |v: f64| v.fract() == 0.0 && (2.0..=200.0).contains(&v);
+        if !(ok(lo) && ok(hi) && lo <= hi) {
+            anyhow::bail!("--orders {lo},{hi}: whole numbers with 2 <= lo <= hi <= 200");
+        }
+        fit.orders = (lo as usize, hi as usize);
+    }
+    let settings = correlate::modelfit::ModelFitSettings {
+        frf,
+        fit,
+        residuals: true,
+    };
+    let id = correlate::modelfit::identify_model(&recs, &settings)?;
+    for d in &id.diagnostics {
+        eprintln!("tacit: note: {d}");
+    }
+    let names: Vec<String> = a.record.iter().map(|p| p.display().to_string()).collect();
+    let description = format!(
+        "identified by tacit modal from {} ({} averages, band {:?} Hz)",
+        names.join(", "),
+        id.frf.averages,
+        fit.band_hz
+    );
+    let name = out
+        .file_stem()
+        .map_or("modal".into(), |s| s.to_string_lossy().to_string());
+    let text = tacit::model::modal::to_toml_string(&name, &description, &id.section);
+    // the file must load as a model before it is written
+    tacit::model::modal::from_toml_str(&text, &out.display().to_string())?;
+    super::output::save_text(out, &text)?;
+    if a.json {
+        outln!("{}", serde_json::to_string_pretty(&id)?);
+        return Ok(());
+    }
+    outln!(
+        "modal model: {} ({} points: {})",
+        out.display(),
+        id.section.points.len(),
+        id.section.points.join(", ")
+    );
+    outln!(
+        "{:>4} {:>10} {:>9}  shape at the points (mass-normalised)",
+        "mode",
+        "freq (Hz)",
+        "damping"
+    );
+    for (r, m) in id.section.modes.iter().enumerate() {
+        let shape: Vec<String> = m.shape.iter().map(|v| format!("{v:>10.4e}")).collect();
+        let tag = if m.residual { "  (residual)" } else { "" };
+        outln!(
+            "{:>4} {:>10.4} {:>9.4}  {}{tag}",
+            r + 1,
+            m.frequency_hz,
+            m.damping,
+            shape.join(" ")
+        );
+    }
+    let pct: Vec<String> = id
+        .fit_error
+        .iter()
+        .map(|e| format!("{:.2} %", 100.0 * e))
+        .collect();
+    outln!("FRF fit error per point: {}", pct.join(", "));
+    Ok(())
+}
+
+/// `--segment` (checked against the shortest record) into `frf`; the
+/// curve-fit settings with `--band` (checked against the first record's
+/// Nyquist frequency).
+fn segment_and_band(
+    a: &Args,
+    recs: &[tacit::record::Record],
+    frf: &mut FrfSettings,
+) -> anyhow::Result<FitSettings> {
+    if let Some(s) = a.segment {
+        let shortest = recs.iter().map(|r| r.len()).min().unwrap_or(0);
+        check::count(
+            "--segment",
+            s,
+            16,
+            shortest.max(16),
+            "FRF segment length, samples, at most the record's length",
+        )?;
+        frf.segment = s;
+    }
+    let mut fit = FitSettings::default();
+    if let Some(b) = a.band {
+        check::band("--band", b, recs[0].fs)?;
+        fit.band_hz = b;
+    }
+    Ok(fit)
+}
+
 /// Test modes from a file or identified from records; the curve-fit
 /// summary for JSON.
 fn test_modes(a: &Args, model: &Model) -> anyhow::Result<(TestModes, Option<serde_json::Value>)> {
@@ -222,22 +375,7 @@ fn test_modes(a: &Args, model: &Model) -> anyhow::Result<(TestModes, Option<serd
         super::records::check(r, model, Some(&sensors))?;
     }
     let mut frf = FrfSettings::default();
-    let shortest = recs.iter().map(|r| r.len()).min().unwrap_or(0);
-    if let Some(s) = a.segment {
-        check::count(
-            "--segment",
-            s,
-            16,
-            shortest.max(16),
-            "FRF segment length, samples, at most the record's length",
-        )?;
-        frf.segment = s;
-    }
-    let mut fit = FitSettings::default();
-    if let Some(b) = a.band {
-        check::band("--band", b, recs[0].fs)?;
-        fit.band_hz = b;
-    }
+    let fit = segment_and_band(a, &recs, &mut frf)?;
     if let Some(d) = a.input_dof {
         super::check_dofs(&[d], model.ndof(), "--input-dof")?;
     }

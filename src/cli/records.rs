@@ -8,6 +8,7 @@ use tacit::integrate::{Integrator, SimSettings};
 use tacit::model::Model;
 use tacit::record::checks::{self, CheckSettings, Finding, Severity};
 use tacit::record::{Quantity, Record};
+use tacit::signal::{force_matrix, rms_of};
 
 /// Run every check of `rec` against `model`; print the warnings on
 /// stderr; fail on a finding that makes the record unusable. `selected`:
@@ -68,12 +69,7 @@ fn scale_finding(rec: &Record, model: &Model, s: &CheckSettings) -> Option<Findi
         ..Default::default()
     };
     let integ = Integrator::new(&lin, rec.fs, settings).ok()?;
-    let mut force = nalgebra::DMatrix::zeros(n, rec.len());
-    for c in &rec.inputs {
-        for (k, v) in c.data.iter().enumerate() {
-            force[(c.dof - 1, k)] += v;
-        }
-    }
+    let force = force_matrix(rec, n);
     let zeros = vec![0.0; n];
     let sim = integ.run(force.as_view(), &zeros, &zeros);
     if !sim.completed() {
@@ -93,7 +89,7 @@ fn scale_finding(rec: &Record, model: &Model, s: &CheckSettings) -> Option<Findi
                 &sim.v
             };
             let row: Vec<f64> = src.row(c.dof - 1).iter().copied().collect();
-            (c.name(), checks::rms(&c.data), checks::rms(&row))
+            (c.name(), rms_of(&c.data), rms_of(&row))
         })
         .collect();
     checks::scale(&pairs, s)
@@ -153,8 +149,8 @@ fn balances(rec: &Record, model: &Model) -> Vec<checks::Balance> {
         out.push(checks::Balance {
             terms,
             force_mean: mean(&f),
-            force_rms: checks::rms(&f),
-            inertia_rms: checks::rms(&inertia),
+            force_rms: rms_of(&f),
+            inertia_rms: rms_of(&inertia),
         });
     }
     out

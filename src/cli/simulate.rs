@@ -148,9 +148,9 @@ fn validate(a: &Args) -> anyhow::Result<()> {
 /// directory.
 fn check_output(path: &std::path::Path) -> anyhow::Result<record::Format> {
     let fmt = record::Format::from_path(path)?;
-    if fmt == record::Format::Mat {
+    if matches!(fmt, record::Format::Mat | record::Format::Uff) {
         anyhow::bail!(
-            "{}: tacit writes .h5 or .csv records, not .mat",
+            "{}: tacit writes .h5 or .csv records, not .mat or universal files",
             path.display()
         );
     }

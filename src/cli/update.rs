@@ -115,6 +115,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let model = Model::from_file(&a.model)?;
     let rec = super::read_record(&a.record)?;
     rec.validate(Some(model.ndof()))?;
+    if let Some(f) = tacit::record::checks::magnitudes(&rec) {
+        anyhow::bail!(
+            "record {}: cannot be used as it is: {f}",
+            rec.source.display()
+        );
+    }
     if let Some(len) = a.segment {
         check::count(
             "--segment",
@@ -137,6 +143,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     settings.validate()?;
     let result = update::fit(&problem, &settings)?;
+    finite(&result)?;
     let before = update::predict(&problem, &problem.x_start()).ok();
     let after = update::predict(&problem, &result.x).ok();
     let dir = staging.dir().to_path_buf();
@@ -162,6 +169,27 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     staging.commit()?;
     print_summary(&result)?;
     outln!("wrote {} in {}", written.join(", "), a.output.display());
+    Ok(())
+}
+
+/// An error with the facts when the fit's cost, parameters or errors are
+/// not finite (never a NaN in a summary).
+fn finite(r: &update::FitResult) -> anyhow::Result<()> {
+    let errors = |e: &Option<update::ErrorReport>| e.as_ref().map_or(0.0, |e| e.overall);
+    let bad = !r.cost().is_finite()
+        || r.values().iter().any(|v| !v.is_finite())
+        || !errors(&r.errors_before).is_finite()
+        || !errors(&r.errors_after).is_finite();
+    if bad {
+        anyhow::bail!(
+            "the updating gave non-finite results (cost {:e}, parameters {:?}, errors {:e} -> {:e}; {}): the record or the model is out of double precision's range",
+            r.cost(),
+            r.values(),
+            errors(&r.errors_before),
+            errors(&r.errors_after),
+            termination_words(&r.termination)
+        );
+    }
     Ok(())
 }
 

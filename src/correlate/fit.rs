@@ -178,10 +178,10 @@ impl FitResult {
 
 /// A mode found in the stabilisation diagram: frequency (Hz), damping
 /// ratio, number of stable poles behind it.
-type Group = (f64, f64, usize);
+pub(crate) type Group = (f64, f64, usize);
 
-/// Lines of the FRF inside the band.
-fn band_lines(frf: &Frf, band: (f64, f64)) -> Vec<usize> {
+/// Lines of the FRF inside the band (Hz).
+pub(crate) fn band_lines(frf: &Frf, band: (f64, f64)) -> Vec<usize> {
     (0..frf.freq_hz.len())
         .filter(|&l| frf.freq_hz[l] >= band.0 && frf.freq_hz[l] <= band.1)
         .collect()
@@ -222,7 +222,7 @@ pub fn identify(frf: &Frf, settings: &FitSettings) -> Result<FitResult> {
             diagnostics,
         });
     }
-    let (consts, fit_error) = lsfd(frf, &lines, &groups)?;
+    let (consts, fit_error) = lsfd(frf, &lines, &groups, true)?;
     let (modes, mass_normalized) = shapes_from_constants(frf, &groups, &consts, &mut diagnostics);
     Ok(FitResult {
         status: FitStatus::Identified,
@@ -407,10 +407,16 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 /// LSFD: real modal constants (outputs × modes) and the relative fit error
-/// per output.
-fn lsfd(frf: &Frf, lines: &[usize], groups: &[Group]) -> Result<(DMatrix<f64>, Vec<f64>)> {
+/// per output; with `residual_terms`, the lower and upper residuals
+/// `−L/ω²` and `U` are fitted beside the modes (and not returned).
+pub(crate) fn lsfd(
+    frf: &Frf,
+    lines: &[usize],
+    groups: &[Group],
+    residual_terms: bool,
+) -> Result<(DMatrix<f64>, Vec<f64>)> {
     let nm = groups.len();
-    let nc = nm + 2;
+    let nc = if residual_terms { nm + 2 } else { nm };
     let d = match frf.quantity {
         Quantity::Disp => 0,
         Quantity::Vel => 1,
@@ -434,8 +440,10 @@ fn lsfd(frf: &Frf, lines: &[usize], groups: &[Group]) -> Result<(DMatrix<f64>, V
                     mult / Complex::new(wr * wr - w * w, 2.0 * z * wr * w)
                 })
                 .collect();
-            row.push(mult * (-1.0 / (w * w)));
-            row.push(mult);
+            if residual_terms {
+                row.push(mult * (-1.0 / (w * w)));
+                row.push(mult);
+            }
             row
         })
         .collect();

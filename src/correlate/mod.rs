@@ -23,6 +23,7 @@ pub mod expand;
 pub mod fit;
 pub mod frf;
 pub mod mac;
+pub mod modelfit;
 pub mod report;
 pub mod residue;
 pub mod testmodes;

@@ -7,6 +7,7 @@
 
 use super::effects::{self, AddedEffect};
 use crate::model::Model;
+use crate::trace::regress::sorted_pair;
 use crate::trace::{EffectKind, RankedEffect};
 use nalgebra::DMatrix;
 
@@ -36,16 +37,10 @@ pub(super) fn cubic_alternative(
     if !(delta.abs() > min_change) {
         return None;
     }
+    let pair = sorted_pair(&best.candidate);
     let mut alt = ranking
         .iter()
-        .find(|e| {
-            e.candidate.kind == EffectKind::Cubic && {
-                let (mut a, mut b) = (e.candidate.dofs.clone(), best.candidate.dofs.clone());
-                a.sort_unstable();
-                b.sort_unstable();
-                a == b
-            }
-        })?
+        .find(|e| e.candidate.kind == EffectKind::Cubic && sorted_pair(&e.candidate) == pair)?
         .clone();
     let ns = states.ncols().max(1);
     let msq = (0..states.ncols())

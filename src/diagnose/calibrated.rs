@@ -29,6 +29,7 @@
 //! apart from the effects.
 
 use super::fit::spread;
+use super::report::pct;
 use super::{effects, joint, prepare_located, DiagnoseSettings, Diagnosis, ErrorSet};
 use crate::calibrate::{self, params, Calibration, CalibrationSettings, LinearParam};
 use crate::error::Result;
@@ -178,7 +179,7 @@ pub fn diagnose_calibrated(
     let declared_validation = vcmp.map(|c| c.errors(declared, sim0).0);
     let (note, std) = refine_once(&mut d, cal, settings, vcmp)?;
     update_effects(&mut d, &std);
-    let corrections = corrections(declared, &calibration, &d.model, &std, &cal.calibration);
+    let corrections = corrections(&calibration, &d.model, &std, &cal.calibration);
     let calibrated_errors = std::mem::replace(&mut d.before, declared_errors);
     if let (Some(v), Some(b)) = (d.validation.as_mut(), declared_validation) {
         v.before = b;
@@ -387,9 +388,9 @@ fn update_effects(d: &mut Diagnosis, std: &[Estimated]) {
     (d.effects, d.added) = pairs.unzip();
 }
 
-/// The linear corrections of the final model against the declared one.
+/// The linear corrections of the final model against the declared one
+/// (named as the calibration named them).
 fn corrections(
-    declared: &Model,
     calibration: &Calibration,
     model: &Model,
     std: &[Estimated],
@@ -409,7 +410,7 @@ fn corrections(
             let change = value / c.declared - 1.0;
             let rel = se.map(|s| s / value.abs().max(1e-300));
             LinearCorrection {
-                name: c.parameter.label(declared),
+                name: c.name.clone(),
                 unit: c.unit.clone(),
                 declared: c.declared,
                 calibrated: c.calibrated,
@@ -432,8 +433,4 @@ fn lower(a: Option<f64>, b: Option<f64>) -> bool {
         (Some(_), None) => true,
         _ => false,
     }
-}
-
-fn pct(x: Option<f64>) -> String {
-    x.map_or("failed".into(), |v| format!("{:.2} %", 100.0 * v))
 }

@@ -45,6 +45,9 @@ pub enum ShotError {
         /// Sample (of the record) where the prediction is NaN.
         sample: usize,
     },
+    /// The predictions were computed but their error is not finite (a
+    /// record or a prediction beyond double precision's range).
+    NotFinite,
 }
 
 impl std::fmt::Display for ShotError {
@@ -55,6 +58,10 @@ impl std::fmt::Display for ShotError {
                 f,
                 "segment {} (sample {sample}) could not be simulated from its start state",
                 segment.map_or("?".into(), |s| s.to_string())
+            ),
+            ShotError::NotFinite => write!(
+                f,
+                "the error is not finite (the record or the predictions exceed double precision's range)"
             ),
         }
     }

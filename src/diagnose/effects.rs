@@ -203,31 +203,6 @@ fn add_element(
     (targets, names, traced, 0.0)
 }
 
-/// The largest `k/m` of the clearances (their penalty stiffness) and, on
-/// the reconstructed `states` (2n × N) when given, of the quadratic
-/// springs (their tangent `2 |k_2| δ_max`), with `1/m` summed over the
-/// element's DOFs: the squared frequency the sub-steps must resolve
-/// ([`super::auto_substeps`]).
-pub fn stiffest_added(model: &Model, states: Option<&nalgebra::DMatrix<f64>>) -> f64 {
-    let inv_m = |dofs: &[usize]| -> f64 { dofs.iter().map(|&d| 1.0 / model.masses[d - 1]).sum() };
-    let mut w2: f64 = 0.0;
-    for c in &model.clearances {
-        w2 = w2.max(c.stiffness * inv_m(&c.dofs));
-    }
-    if let Some(x) = states {
-        for q in &model.quadratics {
-            let rel = |k: usize| match q.dofs.as_slice() {
-                [i, j] => x[(i - 1, k)] - x[(j - 1, k)],
-                [i] => x[(i - 1, k)],
-                _ => 0.0,
-            };
-            let dmax = (0..x.ncols()).map(|k| rel(k).abs()).fold(0.0, f64::max);
-            w2 = w2.max(2.0 * q.k2.abs() * dmax * inv_m(&q.dofs));
-        }
-    }
-    w2
-}
-
 /// The clearance on the pair of a fitted cubic spring `best`, at its
 /// traced values, when the trace ranked it and it lowers the information
 /// criterion (the trace puts the cubic first when both pay,

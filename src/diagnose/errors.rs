@@ -141,7 +141,7 @@ impl Comparison {
             }
         };
         let rel = |y: &Option<DMatrix<f64>>, c: usize| y.as_ref().map(|y| self.channel_error(y, c));
-        let per_channel = self
+        let per_channel: Vec<ChannelError> = self
             .observations
             .iter()
             .enumerate()
@@ -151,9 +151,18 @@ impl Comparison {
                 simulation_error: rel(&whole, c),
             })
             .collect();
+        let relative_error = seg.as_ref().map(|y| self.total_error(y));
+        let simulation_error = whole.as_ref().map(|y| self.total_error(y));
+        let finite = |e: Option<f64>| e.is_none_or(f64::is_finite);
+        if !finite(relative_error) || !per_channel.iter().all(|c| finite(c.relative_error)) {
+            status.multiple_shooting = Some(ShotError::NotFinite);
+        }
+        if !finite(simulation_error) || !per_channel.iter().all(|c| finite(c.simulation_error)) {
+            status.open_loop = Some(ShotError::NotFinite);
+        }
         let set = ErrorSet {
-            relative_error: seg.as_ref().map(|y| self.total_error(y)),
-            simulation_error: whole.as_ref().map(|y| self.total_error(y)),
+            relative_error,
+            simulation_error,
             per_channel,
             status,
             starts,

@@ -16,7 +16,7 @@ use super::DiagnoseSettings;
 use crate::error::Result;
 use crate::integrate::SimSettings;
 use crate::model::Model;
-use crate::trace::EffectKind;
+use crate::trace::{Candidate, EffectKind};
 use crate::update::optimize::FitSettings;
 use crate::update::shooting::Segment;
 use crate::update::{Parameter, Problem, Target};
@@ -182,9 +182,7 @@ fn contact_starts(
     // displacement (beyond it the contact never closes), not only within
     // 3× the traced value: a traced gap from a few sensors can be a third
     // of the truth
-    let dmax = (0..scan.states.ncols())
-        .map(|k| last.candidate.delta(scan.states, k))
-        .fold(0.0, f64::max);
+    let dmax = max_delta(&last.candidate, scan.states);
     let pg = &mut problem.parameters[np - 2];
     pg.upper = pg.upper.max(scan.settings.fit.gap_upper * dmax);
     let kc = scanned_starts(trial, ci, last, problem, scan, starts);
@@ -407,7 +405,7 @@ fn push_start(starts: &mut Vec<Vec<f64>>, params: &[Parameter], values: &[f64]) 
 fn scan_contact(
     trial: &Model,
     ci: usize,
-    cand: &crate::trace::Candidate,
+    cand: &Candidate,
     scan: &Scan<'_>,
 ) -> (Vec<(f64, f64)>, usize) {
     const KEEP: usize = 2;
@@ -420,24 +418,13 @@ fn scan_contact(
     let fs = cmp.fs;
     // a clearance: its gap on |δ|, its own entry
     let two_sided = cand.kind == EffectKind::Clearance;
-    let dofs = if two_sided {
-        &trial.clearances[ci].dofs
-    } else {
-        &trial.contacts[ci].dofs
-    };
     let mut d: Vec<f64> = (0..states.ncols())
         .map(|k| cand.delta(states, k))
         .map(|x| if two_sided { x.abs() } else { x })
         .collect();
     d.sort_by(f64::total_cmp);
     let q = |f: f64| d[((d.len() - 1) as f64 * f) as usize].max(0.0);
-    let kspring = trial
-        .springs
-        .iter()
-        .filter(|s| s.dofs.contains(&dofs[0]) || dofs.get(1).is_some_and(|j| s.dofs.contains(j)))
-        .map(|s| s.stiffness)
-        .fold(0.0, f64::max)
-        .max(1.0);
+    let kspring = stiffest_spring(trial, &cand.dofs);
     let mut scored = vec![];
     let mut evals = 0;
     for &m in &settings.fit.contact_stiffnesses {
@@ -484,14 +471,6 @@ fn floor_start(
     (states, force): (&DMatrix<f64>, &DMatrix<f64>),
     z: &ZeroStarts,
 ) {
-    let stiffest = |m: &Model, dofs: &[usize]| {
-        m.springs
-            .iter()
-            .filter(|s| dofs.iter().any(|d| s.dofs.contains(&(d + 1))))
-            .map(|s| s.stiffness)
-            .fold(0.0, f64::max)
-            .max(1.0)
-    };
     for &t in &e.targets {
         let v = t.get(model).unwrap_or(0.0);
         if v != 0.0 && v.is_finite() {
@@ -499,17 +478,32 @@ fn floor_start(
         }
         let dofs = &e.candidate.dofs;
         let floor = match t {
-            Target::ContactGap(_) => {
-                let dmax = (0..states.ncols())
-                    .map(|k| e.candidate.delta(states, k))
-                    .fold(0.0, f64::max);
-                (z.gap * dmax).max(1e-9)
-            }
-            Target::ContactStiffness(_) => z.contact_stiffness * stiffest(model, dofs),
+            Target::ContactGap(_) => (z.gap * max_delta(&e.candidate, states)).max(1e-9),
+            Target::ContactStiffness(_) => z.contact_stiffness * stiffest_spring(model, dofs),
             Target::FrictionLevel(_) => (z.friction * force.amax()).max(1e-9),
-            Target::SpringStiffness(_) => z.spring * stiffest(model, dofs),
+            Target::SpringStiffness(_) => z.spring * stiffest_spring(model, dofs),
             _ => continue,
         };
         t.set(model, floor);
     }
+}
+
+/// The stiffest spring of `model` at a candidate's DOFs `dofs` (from 0),
+/// at least 1 N/m.
+fn stiffest_spring(model: &Model, dofs: &[usize]) -> f64 {
+    model
+        .springs
+        .iter()
+        .filter(|s| dofs.iter().any(|d| s.dofs.contains(&(d + 1))))
+        .map(|s| s.stiffness)
+        .fold(0.0, f64::max)
+        .max(1.0)
+}
+
+/// The largest relative displacement `δ` of a candidate (signed: a
+/// contact closes on the positive side) over the reconstructed `states`.
+fn max_delta(c: &Candidate, states: &DMatrix<f64>) -> f64 {
+    (0..states.ncols())
+        .map(|k| c.delta(states, k))
+        .fold(0.0, f64::max)
 }

@@ -26,8 +26,9 @@
 //! ([`crate::linear::SampledModel::state_scale`]) and `D_i` is floored at
 //! `1e-10` of its largest entry, so directions the outputs never see (a
 //! free-free model's rigid-body position under acceleration data) take no
-//! step. A step is accepted when the cost falls (λ ÷ 3), else λ × 4 and the
-//! step is recomputed; the fit stops when an accepted step with light
+//! step. The iterations are the least-squares driver's ([`crate::lsq`],
+//! the Schur-complement solve plugged in as its step): a step is accepted
+//! when the cost falls (λ ÷ 3), else λ × 4 and the step is recomputed; the fit stops when an accepted step with light
 //! damping (λ ≤ 0.01 after it) lowers the cost by less than the relative
 //! `f_tol` (at least 1e-4), when λ exceeds 1e6 (stalled: the cost
 //! is rough at the sub-step scale), or at the iteration limit.
@@ -247,6 +248,64 @@ pub struct Stall {
     pub gain: f64,
 }
 
+/// The joint fit as a problem of the least-squares driver: the point is
+/// the parameters and the segments (with their start states), the step
+/// the Schur-complement solve of [`step`].
+struct Joint<'a> {
+    cur: Problem,
+    scale: &'a DVector<f64>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    sims: usize,
+}
+
+impl crate::lsq::Problem for Joint<'_> {
+    type Point = (Vec<f64>, Vec<Segment>);
+    type Eval = Vec<f64>;
+    type Lin = Vec<Lin>;
+    type Step = (DVector<f64>, Vec<DVector<f64>>);
+
+    fn evaluate(&mut self, (x, segs): &Self::Point) -> Option<Vec<f64>> {
+        self.sims += segs.len();
+        let old = std::mem::replace(&mut self.cur.segments, segs.clone());
+        let costs = residuals(&self.cur, x).map(|r| r.iter().map(|v| v.norm_squared()).collect());
+        self.cur.segments = old;
+        costs
+    }
+
+    fn cost(&self, costs: &Vec<f64>) -> f64 {
+        costs.iter().sum()
+    }
+
+    fn linearize(&mut self, (x, segs): &Self::Point, _: &Vec<f64>) -> Result<Vec<Lin>, String> {
+        self.sims += segs.len();
+        self.cur.segments.clone_from(segs);
+        linearize(&self.cur, x, self.scale).ok_or_else(|| "simulation failed".into())
+    }
+
+    fn step(&mut self, lins: &Vec<Lin>, lambda: f64) -> Result<Self::Step, String> {
+        step(lins, lambda).ok_or_else(|| "a block is not positive definite".into())
+    }
+
+    fn trial(&self, (x, segs): &Self::Point, (dx, ds): &Self::Step, _t: f64) -> Self::Point {
+        let (n, scale) = (self.cur.model.ndof(), self.scale);
+        let xt = (0..x.len())
+            .map(|j| (x[j] + dx[j]).clamp(self.lo[j], self.hi[j]))
+            .collect();
+        let st = segs
+            .iter()
+            .zip(ds)
+            .map(|(s, d)| Segment {
+                start: s.start,
+                len: s.len,
+                u0: (0..n).map(|q| s.u0[q] + d[q] * scale[q]).collect(),
+                v0: (0..n).map(|q| s.v0[q] + d[n + q] * scale[n + q]).collect(),
+            })
+            .collect();
+        (xt, st)
+    }
+}
+
 /// Fit `problem`'s parameters (from `x0`) and its segments' start states
 /// together (module docs). Full-order GLS problems only.
 pub fn fit(
@@ -255,6 +314,7 @@ pub fn fit(
     settings: &FitSettings,
     stall: Stall,
 ) -> Result<JointFit, JointError> {
+    use crate::lsq;
     if problem.reduction.is_some() {
         return Err(JointError::Reduced);
     }
@@ -265,91 +325,48 @@ pub fn fit(
         });
     }
     let scale = state_scale(problem).ok_or(JointError::StateScale)?;
-    let n = problem.model.ndof();
     let (lo, hi) = problem.x_bounds();
-    let nseg = problem.segments.len();
-    let costs_of = |r: Vec<DVector<f64>>| r.iter().map(|v| v.norm_squared()).collect::<Vec<_>>();
-    let mut cur = problem.clone();
-    let mut x = x0.to_vec();
-    let mut sims = nseg;
-    let mut segment_costs = costs_of(residuals(&cur, &x).ok_or(JointError::StartFailed)?);
-    let mut cost: f64 = segment_costs.iter().sum();
-    let cost0 = cost;
-    let mut lambda = settings.lm_lambda.max(1e-6);
-    let mut iterations = 0;
-    let mut termination = JointTermination::IterationLimit;
-    let mut slow = 0;
-    'outer: while iterations < settings.max_iterations {
-        sims += nseg;
-        let Some(lins) = linearize(&cur, &x, &scale) else {
-            termination = JointTermination::SimulationFailed;
-            break;
-        };
-        loop {
-            if lambda > 1e6 {
-                termination = JointTermination::StepsVanish;
-                break 'outer;
-            }
-            let Some((dx, ds)) = step(&lins, lambda) else {
-                lambda *= 4.0;
-                continue;
-            };
-            let xt: Vec<f64> = (0..x.len())
-                .map(|j| (x[j] + dx[j]).clamp(lo[j], hi[j]))
-                .collect();
-            let st: Vec<Segment> = cur
-                .segments
-                .iter()
-                .zip(&ds)
-                .map(|(s, d)| Segment {
-                    start: s.start,
-                    len: s.len,
-                    u0: (0..n).map(|q| s.u0[q] + d[q] * scale[q]).collect(),
-                    v0: (0..n).map(|q| s.v0[q] + d[n + q] * scale[n + q]).collect(),
-                })
-                .collect();
-            sims += nseg;
-            let old = std::mem::replace(&mut cur.segments, st);
-            let ct = residuals(&cur, &xt).map(costs_of);
-            match ct {
-                Some(c) if c.iter().sum::<f64>() < cost => {
-                    let total: f64 = c.iter().sum();
-                    let gain = 1.0 - total / cost;
-                    x = xt;
-                    segment_costs = c;
-                    cost = total;
-                    iterations += 1;
-                    lambda = (lambda / 3.0).max(1e-9);
-                    // a small gain under heavy damping is a short step,
-                    // not a minimum
-                    if gain < settings.f_tol.max(1e-4) && lambda <= 1e-2 {
-                        termination = JointTermination::Converged;
-                        break 'outer;
-                    }
-                    // but a run of them is the cost's roughness (contact
-                    // switches within the segments) holding the steps
-                    // short: what is left there is below the noise
-                    slow = if gain < stall.gain { slow + 1 } else { 0 };
-                    if slow >= stall.steps {
-                        termination = JointTermination::Stalled(stall);
-                        break 'outer;
-                    }
-                    continue 'outer;
-                }
-                _ => {
-                    cur.segments = old;
-                    lambda *= 4.0;
-                }
-            }
-        }
-    }
+    let mut q = Joint {
+        cur: problem.clone(),
+        scale: &scale,
+        lo,
+        hi,
+        sims: 0,
+    };
+    let damping = lsq::Damping {
+        initial: settings.lm_lambda.max(1e-6),
+        grow: 4.0,
+        shrink: 3.0,
+        floor: 1e-9,
+        ceiling: 1e6,
+    };
+    let stop = lsq::Stopping {
+        max_iterations: settings.max_iterations,
+        x_tol: None,
+        cost: lsq::CostTest::Gain(settings.f_tol.max(1e-4)),
+        light: 1e-2,
+        stall: Some((stall.steps, stall.gain)),
+        count_failed_attempt: false,
+    };
+    let start = (x0.to_vec(), problem.segments.clone());
+    let out = lsq::minimize(&mut q, start, lsq::Method::Damped(damping), &stop);
+    let termination = match out.termination {
+        lsq::Termination::StartFailed => return Err(JointError::StartFailed),
+        lsq::Termination::Converged(_) => JointTermination::Converged,
+        lsq::Termination::Stalled { .. } => JointTermination::Stalled(stall),
+        lsq::Termination::DampingCeiling { .. } => JointTermination::StepsVanish,
+        lsq::Termination::LinearizationFailed(_) => JointTermination::SimulationFailed,
+        // no budget, step test or line search here: the limit is the rest
+        _ => JointTermination::IterationLimit,
+    };
+    let (x, segments) = out.point;
     Ok(JointFit {
-        segment_costs,
+        segment_costs: out.eval.unwrap_or_default(),
         x,
-        segments: cur.segments,
-        cost: (cost0, cost),
-        iterations,
-        simulations: sims,
+        segments,
+        cost: (out.history[0], out.cost),
+        iterations: out.iterations,
+        simulations: q.sims,
         termination,
     })
 }

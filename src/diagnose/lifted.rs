@@ -61,6 +61,7 @@
 use crate::error::{Result, TacitError};
 use crate::linear::SampledModel;
 use crate::record::Quantity;
+use crate::riccati::{rel_change, symmetrize, RelativeTo};
 use nalgebra::{DMatrix, DVector};
 use std::time::Instant;
 
@@ -283,18 +284,14 @@ struct Scaled {
 }
 
 /// `W^{1/2}` per channel: `1/(fraction × RMS)`.
-fn channel_weights(y: &DMatrix<f64>, fraction: f64) -> Result<DVector<f64>> {
-    let mut w = DVector::zeros(y.nrows());
-    for r in 0..y.nrows() {
-        let rms = (y.row(r).norm_squared() / y.ncols() as f64).sqrt();
-        if !(rms > 0.0) {
-            return Err(bad(format!(
-                "channel {r} is identically zero, so a noise level relative to its RMS is undefined"
-            )));
-        }
-        w[r] = 1.0 / (fraction * rms);
+fn rms_weights(y: &DMatrix<f64>, fraction: f64) -> Result<DVector<f64>> {
+    let w = crate::signal::channel_weights(y, fraction);
+    match w.iter().position(Option::is_none) {
+        Some(r) => Err(bad(format!(
+            "channel {r} is identically zero, so a noise level relative to its RMS is undefined"
+        ))),
+        None => Ok(DVector::from_iterator(y.nrows(), w.into_iter().flatten())),
     }
-    Ok(w)
 }
 
 fn check_sizes(
@@ -361,7 +358,7 @@ impl Scaled {
         let nq = directions.ncols();
         let (nx, nu, p) = (2 * n, nq * r, channels.len());
         let (cy, dy) = sm.outputs(channels)?;
-        let wsqrt = channel_weights(measured, s.noise_fraction)?;
+        let wsqrt = rms_weights(measured, s.noise_fraction)?;
         // reference frequency and mass (as the horizon smoother)
         let (omega, mref) = sm.reference_scales();
         let dx = sm.state_scale();
@@ -462,17 +459,6 @@ struct Gain {
     phit: DMatrix<f64>,
 }
 
-fn symmetrize(p: &mut DMatrix<f64>) {
-    let n = p.nrows();
-    for i in 0..n {
-        for j in 0..i {
-            let v = 0.5 * (p[(i, j)] + p[(j, i)]);
-            p[(i, j)] = v;
-            p[(j, i)] = v;
-        }
-    }
-}
-
 /// One Riccati step from `P' = pn`: the gains and `P`. `None` when `Q_uu`
 /// is not positive definite.
 fn riccati_step(sp: &Scaled, pn: &DMatrix<f64>, k: usize) -> Option<(Gain, DMatrix<f64>)> {
@@ -529,15 +515,6 @@ fn riccati_step(sp: &Scaled, pn: &DMatrix<f64>, k: usize) -> Option<(Gain, DMatr
     ))
 }
 
-fn rel_change(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
-    let scale = a.amax().max(b.amax());
-    if scale == 0.0 {
-        0.0
-    } else {
-        (a - b).amax() / scale
-    }
-}
-
 /// The backward pass.
 struct Backward {
     /// Samples `k ≥ j0` use `transient[k − j0]`, `k < j0` the steady gain.
@@ -581,7 +558,7 @@ fn backward(sp: &Scaled) -> Result<Backward> {
         lff.set_column(k, &(&gain.kr * rk + &gain.ke * &e));
         pv = &gain.mt * rk + &gain.phit * &e;
         project_vector(&sp.null, &mut pv);
-        calm = if rel_change(&pk, &p) <= RICCATI_TOL {
+        calm = if rel_change(&pk, &p, RelativeTo::Larger) <= RICCATI_TOL {
             calm + 1
         } else {
             0
@@ -918,7 +895,7 @@ mod tests {
         // dense: z = [x0; u_0; …; u_{N−1}]
         let (nx, nu) = (2 * n, n * r);
         let nz = nx + nu * len;
-        let w = channel_weights(measured, s.noise_fraction).unwrap();
+        let w = rms_weights(measured, s.noise_fraction).unwrap();
         // x_k = X_k z + x_k^c
         let mut xm = DMatrix::zeros(nx, nz);
         xm.columns_mut(0, nx).fill_with_identity();

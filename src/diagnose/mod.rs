@@ -92,6 +92,22 @@ use state::{add_time, Context, State};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+/// An error with the facts when the declared model cannot be scored on
+/// the record (a simulation failed, or an error is not finite): a
+/// diagnosis would then compare nothing.
+fn unscored(declared: &Model, rec: &Record, sim: SimSettings, before: &ErrorSet) -> Result<()> {
+    if before.status.is_ok() {
+        return Ok(());
+    }
+    let step = crate::integrate::Integrator::new(declared, rec.fs, sim)
+        .map(|i| format!("; {}", i.describe_step()))
+        .unwrap_or_default();
+    Err(crate::error::TacitError::Numerical(format!(
+        "the declared model {} cannot be scored on the record: {}{step}",
+        declared.name, before.status
+    )))
+}
+
 /// Run the diagnosis of `rec` with the `declared` model (module docs),
 /// validated on `validation` when given; `progress` hears each stage.
 pub fn diagnose(
@@ -130,6 +146,7 @@ pub fn diagnose(
     progress("errors before");
     let t = Instant::now();
     let (before, pred_before) = ctx.cmp().errors(declared, sim0);
+    unscored(declared, rec, sim0, &before)?;
     timings.insert("errors_before".into(), t.elapsed().as_secs_f64());
     let sims = errors::error_simulations(&before, ctx.cmp());
     let mut st = State::new(

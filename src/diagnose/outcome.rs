@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 /// One effect in the report.
 #[derive(Debug, Clone, Serialize)]
 pub struct EffectReport {
-    /// `contact`, `friction`, `cubic`, `stiffness`, `ground_spring`, `damping`.
+    /// The effect's kind ([`EffectKind`]; serialized in snake case).
     pub kind: EffectKind,
     /// DOFs from 1 (contact `[i, j]`: on when `u_i − u_j` exceeds the gap).
     pub dofs: Vec<usize>,

@@ -75,7 +75,9 @@ pub fn write(
     Ok(out)
 }
 
-fn pct(x: Option<f64>) -> String {
+/// A fraction as a percentage with two decimals, or `failed` (an error
+/// that could not be computed).
+pub fn pct(x: Option<f64>) -> String {
     x.map_or("failed".into(), |v| format!("{:.2} %", 100.0 * v))
 }
 
@@ -493,7 +495,7 @@ fn force_figures(dir: &Path, d: &Diagnosis, t: &[f64]) -> Vec<(Figure, PathBuf)>
     jobs
 }
 
-/// A percentage of an error, `NaN` when missing.
+/// An error (a fraction) to four decimals, `NaN` when missing.
 fn p4(x: Option<f64>) -> String {
     format!("{:.4}", x.unwrap_or(f64::NAN))
 }

@@ -27,29 +27,22 @@ fn fit_trial(
     correction: Option<&DMatrix<f64>>,
     predicted: Option<&[Vec<f64>]>,
 ) -> Result<EffectFit> {
+    let own = ctx.own_prep(trial, ctx.rec);
+    let (cmp, states, correction) = match &own {
+        Some(o) => (&o.comparison, &o.recon.states, None),
+        None => (ctx.cmp(), &ctx.prep.recon.states, correction),
+    };
     let fs = ctx.rec.fs;
-    match &ctx.own_prep(trial, ctx.rec) {
-        Some(o) => fit_effects(
-            trial,
-            all,
-            &o.comparison,
-            &o.recon.states,
-            None,
-            predicted,
-            fs,
-            ctx.settings,
-        ),
-        None => fit_effects(
-            trial,
-            all,
-            ctx.cmp(),
-            &ctx.prep.recon.states,
-            correction,
-            predicted,
-            fs,
-            ctx.settings,
-        ),
-    }
+    fit_effects(
+        trial,
+        all,
+        cmp,
+        states,
+        correction,
+        predicted,
+        fs,
+        ctx.settings,
+    )
 }
 
 /// Add `best` to the current model, fit every added effect and score

@@ -16,7 +16,10 @@
 //! ([`Integrator::run_sensitivities`], the exact derivative of the discrete
 //! solution: one simulation of every segment per iteration, with 2n seeds),
 //! and the iterations go on; a step that does not lower `J_s` is halved, up
-//! to four times, else the segment keeps its state. `J⁺` is the
+//! to four times (the halving schedule of the least-squares driver,
+//! [`crate::lsq::halving`], every segment still pending at one step
+//! fraction so that their simulations run together), else the segment
+//! keeps its state. `J⁺` is the
 //! pseudo-inverse in states scaled to a common unit (displacements × ω,
 //! [`SampledModel::state_scale`]), singular values below 1e-8 of the
 //! largest dropped: directions the outputs never see (a free-free model's
@@ -495,11 +498,12 @@ impl Stepping<'_> {
             .copied()
             .filter(|&i| step_of[i].is_some())
             .collect();
-        let mut t = 1.0;
         let mut improved = vec![false; self.segs.len()];
-        for _ in 0..5 {
+        // the driver's halving schedule, all pending segments at one t:
+        // 1, 1/2, …, 1/16
+        crate::lsq::halving(1.0, 1.0 / 16.0, |t| {
             if pending.is_empty() {
-                break;
+                return crate::lsq::Halve::Stop;
             }
             let trial: Vec<Segment> = pending
                 .iter()
@@ -528,9 +532,9 @@ impl Stepping<'_> {
                     _ => still.push(i),
                 }
             }
-            pending = still;
-            t *= 0.5;
-        }
+            pending = std::mem::take(&mut still);
+            crate::lsq::Halve::Again
+        });
         improved
     }
 }

@@ -3,7 +3,7 @@
 use super::effects;
 use super::errors::Comparison;
 use super::fit::spread;
-use super::outcome::{EffectReport, ToleratedFailure};
+use super::outcome::EffectReport;
 use super::state::{Context, KeptEffect, State};
 use super::{joint, DiagnoseSettings};
 use crate::integrate::SimSettings;
@@ -63,78 +63,70 @@ fn standard_errors(
     sims: &mut usize,
 ) -> BTreeMap<(usize, usize), f64> {
     let (cmp, settings): (&Comparison, &DiagnoseSettings) = (ctx.cmp(), ctx.settings);
-    let mut tolerated = ctx.tolerated.borrow_mut();
-    let mut tolerate = |step: String, error: String, fallback: &str| {
-        tolerated.push(ToleratedFailure {
-            step,
-            error,
-            fallback: fallback.into(),
-        })
-    };
     let mut ses: BTreeMap<(usize, usize), f64> = BTreeMap::new();
-    if !added.is_empty() {
-        let mut params = vec![];
-        let mut owner = vec![];
-        for (ei, k) in added.iter().enumerate() {
-            match effects::parameters(model, &k.effect) {
-                Ok(ps) => {
-                    for (pi, p) in ps.into_iter().enumerate() {
-                        params.push(p);
-                        owner.push((ei, pi));
-                    }
+    if added.is_empty() {
+        return ses;
+    }
+    let mut params = vec![];
+    let mut owner = vec![];
+    for (ei, k) in added.iter().enumerate() {
+        match effects::parameters(model, &k.effect) {
+            Ok(ps) => {
+                for (pi, p) in ps.into_iter().enumerate() {
+                    params.push(p);
+                    owner.push((ei, pi));
                 }
-                Err(e) => tolerate(
-                    format!("standard errors of {}", k.effect.label),
-                    e.to_string(),
-                    "none reported",
-                ),
+            }
+            Err(e) => ctx.tolerate(
+                &format!("standard errors of {}", k.effect.label),
+                e,
+                "none reported",
+            ),
+        }
+    }
+    // with the fit's segments and start states: the start states are
+    // nuisance parameters of the same fit ([`joint::std_errors`])
+    let joint = fitted.and_then(|(segs, fsim)| {
+        let mut problem = cmp.problem(model, segs.clone(), *fsim);
+        problem.parameters = params.clone();
+        *sims += segs.len();
+        let x = vec![0.0; problem.parameters.len()];
+        joint::std_errors(&problem, &x, settings.noise.level)
+    });
+    if let Some(sd) = joint {
+        for (k, v) in sd.into_iter().enumerate() {
+            if let Some(&o) = owner.get(k) {
+                ses.insert(o, v);
             }
         }
-        // with the fit's segments and start states: the start states are
-        // nuisance parameters of the same fit ([`joint::std_errors`])
-        let joint = fitted.and_then(|(segs, fsim)| {
-            let mut problem = cmp.problem(model, segs.clone(), *fsim);
-            problem.parameters = params.clone();
-            *sims += segs.len();
-            let x = vec![0.0; problem.parameters.len()];
-            joint::std_errors(&problem, &x, settings.noise.level)
-        });
-        match joint {
-            Some(sd) => {
-                for (k, v) in sd.into_iter().enumerate() {
+        return ses;
+    }
+    let segs = spread(&cmp.segments, settings.segments.fit_segments);
+    let mut problem = cmp.problem(model, segs, sim);
+    problem.parameters = params;
+    let fs_ = FitSettings {
+        max_iterations: 1,
+        ..settings.fit_settings()
+    };
+    if fitted.is_some() {
+        ctx.tolerate(
+            "standard errors with the start states as nuisance parameters",
+            "a simulation failed or the Schur complement is singular",
+            "from the parameter Jacobian at the reconstructed start states",
+        );
+    }
+    match crate::update::fit(&problem, &fs_) {
+        Err(e) => ctx.tolerate(
+            "standard errors from the parameter Jacobian",
+            e,
+            "none reported",
+        ),
+        Ok(r) => {
+            *sims += r.simulations;
+            if let Some(id) = &r.identifiability {
+                for (k, pid) in id.parameters.iter().enumerate() {
                     if let Some(&o) = owner.get(k) {
-                        ses.insert(o, v);
-                    }
-                }
-            }
-            None => {
-                let segs = spread(&cmp.segments, settings.segments.fit_segments);
-                let mut problem = cmp.problem(model, segs, sim);
-                problem.parameters = params;
-                let fs_ = FitSettings {
-                    max_iterations: 1,
-                    ..settings.fit_settings()
-                };
-                if fitted.is_some() {
-                    tolerate(
-                        "standard errors with the start states as nuisance parameters".into(),
-                        "a simulation failed or the Schur complement is singular".into(),
-                        "from the parameter Jacobian at the reconstructed start states",
-                    );
-                }
-                let r = crate::update::fit(&problem, &fs_);
-                if let Err(e) = &r {
-                    let step = "standard errors from the parameter Jacobian".into();
-                    tolerate(step, e.to_string(), "none reported");
-                }
-                if let Ok(r) = r {
-                    *sims += r.simulations;
-                    if let Some(id) = &r.identifiability {
-                        for (k, pid) in id.parameters.iter().enumerate() {
-                            if let Some(&o) = owner.get(k) {
-                                ses.insert(o, pid.std_value);
-                            }
-                        }
+                        ses.insert(o, pid.std_value);
                     }
                 }
             }

@@ -10,7 +10,7 @@
 //! Householder QR with two steps of iterative refinement. The posterior covariance is `(AᵀA)^{-1} = R^{-1}R^{-T}`.
 //! Memory and time grow as N²: a test tool, limited to 4000 unknowns.
 
-use super::problem::{channel_weights, HorizonData};
+use super::problem::{noise_weights, HorizonData};
 use super::settings::{HorizonSettings, InitialState};
 use crate::error::{Result, TacitError};
 use crate::linear::SampledModel;
@@ -76,7 +76,7 @@ fn build(
             "batch least squares: {nz} unknowns and {len} samples; at most 4000 unknowns, at least 2 samples"
         )));
     }
-    let ws = channel_weights(data.measured, &settings.noise)?;
+    let ws = noise_weights(data.measured, &settings.noise)?;
     let (cy, dy) = model.outputs(data.channels)?;
     let e = &dy * data.unknown;
     let b0u = &model.b0 * data.unknown;

@@ -116,21 +116,7 @@ pub(crate) fn solve_lower_t_vec(c: &DMatrix<f64>, x: &mut [f64]) {
     }
 }
 
-/// Make a square matrix exactly symmetric (mean of the two triangles).
-pub(crate) fn symmetrize(p: &mut DMatrix<f64>) {
-    let n = p.nrows();
-    let a = p.as_mut_slice();
-    for j in 0..n {
-        // column j against row j, read as the j-th entry of the later columns
-        let (left, right) = a.split_at_mut((j + 1) * n);
-        let col = &mut left[j * n..];
-        for (cj, other) in col[j + 1..].iter_mut().zip(right.chunks_exact_mut(n)) {
-            let v = 0.5 * (*cj + other[j]);
-            *cj = v;
-            other[j] = v;
-        }
-    }
-}
+pub(crate) use crate::riccati::symmetrize;
 
 #[cfg(test)]
 mod tests {

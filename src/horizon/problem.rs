@@ -130,7 +130,7 @@ impl Lq {
         let (n, len) = check_sizes(model, data)?;
         let (nx, m, p) = (2 * n, data.unknown.ncols(), data.channels.len());
         let ns = nx + m;
-        let wsqrt = channel_weights(data.measured, &settings.noise)?;
+        let wsqrt = noise_weights(data.measured, &settings.noise)?;
         let d = scaling(model, m);
         let (cy, dy) = model.outputs(data.channels)?;
         let bu = data.unknown;
@@ -273,33 +273,28 @@ fn check_sizes(model: &SampledModel, data: &HorizonData<'_>) -> Result<(usize, u
 }
 
 /// `W^{1/2}` per channel from the assumed channel noise.
-pub(crate) fn channel_weights(y: &DMatrix<f64>, noise: &ChannelNoise) -> Result<DVector<f64>> {
+pub(crate) fn noise_weights(y: &DMatrix<f64>, noise: &ChannelNoise) -> Result<DVector<f64>> {
     let p = y.nrows();
-    let mut w = DVector::zeros(p);
-    for r in 0..p {
-        let sigma = match noise {
-            ChannelNoise::RmsFraction { fraction } => {
-                let rms = (y.row(r).norm_squared() / y.ncols() as f64).sqrt();
-                if !(rms > 0.0) {
-                    return Err(TacitError::Setting(format!(
-                        "horizon: channel {r} is identically zero, so a noise level relative to its RMS is undefined; give the noise std"
-                    )));
-                }
-                fraction * rms
+    match noise {
+        ChannelNoise::RmsFraction { fraction } => {
+            let w = crate::signal::channel_weights(y, *fraction);
+            match w.iter().position(Option::is_none) {
+                Some(r) => Err(TacitError::Setting(format!(
+                    "horizon: channel {r} is identically zero, so a noise level relative to its RMS is undefined; give the noise std"
+                ))),
+                None => Ok(DVector::from_iterator(p, w.into_iter().flatten())),
             }
-            ChannelNoise::Std { std } => {
-                if std.len() != p {
-                    return Err(TacitError::Setting(format!(
-                        "horizon: {} noise std values for {p} channels",
-                        std.len()
-                    )));
-                }
-                std[r]
+        }
+        ChannelNoise::Std { std } => {
+            if std.len() != p {
+                return Err(TacitError::Setting(format!(
+                    "horizon: {} noise std values for {p} channels",
+                    std.len()
+                )));
             }
-        };
-        w[r] = 1.0 / sigma;
+            Ok(DVector::from_iterator(p, std.iter().map(|s| 1.0 / s)))
+        }
     }
-    Ok(w)
 }
 
 /// The state scaling `D`: displacement × ω, force / (m ω) (velocity units).

@@ -178,32 +178,9 @@ impl Riccati {
     }
 }
 
-/// Relative change `‖a − b‖_max / ‖b‖_max` (four lanes, so that it
-/// vectorises).
+/// Relative change `‖a − b‖_max / ‖b‖_max` ([`crate::riccati::rel_change`]).
 pub(crate) fn rel_change(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
-    let (mut d, mut s) = ([0.0f64; 4], [0.0f64; 4]);
-    let (ca, cb) = (a.as_slice().chunks_exact(4), b.as_slice().chunks_exact(4));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for i in 0..4 {
-            let (e, v) = ((x[i] - y[i]).abs(), y[i].abs());
-            d[i] = if e > d[i] { e } else { d[i] };
-            s[i] = if v > s[i] { v } else { s[i] };
-        }
-    }
-    for (x, y) in ra.iter().zip(rb) {
-        d[0] = d[0].max((x - y).abs());
-        s[0] = s[0].max(y.abs());
-    }
-    let (d, s) = (
-        d.iter().fold(0.0, |a: f64, b| a.max(*b)),
-        s.iter().fold(0.0, |a: f64, b| a.max(*b)),
-    );
-    if s == 0.0 {
-        0.0
-    } else {
-        d / s
-    }
+    crate::riccati::rel_change(a, b, crate::riccati::RelativeTo::Second)
 }
 
 /// Most doublings [`stein`] takes: the series is then summed over 2^40

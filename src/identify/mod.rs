@@ -8,8 +8,12 @@
 //! - [`Method::Paper`]: the published sequential scheme ([`paper`]), with
 //!   the closed-loop spectral radius of its recursion computed before
 //!   running and a warning when it is ≥ 1 (docs/theory.md, fact R1);
-//! - [`Method::Mhe`] (default): moving-horizon estimation ([`mhe`]), which
-//!   re-estimates each window's start state and stays bounded.
+//! - [`Method::Mhe`]: moving-horizon estimation ([`mhe`]), which
+//!   re-estimates each window's start state and stays bounded;
+//! - the located, lifted smoother ([`located`], `tacit identify`'s
+//!   default): where the force acts is found first, then the force is
+//!   reconstructed along those directions with a sub-sample resolution
+//!   (the reconstruction `tacit diagnose` starts from).
 //!
 //! Both run on the exact sampled linear model ([`crate::linear`]), reduced
 //! onto the sensors or not ([`Reduce`]); every window problem is linear in
@@ -19,11 +23,13 @@
 //! ([`regularize`]); [`identifiability`] tells which force combinations the
 //! sensors see.
 //!
-//! Front door: [`Problem::new`] then [`identify`]. The result is a
+//! Front door: [`Problem::new`] then [`identify`] (window schemes) or
+//! [`identify_located`]. The result is a
 //! [`ForceEstimate`], written by [`output::write_all`]. Theory and the
 //! comparison with the paper's Figs 8–10: `docs/identification.md`.
 
 pub mod identifiability;
+pub mod located;
 pub mod mhe;
 pub mod output;
 pub mod paper;
@@ -34,6 +40,7 @@ pub mod settings;
 pub mod system;
 pub mod window;
 
+pub use located::{identify_located, LocatedSettings};
 pub use output::{ForceEstimate, Status};
 pub use settings::{Constraints, IdentifySettings, Method, Reduce, Regularization, Solver};
 pub use system::{Problem, System};

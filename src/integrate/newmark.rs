@@ -25,9 +25,11 @@ use nalgebra::{DMatrix, DMatrixView};
 
 mod dense;
 mod sensitivity;
+mod stability;
 use dense::{chol_solve, cholesky_in_place, dim, lu_solve, mat_vec_axpy, max_abs};
 pub use sensitivity::{ElementSeed, ParamSeed, Seeds, Sensitivities};
 use serde::Serialize;
+pub use stability::{Divergence, MAX_SUBSTEPS};
 
 /// Integrator settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

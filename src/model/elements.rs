@@ -12,7 +12,7 @@
 //!   softer on the other; `docs/formats.md` gives the reasons for this form).
 //! - Nonlinear dampers in the relative velocity `ν = u̇_i − u̇_j` (or `u̇_i`):
 //!   quadratic `f = c_2 ν|ν|`, cubic `f = c_3 ν³`.
-//! - Two-sided clearance (dead zone) between two DOFs or to ground:
+//! - Two-sided clearance (dead zone) between two DOFs:
 //!   `f = k_c (|δ| − gap) sign(δ)` when `|δ| > gap`, 0 inside. It is
 //!   compiled as two penalty contacts (i→j and j→i, the same gap and
 //!   stiffness), which is the same law, so the integrator's contact
@@ -96,7 +96,7 @@ pub struct CubicDamper {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Clearance {
-    /// `[i, j]` or `[i]` (to ground, stops on both sides).
+    /// `[i, j]` (no clearance to ground).
     pub dofs: Vec<usize>,
     /// Half-width of the dead zone, m (>= 0).
     pub gap: f64,

@@ -730,7 +730,7 @@ fn element_labels(
 }
 
 /// Replace the labels in the elements' `dofs` / `dof` by reduced DOFs.
-fn map_element_labels(t: &mut toml::Table, to: &dyn Fn(&str) -> Option<usize>) {
+pub(super) fn map_element_labels(t: &mut toml::Table, to: &dyn Fn(&str) -> Option<usize>) {
     let conv = |v: &mut toml::Value| {
         if let Some(d) = v.as_str().and_then(to) {
             *v = toml::Value::Integer(d as i64);

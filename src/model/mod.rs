@@ -11,6 +11,7 @@
 
 pub mod elements;
 pub mod matrix;
+pub mod modal;
 
 use crate::error::{Result, TacitError};
 use nalgebra::DMatrix;
@@ -182,7 +183,9 @@ impl Model {
     /// ([`Model::resolve_channels`]).
     pub fn load(path: &Path, records: &mut [&mut crate::record::Record]) -> Result<Model> {
         let text = std::fs::read_to_string(path).map_err(|e| TacitError::io(path, e))?;
-        let model = if matrix::is_matrix_model(&text) {
+        let model = if modal::is_modal_model(&text) {
+            modal::from_toml_str(&text, &path.display().to_string())?
+        } else if matrix::is_matrix_model(&text) {
             let mm = matrix::MatrixModel::from_file(path)?;
             let mut labels = vec![];
             for r in records.iter() {
@@ -247,10 +250,14 @@ impl Model {
         Ok(())
     }
 
-    /// Read and validate a lumped model file (a model from matrices is an
-    /// error that says where it is taken: [`Model::load`]).
+    /// Read and validate a lumped model file or a modal model
+    /// ([`modal`]); a model from matrices is an error that says where it is
+    /// taken ([`Model::load`]).
     pub fn from_file(path: &Path) -> Result<Model> {
         let text = std::fs::read_to_string(path).map_err(|e| TacitError::io(path, e))?;
+        if modal::is_modal_model(&text) {
+            return modal::from_toml_str(&text, &path.display().to_string());
+        }
         if matrix::is_matrix_model(&text) {
             return Err(TacitError::model(
                 path.display().to_string(),

@@ -44,7 +44,14 @@ pub enum Kind {
     /// Responses larger or smaller than the model predicts from the force
     /// by a factor near a unit conversion (9.81, 1000).
     Scale,
+    /// Values so large that sums of their squares overflow.
+    Magnitude,
 }
+
+/// Largest magnitude a sample may have: sums of squares over a record
+/// (errors, fits, norms) stay within double precision (1.8e308) for up to
+/// 1e100 samples of it; no physical quantity in SI units comes near.
+pub const MAX_MAGNITUDE: f64 = 1e100;
 
 /// One finding of the checks.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -126,6 +133,7 @@ pub fn check_record(rec: &Record, selected: Option<&[usize]>, s: &CheckSettings)
             out.push(f);
         }
     }
+    out.extend(magnitudes(rec));
     for c in &rec.outputs {
         let used = selected.is_none_or(|d| d.contains(&c.dof));
         let sev = if used {
@@ -150,6 +158,42 @@ pub fn check_record(rec: &Record, selected: Option<&[usize]>, s: &CheckSettings)
         }
     }
     out
+}
+
+/// The first channel holding a sample above [`MAX_MAGNITUDE`], with a
+/// count of the others.
+pub fn magnitudes(rec: &Record) -> Option<Finding> {
+    let huge: Vec<Finding> = rec
+        .inputs
+        .iter()
+        .chain(&rec.outputs)
+        .filter_map(|c| magnitude(c, rec.fs))
+        .collect();
+    let mut f = huge.first()?.clone();
+    if huge.len() > 1 {
+        f.message += &format!(" ({} other channels too)", huge.len() - 1);
+    }
+    Some(f)
+}
+
+/// A channel holding a sample above [`MAX_MAGNITUDE`] (an error).
+pub fn magnitude(c: &Channel, fs: f64) -> Option<Finding> {
+    let (k, x) = c
+        .data
+        .iter()
+        .enumerate()
+        .find(|(_, x)| x.abs() > MAX_MAGNITUDE)?;
+    Some(Finding {
+        kind: Kind::Magnitude,
+        severity: Severity::Error,
+        channel: Some(c.name()),
+        message: format!(
+            "channel {} holds {x:.4e} {} at sample {k} (t = {:.4} s): beyond {MAX_MAGNITUDE:e} the sums of squares of its errors and fits overflow double precision; check the channel's units or scale",
+            c.name(),
+            c.unit,
+            k as f64 / fs
+        ),
+    })
 }
 
 /// A channel whose samples are all equal.
@@ -409,14 +453,6 @@ pub fn scale(pairs: &[(String, f64, f64)], s: &CheckSettings) -> Option<Finding>
     })
 }
 
-/// RMS of a signal.
-pub fn rms(x: &[f64]) -> f64 {
-    if x.is_empty() {
-        return 0.0;
-    }
-    (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -450,6 +486,18 @@ mod tests {
     fn clean_record_has_no_finding() {
         let f = check_record(&record(), None, &CheckSettings::default());
         assert!(f.is_empty(), "{f:?}");
+    }
+
+    #[test]
+    fn huge_values_are_an_error_naming_channel_and_sample() {
+        let mut r = record();
+        r.outputs[1].data[37] = 2e300;
+        let f = check_record(&r, None, &CheckSettings::default());
+        let big: Vec<_> = f.iter().filter(|f| f.kind == Kind::Magnitude).collect();
+        assert_eq!(big.len(), 1, "{f:?}");
+        assert_eq!(big[0].severity, Severity::Error);
+        assert_eq!(big[0].channel.as_deref(), Some("accel_2"));
+        assert!(big[0].message.contains("2.0000e300") && big[0].message.contains("sample 37"));
     }
 
     #[test]

@@ -314,8 +314,30 @@ fn read_channel(g: &Group, gname: &str, name: &str) -> Msg<Channel> {
     })
 }
 
+/// Refuse a dataset that declares more values than its file can hold:
+/// unfiltered, its values are stored in the file; through deflate, the
+/// strongest of HDF5's standard filters, at most about 1032 times the
+/// file (RFC 1951: a 258-byte match in a code of about 2 bits). A larger
+/// declared size is a corrupt header, not data (a fuzzed header of the
+/// 1.4 MB shipped record asked for 2.5 GB).
+fn check_declared_size(ds: &Dataset, label: &str) -> Msg<()> {
+    let file_len = ds.file().map(|f| f.size()).unwrap_or(0);
+    let item = ds.dtype().map_or(8, |t| t.size()) as u64;
+    let needed = (ds.size() as u64).saturating_mul(item);
+    let ratio = if ds.filters().is_empty() { 1 } else { 1032 };
+    let limit = file_len.saturating_mul(ratio).max(1 << 20);
+    if needed > limit {
+        return Err(format!(
+            "{label}: declares {} values ({needed} bytes stored), more than a file of {file_len} bytes can hold; the file is corrupt or truncated",
+            ds.size()
+        ));
+    }
+    Ok(())
+}
+
 /// A dataset with at most one dimension larger than 1, as f64.
 fn read_vector(ds: &Dataset, label: &str) -> Msg<Vec<f64>> {
+    check_declared_size(ds, label)?;
     let shape = ds.shape();
     if shape.iter().filter(|d| **d > 1).count() > 1 {
         return Err(format!("{label}: shape {shape:?} is not a vector"));
@@ -359,6 +381,7 @@ fn read_matrix(g: &Group, name: &str, n: usize) -> Msg<Vec<Vec<f64>>> {
             "/truth/{name} has shape {shape:?}, expected (ndof, {n})"
         ));
     }
+    check_declared_size(&ds, &format!("/truth/{name}"))?;
     let arr = ds
         .read_2d::<f64>()
         .map_err(h5(format!("/truth/{name}: cannot read as numbers")))?;
@@ -541,6 +564,28 @@ mod tests {
         assert_eq!(rec.outputs[1].data, vec![2.0; 10]);
         assert_eq!(rec.outputs[1].unit, "m/s^2");
         assert_eq!(rec.outputs[0].unit, "mm");
+    }
+
+    /// The fuzzer's out-of-memory input: two bytes of the shipped
+    /// validation record's header changed so that a dataset declares
+    /// 2.5 GB; refused before HDF5 allocates it.
+    #[test]
+    fn a_dataset_larger_than_its_file_is_refused() {
+        let src = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/data/lanl8dof-bumper-validation.h5"
+        );
+        let mut bytes = std::fs::read(src).unwrap();
+        let at = u32::from_le_bytes([0xcf, 0x32, 0x00, 0x26]) as usize % bytes.len();
+        bytes[at..at + 2].copy_from_slice(&[0x96, 0x27]);
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("r.h5");
+        std::fs::write(&p, bytes).unwrap();
+        let e = read_err(&p);
+        assert!(
+            e.contains("declares") && e.contains("corrupt or truncated"),
+            "{e}"
+        );
     }
 
     fn write_raw(p: &Path, build: impl FnOnce(&hdf5::File)) {

@@ -15,6 +15,7 @@ pub mod checks;
 pub mod csvio;
 pub mod hdf5io;
 pub mod matio;
+pub mod uff;
 pub mod units;
 
 /// What a channel measures.
@@ -109,10 +110,16 @@ impl Channel {
     }
     /// Channel name: `accel_5`, or `accel:n12:uy` for a labelled point.
     pub fn name(&self) -> String {
-        match &self.point {
-            Some(p) => format!("{}:{p}", self.quantity.prefix()),
-            None => format!("{}_{}", self.quantity.prefix(), self.dof),
-        }
+        channel_name(self.quantity, self.dof, self.point.as_deref())
+    }
+}
+
+/// A channel's name: `<quantity>_<dof>`, or `<quantity>:<label>` at a
+/// labelled point.
+fn channel_name(quantity: Quantity, dof: usize, point: Option<&str>) -> String {
+    match point {
+        Some(p) => format!("{}:{p}", quantity.prefix()),
+        None => format!("{}_{dof}", quantity.prefix()),
     }
 }
 
@@ -304,6 +311,8 @@ pub enum Format {
     Csv,
     /// `.mat` (MATLAB v5).
     Mat,
+    /// `.uff` / `.unv` (universal file, ASCII datasets 58; read only).
+    Uff,
 }
 
 impl Format {
@@ -318,9 +327,10 @@ impl Format {
             Some("h5") | Some("hdf5") => Ok(Format::Hdf5),
             Some("csv") => Ok(Format::Csv),
             Some("mat") => Ok(Format::Mat),
+            Some("uff") | Some("unv") => Ok(Format::Uff),
             _ => Err(TacitError::record(
                 path,
-                "unknown extension: expected .h5, .hdf5, .csv or .mat",
+                "unknown extension: expected .h5, .hdf5, .csv, .mat, .uff or .unv",
             )),
         }
     }
@@ -329,15 +339,193 @@ impl Format {
 /// How to read a `.mat` file: which variable is which channel, and the rate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MatMapping {
-    /// (variable name, channel) pairs, e.g. ("V1", force at DOF 1).
-    pub channels: Vec<(String, Quantity, usize)>,
-    /// Sample rate, Hz.
-    pub fs: f64,
+    /// The channels, each from a vector variable or one row (column) of a
+    /// matrix variable.
+    pub channels: Vec<MatChannel>,
+    /// Sample rate: a number, or a scalar variable of the file.
+    pub fs: MatRate,
     /// Subtract each channel's mean (the Silverbox README asks for it).
     pub remove_mean: bool,
 }
 
-/// Read a record (HDF5 or CSV; `.mat` needs [`read_mat`]), convert its
+/// One channel of a `.mat` file: a variable (one of its signals when it is
+/// a matrix) and the channel it becomes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MatChannel {
+    /// Variable name, e.g. `Acceleration`.
+    pub variable: String,
+    /// Which signal of a matrix variable, from 1: a row of a matrix with
+    /// more columns than rows (signals along the rows, `3 × N`), a column
+    /// otherwise (`N × 3`). `None` for a vector variable.
+    pub signal: Option<usize>,
+    /// What the channel measures.
+    pub quantity: Quantity,
+    /// DOF from 1 (`accel_2`), or 0 with `point` set.
+    pub dof: usize,
+    /// Point label (`accel:wing`), for models with named points.
+    pub point: Option<String>,
+}
+
+impl MatChannel {
+    /// A vector variable as the channel `<quantity>_<dof>`.
+    pub fn at_dof(variable: &str, quantity: Quantity, dof: usize) -> Self {
+        MatChannel {
+            variable: variable.to_string(),
+            signal: None,
+            quantity,
+            dof,
+            point: None,
+        }
+    }
+
+    /// Parse `VARIABLE=CHANNEL` or `VARIABLE[k]=CHANNEL` (signal `k` of a
+    /// matrix variable, from 1), with CHANNEL `force_1` or `accel:wing`;
+    /// the error repeats the pair.
+    pub fn parse(pair: &str) -> std::result::Result<MatChannel, String> {
+        let bad = |why: &str| format!("'{pair}': {why}");
+        let (var, ch) = pair
+            .split_once('=')
+            .ok_or_else(|| bad("expected VARIABLE=CHANNEL or VARIABLE[k]=CHANNEL"))?;
+        let var = var.trim();
+        let (variable, signal) = match var.strip_suffix(']').and_then(|v| v.split_once('[')) {
+            Some((v, k)) => {
+                let k: usize =
+                    k.trim().parse().ok().filter(|k| *k >= 1).ok_or_else(|| {
+                        bad("the signal index in [k] must be a whole number from 1")
+                    })?;
+                (v.trim(), Some(k))
+            }
+            None => (var, None),
+        };
+        if variable.is_empty() || variable.contains(['[', ']']) {
+            return Err(bad("bad variable name"));
+        }
+        let ch = ch.trim();
+        let (quantity, dof, point) = match parse_point_name(ch) {
+            Some((q, label)) => (q, 0, Some(label.to_string())),
+            None => {
+                let (q, d) = ch
+                    .split_once('_')
+                    .ok_or_else(|| bad("the channel must look like force_1 or accel:wing"))?;
+                let q = Quantity::from_prefix(q)
+                    .ok_or_else(|| bad("unknown quantity (force, disp, vel, accel)"))?;
+                let d: usize = d
+                    .parse()
+                    .ok()
+                    .filter(|d| *d >= 1)
+                    .ok_or_else(|| bad("the DOF must be a whole number from 1"))?;
+                (q, d, None)
+            }
+        };
+        Ok(MatChannel {
+            variable: variable.to_string(),
+            signal,
+            quantity,
+            dof,
+            point,
+        })
+    }
+
+    /// The channel's name (`force_1`, `accel:wing`).
+    pub fn name(&self) -> String {
+        channel_name(self.quantity, self.dof, self.point.as_deref())
+    }
+
+    /// The variable and the signal, for messages: `Acceleration row 2`
+    /// style is given by the reader; here `Acceleration[2]`.
+    pub fn source(&self) -> String {
+        match self.signal {
+            Some(r) => format!("{}[{r}]", self.variable),
+            None => self.variable.clone(),
+        }
+    }
+}
+
+/// The sample rate of a `.mat` record.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MatRate {
+    /// Given, Hz.
+    Hz(f64),
+    /// Read from a real scalar variable of the file (any numeric class,
+    /// e.g. the `uint16` `Fs` of the F-16 benchmark files), Hz.
+    Variable(String),
+}
+
+impl MatRate {
+    /// A number (Hz) or else a variable name.
+    pub fn parse(s: &str) -> MatRate {
+        match s.trim().parse::<f64>() {
+            Ok(hz) => MatRate::Hz(hz),
+            Err(_) => MatRate::Variable(s.trim().to_string()),
+        }
+    }
+}
+
+impl From<f64> for MatRate {
+    fn from(hz: f64) -> Self {
+        MatRate::Hz(hz)
+    }
+}
+
+/// A warm-up: the first part of a record, not scored (the transient of a
+/// periodic excitation started from rest).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum WarmUp {
+    /// A number of samples.
+    Samples(usize),
+    /// A duration, s.
+    Seconds(f64),
+}
+
+impl WarmUp {
+    /// Parse `8192` (samples) or `20.48s` (seconds); the error repeats the
+    /// value and the rule.
+    pub fn parse(s: &str) -> std::result::Result<WarmUp, String> {
+        let t = s.trim();
+        if let Some(sec) = t.strip_suffix('s') {
+            return match sec.trim().parse::<f64>() {
+                Ok(v) if v.is_finite() && v >= 0.0 => Ok(WarmUp::Seconds(v)),
+                _ => Err(format!(
+                    "warm-up '{s}': seconds must be a number >= 0, e.g. 20.48s"
+                )),
+            };
+        }
+        t.parse::<usize>().map(WarmUp::Samples).map_err(|_| {
+            format!("warm-up '{s}': give whole samples (8192) or seconds with an s (20.48s)")
+        })
+    }
+
+    /// Samples at rate `fs` (seconds rounded to the nearest sample).
+    pub fn samples(self, fs: f64) -> usize {
+        match self {
+            WarmUp::Samples(n) => n,
+            WarmUp::Seconds(t) => (t * fs).round() as usize,
+        }
+    }
+}
+
+impl Record {
+    /// The record without its first `warm_up` (a new record whose `t0`
+    /// is the time of the first sample kept); an error naming the record
+    /// when nothing would be left.
+    pub fn without_warm_up(&self, warm_up: WarmUp) -> Result<Record> {
+        let k = warm_up.samples(self.fs);
+        if k == 0 {
+            return Ok(self.clone());
+        }
+        let n = self.len();
+        if k >= n {
+            return Err(TacitError::record(
+                self.source.clone(),
+                format!("the warm-up of {k} samples leaves nothing of the record's {n} samples"),
+            ));
+        }
+        self.slice(k, n)
+    }
+}
+
+/// Read a record (HDF5, CSV or universal file dataset 58; `.mat` needs
+/// [`read_mat`]), convert its
 /// channels to SI by their `unit` and validate it.
 pub fn read(path: &Path) -> Result<Record> {
     read_with_conversions(path).map(|(rec, _)| rec)
@@ -348,6 +536,7 @@ pub fn read_with_conversions(path: &Path) -> Result<(Record, Vec<units::Conversi
     let mut rec = match Format::from_path(path)? {
         Format::Hdf5 => hdf5io::read(path)?,
         Format::Csv => csvio::read(path)?,
+        Format::Uff => uff::read(path)?,
         Format::Mat => {
             return Err(TacitError::record(
                 path,
@@ -376,6 +565,10 @@ pub fn write(rec: &Record, path: &Path) -> Result<()> {
         Format::Hdf5 => hdf5io::write(rec, tmp),
         Format::Csv => csvio::write(rec, tmp),
         Format::Mat => Err(TacitError::record(path, "writing .mat is not supported")),
+        Format::Uff => Err(TacitError::record(
+            path,
+            "writing universal files is not supported: write .h5 or .csv",
+        )),
     })
 }
 
@@ -470,6 +663,57 @@ mod band_tests {
             ..rec
         };
         assert_eq!(band_top(&none), None);
+    }
+
+    #[test]
+    fn warm_up_parses_and_cuts() {
+        assert_eq!(WarmUp::parse("8192"), Ok(WarmUp::Samples(8192)));
+        assert_eq!(WarmUp::parse("20.48s"), Ok(WarmUp::Seconds(20.48)));
+        assert_eq!(WarmUp::Seconds(20.48).samples(400.0), 8192);
+        assert!(WarmUp::parse("-1s").is_err() && WarmUp::parse("1.5").is_err());
+        let rec = Record {
+            t0: 0.0,
+            fs: 10.0,
+            inputs: vec![Channel::new(
+                Quantity::Force,
+                1,
+                (0..10).map(f64::from).collect(),
+            )],
+            outputs: vec![],
+            truth: None,
+            source: "r.h5".into(),
+        };
+        let cut = rec.without_warm_up(WarmUp::Seconds(0.3)).unwrap();
+        assert_eq!(cut.len(), 7);
+        assert_eq!(cut.inputs[0].data[0], 3.0);
+        assert!((cut.t0 - 0.3).abs() < 1e-12);
+        let e = rec
+            .without_warm_up(WarmUp::Samples(10))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("r.h5") && e.contains("warm-up"), "{e}");
+    }
+
+    #[test]
+    fn mat_channels_parse() {
+        let c = MatChannel::parse("Acceleration[2]=accel:wing").unwrap();
+        assert_eq!(c.variable, "Acceleration");
+        assert_eq!(c.signal, Some(2));
+        assert_eq!(c.name(), "accel:wing");
+        let c = MatChannel::parse(" V1 = force_1").unwrap();
+        assert_eq!((c.variable.as_str(), c.signal, c.dof), ("V1", None, 1));
+        for bad in [
+            "A[0]=accel_1",
+            "A[x]=accel_1",
+            "A=strain_1",
+            "A",
+            "A=accel_0",
+        ] {
+            let e = MatChannel::parse(bad).unwrap_err();
+            assert!(e.contains(bad), "{e}");
+        }
+        assert_eq!(MatRate::parse("400"), MatRate::Hz(400.0));
+        assert_eq!(MatRate::parse("Fs"), MatRate::Variable("Fs".into()));
     }
 
     #[test]

@@ -232,7 +232,7 @@ fn phase_fix(v: MatRef<'_, faer::c64>, j: usize) -> (f64, f64) {
 pub fn rayleigh_ritz(k: &SpMat, m: &SpMat, basis: MatRef<'_, f64>) -> Result<SparseModes> {
     let kr = project(k, basis);
     let mr = project(m, basis);
-    let modes = crate::modal::solve(&mr, &kr).map_err(|e| {
+    let modes = crate::modal::solve_projected(&mr, &kr).map_err(|e| {
         TacitError::Numerical(format!(
             "sparse eigensolver: the Rayleigh–Ritz step failed ({e})"
         ))

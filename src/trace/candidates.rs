@@ -61,26 +61,6 @@ impl EffectKind {
         }
     }
 
-    /// The kind of a report name ([`EffectKind::name`]).
-    pub fn from_name(name: &str) -> Option<EffectKind> {
-        use EffectKind::*;
-        [
-            Contact,
-            Friction,
-            Cubic,
-            Stiffness,
-            GroundSpring,
-            Damping,
-            Quadratic,
-            QuadraticDamping,
-            CubicDamping,
-            Clearance,
-            RelativeFriction,
-        ]
-        .into_iter()
-        .find(|k| k.name() == name)
-    }
-
     /// The best paying candidate acting along the located force
     /// directions is moved ahead of better-scoring ones ([`super::trace`])
     /// when it is of this kind: the contact, friction, cubic, stiffness,

@@ -266,20 +266,6 @@ fn stack(m: &DMatrix<f64>, w: &[f64]) -> DVector<f64> {
     DVector::from_fn(p * ns, |i, _| w[i % p] * m[(i % p, i / p)])
 }
 
-/// Channel weights 1 / RMS of the measured channel.
-pub fn channel_weights(measured: &DMatrix<f64>) -> Vec<f64> {
-    (0..measured.nrows())
-        .map(|c| {
-            let r = (measured.row(c).norm_squared() / measured.ncols().max(1) as f64).sqrt();
-            if r > 0.0 {
-                1.0 / r
-            } else {
-                1.0
-            }
-        })
-        .collect()
-}
-
 /// The current selection: the column blocks of the selected effects
 /// (strength column first, then its hidden-state columns), an orthonormal
 /// basis of them, the residual energy and the parameter count.
@@ -386,7 +372,11 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
     let sm = input.sampled;
     let (p, ns) = input.measured.shape();
     let seg = input.segment.max(2);
-    let w = channel_weights(input.measured);
+    // channel weights 1 / RMS (1 for a channel that is zero throughout)
+    let w: Vec<f64> = crate::signal::channel_weights(input.measured, 1.0)
+        .into_iter()
+        .map(|w| w.unwrap_or(1.0))
+        .collect();
     let r0 = match input.baseline {
         Some(b) => stack(&(input.measured - b), &w),
         None => {

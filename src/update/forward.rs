@@ -94,7 +94,10 @@ pub fn simulate(
             if !sim.completed() {
                 return Err(Failure {
                     segment: Some(i),
-                    reason: format!("simulation stopped: {:?}", sim.status),
+                    reason: format!(
+                        "simulation stopped: {}",
+                        crate::simulate::describe_status(&sim.status)
+                    ),
                 });
             }
             Ok(extract(problem, &sim, &compiled.pos))

@@ -12,15 +12,18 @@
 //! searches shorten the step, the simplex contracts) and counted in
 //! `failed_trials`.
 //!
-//! Why not `argmin` / `levenberg-marquardt`: neither has bounds, and both
-//! abort the whole run when one evaluation fails; the methods are short
-//! enough to write here with the same counters and termination reasons.
+//! Levenberg–Marquardt and Gauss–Newton run on the crate's bounded
+//! least-squares driver ([`crate::lsq`]; this module supplies the
+//! residual, its Jacobian and the normal-equation solves); BFGS and the
+//! simplex are here. Why not the `levenberg-marquardt` crate: it has no
+//! bounds and aborts the whole run when one evaluation fails.
 //! References: Nocedal & Wright, *Numerical Optimization* (2006): ch. 10
 //! (Gauss–Newton, Levenberg–Marquardt), ch. 6 (BFGS), ch. 9 (Nelder–Mead);
 //! Lagarias et al. (1998) for the simplex coefficients.
 
 use super::cost::Evaluator;
 use super::forward::Failure;
+use crate::lsq;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
@@ -390,146 +393,38 @@ impl State<'_, '_, '_> {
         self.outcome(x, f64::NAN, vec![], Termination::StartFailed { failure }, 0)
     }
 
-    /// Levenberg–Marquardt (`damped`) or Gauss–Newton with backtracking.
-    fn lm(&mut self, mut x: Vec<f64>, damped: bool) -> Outcome {
-        let Some(mut r) = self.eval(&x) else {
-            return self.start_failed(x);
-        };
-        let mut cost = r.norm_squared();
-        let mut history = vec![cost];
-        let mut lambda = self.s.lm_lambda;
-        let mut it = 0;
-        let term = loop {
-            if it >= self.s.max_iterations {
-                break Termination::IterationLimit;
-            }
-            if self.out_of_budget() {
-                break Termination::EvaluationLimit;
-            }
-            let jac = match jacobian_with(self.ev, &x, &r, self.lo, self.hi, self.s) {
-                Ok(j) => j,
-                Err(f) => {
-                    break Termination::Stalled {
-                        reason: f.to_string(),
-                    }
-                }
-            };
-            let g = jac.transpose() * &r;
-            if projected(&g, &x, self.lo, self.hi).amax() * 2.0 <= self.s.g_tol {
-                break Termination::Converged {
-                    criterion: "gradient".into(),
-                };
-            }
-            it += 1;
-            let jtj = jac.transpose() * &jac;
-            let step = if damped {
-                self.lm_step(&x, &jtj, &g, cost, &mut lambda)
-            } else {
-                self.gn_step(&x, &jtj, &g, cost)
-            };
-            match step {
-                Step::Accepted { x: xn, r: rn } => {
-                    let cn = rn.norm_squared();
-                    let small = small_step(&xn, &x, self.s.x_tol);
-                    let flat = cost - cn <= self.s.f_tol * cost;
-                    x = xn;
-                    r = rn;
-                    cost = cn;
-                    history.push(cost);
-                    // a short step forced by heavy damping is not convergence
-                    let undamped = !damped || lambda <= 1.0;
-                    if small && undamped {
-                        break Termination::Converged { criterion: "step".into() };
-                    }
-                    if flat && undamped {
-                        break Termination::Converged { criterion: "cost".into() };
-                    }
-                }
-                Step::Tiny if !damped || lambda <= 1.0 => {
-                    break Termination::Converged { criterion: "step".into() }
-                }
-                Step::Tiny => {
-                    break Termination::Stalled {
-                        reason: format!(
-                            "Levenberg-Marquardt steps vanish at damping {lambda:.1e}: the cost is rough or the derivatives unreliable here"
-                        ),
-                    }
-                }
-                Step::Failed(reason) => break Termination::Stalled { reason },
+    /// Levenberg–Marquardt (`damped`) or Gauss–Newton with backtracking,
+    /// by the least-squares driver ([`crate::lsq`]).
+    fn lm(&mut self, x: Vec<f64>, damped: bool) -> Outcome {
+        let s = self.s;
+        let method = if damped {
+            lsq::Method::Damped(lsq::Damping {
+                initial: s.lm_lambda,
+                grow: 10.0,
+                shrink: 10.0,
+                floor: 1e-12,
+                ceiling: 1e12,
+            })
+        } else {
+            lsq::Method::LineSearch {
+                min_t: 1.0 / 1024.0,
             }
         };
-        self.outcome(x, cost, history, term, it)
-    }
-
-    fn lm_step(
-        &mut self,
-        x: &[f64],
-        jtj: &DMatrix<f64>,
-        g: &DVector<f64>,
-        cost: f64,
-        lambda: &mut f64,
-    ) -> Step {
-        let n = x.len();
-        let dmax = jtj.diagonal().amax().max(f64::MIN_POSITIVE);
-        loop {
-            if *lambda > 1e12 {
-                return Step::Failed(format!(
-                    "Levenberg-Marquardt damping reached {lambda:.1e} without a better point"
-                ));
-            }
-            if self.out_of_budget() {
-                return Step::Failed("evaluation limit reached inside a step".into());
-            }
-            let mut a = jtj.clone();
-            for i in 0..n {
-                a[(i, i)] += *lambda * jtj[(i, i)].max(1e-9 * dmax);
-            }
-            let Some(d) = a.cholesky().map(|c| c.solve(&(-g))) else {
-                *lambda *= 10.0;
-                continue;
-            };
-            let xn = clamp(
-                &(0..n).map(|i| x[i] + d[i]).collect::<Vec<_>>(),
-                self.lo,
-                self.hi,
-            );
-            if small_step(&xn, x, self.s.x_tol * 1e-3) {
-                return Step::Tiny;
-            }
-            match self.eval(&xn) {
-                Some(rn) if rn.norm_squared() < cost => {
-                    *lambda = (*lambda / 10.0).max(1e-12);
-                    return Step::Accepted { x: xn, r: rn };
-                }
-                _ => *lambda *= 10.0,
-            }
-        }
-    }
-
-    fn gn_step(&mut self, x: &[f64], jtj: &DMatrix<f64>, g: &DVector<f64>, cost: f64) -> Step {
-        let n = x.len();
-        let d = match jtj.clone().svd(true, true).solve(&(-g), 1e-12 * jtj.amax()) {
-            Ok(d) => d,
-            Err(e) => return Step::Failed(format!("Gauss-Newton system: {e}")),
+        let stop = lsq::Stopping {
+            max_iterations: s.max_iterations,
+            x_tol: Some(s.x_tol),
+            cost: lsq::CostTest::Drop(s.f_tol),
+            light: 1.0,
+            stall: None,
+            count_failed_attempt: true,
         };
-        let mut t = 1.0;
-        while t >= 1.0 / 1024.0 {
-            let xn = clamp(
-                &(0..n).map(|i| x[i] + t * d[i]).collect::<Vec<_>>(),
-                self.lo,
-                self.hi,
-            );
-            if small_step(&xn, x, self.s.x_tol * 1e-3) {
-                return Step::Tiny;
-            }
-            if let Some(rn) = self.eval(&xn) {
-                if rn.norm_squared() < cost {
-                    return Step::Accepted { x: xn, r: rn };
-                }
-            }
-            t *= 0.5;
-        }
-        Step::Failed("Gauss-Newton line search found no lower cost".into())
+        let mut q = Fit { st: self, damped };
+        let out = lsq::minimize(&mut q, x, method, &stop);
+        let term = match out.termination {
+            lsq::Termination::StartFailed => return self.start_failed(out.point),
+            t => termination(t),
+        };
+        self.outcome(out.point, out.cost, out.history, term, out.iterations)
     }
 
     /// Gradient `2 Jᵀ r` of J at x.
@@ -771,8 +666,112 @@ impl State<'_, '_, '_> {
     }
 }
 
-enum Step {
-    Accepted { x: Vec<f64>, r: DVector<f64> },
-    Tiny,
-    Failed(String),
+/// The optimizer's state as a problem of the least-squares driver: the
+/// residual and its Jacobian ([`jacobian_with`]), the damped normal
+/// equations (Marquardt's scaling, floored at 1e-9 of the largest
+/// diagonal entry) or the Gauss–Newton system solved by SVD.
+struct Fit<'s, 'e, 'p, 'b> {
+    st: &'s mut State<'e, 'p, 'b>,
+    damped: bool,
+}
+
+/// Jacobian, gradient `Jᵀ r` and `JᵀJ`.
+struct Normal {
+    g: DVector<f64>,
+    jtj: DMatrix<f64>,
+}
+
+impl lsq::Problem for Fit<'_, '_, '_, '_> {
+    type Point = Vec<f64>;
+    type Eval = DVector<f64>;
+    type Lin = Normal;
+    type Step = DVector<f64>;
+
+    fn evaluate(&mut self, x: &Vec<f64>) -> Option<DVector<f64>> {
+        self.st.eval(x)
+    }
+
+    fn cost(&self, r: &DVector<f64>) -> f64 {
+        r.norm_squared()
+    }
+
+    fn linearize(&mut self, x: &Vec<f64>, r: &DVector<f64>) -> Result<Normal, String> {
+        let st = &mut *self.st;
+        let jac = jacobian_with(st.ev, x, r, st.lo, st.hi, st.s).map_err(|f| f.to_string())?;
+        let g = jac.transpose() * r;
+        let jtj = jac.transpose() * &jac;
+        Ok(Normal { g, jtj })
+    }
+
+    fn gradient_converged(&self, x: &Vec<f64>, lin: &Normal) -> bool {
+        projected(&lin.g, x, self.st.lo, self.st.hi).amax() * 2.0 <= self.st.s.g_tol
+    }
+
+    fn step(&mut self, lin: &Normal, lambda: f64) -> Result<DVector<f64>, String> {
+        let (jtj, g) = (&lin.jtj, &lin.g);
+        if !self.damped {
+            return jtj
+                .clone()
+                .svd(true, true)
+                .solve(&(-g), 1e-12 * jtj.amax())
+                .map_err(|e| format!("Gauss-Newton system: {e}"));
+        }
+        let dmax = jtj.diagonal().amax().max(f64::MIN_POSITIVE);
+        let mut a = jtj.clone();
+        for i in 0..jtj.nrows() {
+            a[(i, i)] += lambda * jtj[(i, i)].max(1e-9 * dmax);
+        }
+        a.cholesky()
+            .map(|c| c.solve(&(-g)))
+            .ok_or_else(|| "not positive definite".into())
+    }
+
+    fn trial(&self, x: &Vec<f64>, d: &DVector<f64>, t: f64) -> Vec<f64> {
+        let n = x.len();
+        clamp(
+            &(0..n).map(|i| x[i] + t * d[i]).collect::<Vec<_>>(),
+            self.st.lo,
+            self.st.hi,
+        )
+    }
+
+    fn small_step(&self, a: &Vec<f64>, b: &Vec<f64>, tol: f64) -> bool {
+        small_step(a, b, tol)
+    }
+
+    fn budget_spent(&self) -> bool {
+        self.st.out_of_budget()
+    }
+}
+
+/// The driver's termination as the optimizer's.
+fn termination(t: lsq::Termination) -> Termination {
+    use lsq::Termination as L;
+    let stalled = |reason: String| Termination::Stalled { reason };
+    match t {
+        L::Converged(c) => Termination::Converged {
+            criterion: match c {
+                lsq::Criterion::Gradient => "gradient",
+                lsq::Criterion::Step => "step",
+                lsq::Criterion::Cost => "cost",
+            }
+            .into(),
+        },
+        L::IterationLimit => Termination::IterationLimit,
+        L::EvaluationLimit => Termination::EvaluationLimit,
+        L::DampingCeiling { lambda } => stalled(format!(
+            "Levenberg-Marquardt damping reached {lambda:.1e} without a better point"
+        )),
+        L::BudgetInStep => stalled("evaluation limit reached inside a step".into()),
+        L::VanishingSteps { lambda } => stalled(format!(
+            "Levenberg-Marquardt steps vanish at damping {lambda:.1e}: the cost is rough or the derivatives unreliable here"
+        )),
+        L::NoDecrease => stalled("Gauss-Newton line search found no lower cost".into()),
+        L::SolveFailed(reason) | L::LinearizationFailed(reason) => stalled(reason),
+        L::Stalled { steps, gain } => stalled(format!(
+            "{steps} accepted steps in a row each lowered the cost by less than {:.1} %",
+            100.0 * gain
+        )),
+        L::StartFailed => stalled("evaluation at the start failed".into()),
+    }
 }

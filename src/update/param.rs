@@ -58,6 +58,12 @@ pub enum Target {
     RelativeFrictionLevel(usize),
 }
 
+/// The mean of per-mode damping ratios: the value of
+/// [`Target::DampingRatio`] on a model with one ratio per mode.
+pub(super) fn mean_ratio(ratios: &[f64]) -> f64 {
+    ratios.iter().sum::<f64>() / ratios.len() as f64
+}
+
 impl Target {
     /// Value of this target in `model`; an error names the missing entry.
     pub fn get(&self, model: &Model) -> Result<f64> {
@@ -83,7 +89,7 @@ impl Target {
                 Damping::Modal {
                     ratio: None,
                     ratios,
-                } if !ratios.is_empty() => ratios.iter().sum::<f64>() / ratios.len() as f64,
+                } if !ratios.is_empty() => mean_ratio(ratios),
                 _ => {
                     return Err(TacitError::Setting(
                         "parameter zeta: the model's damping is not modal".into(),
@@ -174,7 +180,7 @@ impl Target {
                     ratio: None,
                     ratios,
                 } if !ratios.is_empty() => {
-                    let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
+                    let mean = mean_ratio(ratios);
                     let f = if mean > 0.0 { value / mean } else { 0.0 };
                     ratios
                         .iter_mut()

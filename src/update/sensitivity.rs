@@ -103,7 +103,10 @@ pub fn simulate_seeded(
                 .run_sensitivities(force, &seg.u0, &seg.v0, &seeds)
                 .map_err(|e| fail(Some(i), e.to_string()))?;
             if !sim.completed() {
-                let reason = format!("simulation stopped: {:?}", sim.status);
+                let reason = format!(
+                    "simulation stopped: {}",
+                    crate::simulate::describe_status(&sim.status)
+                );
                 return Err(fail(Some(i), reason));
             }
             if let Some(t) = sens.singular_tangent {
@@ -246,7 +249,7 @@ fn unit_damping(model: &Model, target: Target) -> std::result::Result<Damping, S
             },
             Target::DampingRatio,
         ) if !ratios.is_empty() => {
-            let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
+            let mean = super::param::mean_ratio(ratios);
             ratios.iter().map(|z| z / mean.max(1e-300)).collect()
         }
         (

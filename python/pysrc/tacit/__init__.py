@@ -1,0 +1,255 @@
+"""tacit: find, explain and fix what a linear structural model misses in a
+nonlinear vibration test.
+
+Units are SI throughout: masses in kg, stiffnesses in N/m, forces in N,
+displacements in m, velocities in m/s, accelerations in m/s^2, time in s,
+frequencies in Hz. DOFs are numbered from 1. Arrays are NumPy float64,
+one row per DOF or channel and one column per sample.
+
+    >>> import tacit
+    >>> model = tacit.Model.load("data/lanl8dof.toml")
+    >>> rec = tacit.Record.read("data/lanl8dof-bumper.h5")
+    >>> d = tacit.diagnose(model, rec, "out/py-diagnose")
+    >>> d.effects[0]["label"]            # doctest: +SKIP
+    'contact 5→6'
+
+Every error tacit reports is raised as ``tacit.TacitError`` with tacit's
+message, which names the file, channel, key or option at fault.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _tacit
+from ._tacit import Model, Record, TacitError
+
+__all__ = [
+    "Model",
+    "Record",
+    "TacitError",
+    "Diagnosis",
+    "Identification",
+    "Modes",
+    "diagnose",
+    "identify",
+    "modal",
+    "simulate",
+    "read_record",
+    "load_model",
+    "__version__",
+]
+
+__version__ = _tacit.__version__
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+def load_model(path: PathLike) -> Model:
+    """Read and check a model file (TOML)."""
+    return Model.load(os.fspath(path))
+
+
+def _model_from_dict(d: Dict[str, Any]) -> Model:
+    """A model from a dict with the keys of the model file: ``masses`` (kg),
+    ``spring`` (list of ``{"dofs": [i, j], "stiffness": N/m}``), ``damping``
+    (e.g. ``{"modal": {"ratio": 0.01}}``), ``contact``, ``friction``, ...
+    """
+    return Model.from_json(json.dumps(d))
+
+
+def _model_to_dict(self: Model) -> Dict[str, Any]:
+    """The model's fields as a dict (the keys of the model file)."""
+    return json.loads(self.to_json())
+
+
+Model.from_dict = staticmethod(_model_from_dict)  # type: ignore[attr-defined]
+Model.to_dict = _model_to_dict  # type: ignore[attr-defined]
+
+
+def read_record(path: PathLike) -> Record:
+    """Read a record file (.h5, .csv or .mat), converted to SI units."""
+    return Record.read(os.fspath(path))
+
+
+def _as_model(model: Union[Model, PathLike]) -> Model:
+    return model if isinstance(model, Model) else load_model(model)
+
+
+def _as_record(record: Union[Record, PathLike]) -> Record:
+    return record if isinstance(record, Record) else read_record(record)
+
+
+def simulate(model: Union[Model, PathLike], **options: Any) -> Record:
+    """Simulate ``model`` (nonlinear elements included) and sample a record
+    carrying its truth.
+
+    Options (defaults in brackets): ``samples`` [4096], ``fs`` Hz [512],
+    ``input`` [``"random"``; ``"sweep"``, ``"none"``], ``rms`` N [20],
+    ``band`` Hz [(5, 200)], ``amplitude`` N [10], ``sweep`` Hz [(5, 150)],
+    ``force`` (a force history in N, replaces ``input``), ``input_dof``
+    [1], ``sensors`` (DOFs from 1) [all], ``kinds`` [``["accel"]``; also
+    ``"disp"``, ``"vel"``], ``noise`` (fraction of each channel's RMS)
+    [0], ``seed`` [7], ``substeps`` (Newmark sub-steps per sample; a
+    2e6 N/m contact at 512 Hz needs 40) [10].
+    """
+    if "force" in options and options["force"] is not None:
+        options["force"] = np.ascontiguousarray(options["force"], dtype=np.float64)
+    return _tacit.simulate(_as_model(model), **options)
+
+
+@dataclass
+class Modes:
+    """Modes of the undamped linear part of a model."""
+
+    #: Natural frequencies, Hz, ascending (0 for rigid-body modes).
+    freq_hz: np.ndarray
+    #: Mass-normalized shapes, one column per mode (ndof x ndof).
+    shapes: np.ndarray
+    #: True for each rigid-body mode.
+    rigid: List[bool]
+
+
+def modal(model: Union[Model, PathLike]) -> Modes:
+    """Natural frequencies (Hz) and mass-normalized mode shapes of the
+    linear part of ``model`` (generalized symmetric eigenproblem)."""
+    f, phi, rigid = _tacit.modal(_as_model(model))
+    return Modes(freq_hz=f, shapes=phi, rigid=list(rigid))
+
+
+@dataclass
+class Identification:
+    """The internal force a linear model lacks, identified from a record."""
+
+    #: Internal force per DOF, N (ndof x samples), on the left-hand side of
+    #: M a + C v + K u + f = f_ext (a contact closing as u_i - u_j grows gives
+    #: f_i >= 0).
+    force: np.ndarray
+    #: Time of every sample, s.
+    time: np.ndarray
+    #: The summary ``tacit identify`` writes to summary.json: relative errors
+    #: before/after (fractions), per-channel errors, force RMS per DOF (N),
+    #: the location found, the comparison with a simulated record's truth.
+    summary: Dict[str, Any]
+
+    @property
+    def located(self) -> Optional[List[List[int]]]:
+        """The force directions found (DOF lists from 1), or None."""
+        loc = self.summary.get("settings", {}).get("located")
+        return None if loc is None else [d["dofs"] for d in loc["directions"]]
+
+
+def identify(
+    model: Union[Model, PathLike],
+    record: Union[Record, PathLike],
+    sensors: Sequence[int],
+    *,
+    resolution: int = 8,
+    noise: float = 0.01,
+    locate: bool = True,
+    substeps: int = 10,
+) -> Identification:
+    """Identify the internal force the linear part of ``model`` lacks from
+    ``record``, with accelerometers (or other channels) at ``sensors`` (DOFs
+    from 1): the located, lifted smoother of ``tacit identify``. ``noise``
+    is the assumed channel noise as a fraction of each channel's RMS;
+    ``resolution`` the sub-intervals per sample on which the force is
+    constant; ``locate=False`` leaves an unknown force at every DOF."""
+    s, f, t = _tacit.identify(
+        _as_model(model),
+        _as_record(record),
+        list(sensors),
+        resolution=resolution,
+        noise=noise,
+        locate=locate,
+        substeps=substeps,
+    )
+    return Identification(force=f, time=t, summary=json.loads(s))
+
+
+@dataclass
+class Diagnosis:
+    """What ``tacit diagnose`` found, with the files it wrote."""
+
+    #: The whole report (report.json) as a dict.
+    report: Dict[str, Any]
+    #: The files written (report.json, report.md, settings.toml,
+    #: model-fitted.toml, figures).
+    paths: List[str]
+    #: The output directory.
+    output: str
+    #: The fitted model (declared model + effects found, calibrated).
+    model: Model
+    #: Convenience views of ``report``.
+    effects: List[Dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def verdict(self) -> str:
+        """One line: what was found."""
+        return self.report["verdict"]
+
+    @property
+    def errors(self) -> Dict[str, Optional[float]]:
+        """Relative and multiple-shooting errors before and after (fractions;
+        None where a simulation failed)."""
+        b, a = self.report["before"], self.report["after"]
+        return {
+            "relative_before": b.get("relative_error"),
+            "relative_after": a.get("relative_error"),
+            "simulation_before": b.get("simulation_error"),
+            "simulation_after": a.get("simulation_error"),
+        }
+
+    def parameters(self) -> Dict[str, float]:
+        """Fitted parameters of every effect found, ``{"<effect> <name>":
+        value}`` in SI units (gap in m, stiffness in N/m, level in N)."""
+        out = {}
+        for e in self.effects:
+            for name, value in e.get("parameters", {}).items():
+                out[f"{e['label']} {name}"] = value
+        return out
+
+
+def diagnose(
+    model: Union[Model, PathLike],
+    record: Union[Record, PathLike],
+    output: PathLike,
+    *,
+    validation: Union[Record, PathLike, None] = None,
+    sensors: Optional[Sequence[int]] = None,
+    linear_records: Sequence[Union[Record, PathLike]] = (),
+    trust_linear: bool = False,
+    settings: Optional[PathLike] = None,
+    force: bool = False,
+) -> Diagnosis:
+    """What is ``model`` missing? The close-the-loop diagnosis of ``record``
+    (``tacit diagnose``): effects found and fitted, errors before and after,
+    validated on ``validation`` when given. Files go to ``output`` (refused
+    when not empty unless ``force``). ``settings``: a settings file (TOML or
+    a report.json to replay)."""
+    out = os.fspath(output)
+    paths, fitted = _tacit.diagnose(
+        _as_model(model),
+        _as_record(record),
+        out,
+        validation=None if validation is None else _as_record(validation),
+        sensors=None if sensors is None else list(sensors),
+        linear_records=[_as_record(r) for r in linear_records],
+        trust_linear=trust_linear,
+        settings=None if settings is None else os.fspath(settings),
+        force=force,
+    )
+    with open(os.path.join(out, "report.json"), encoding="utf-8") as f:
+        rep = json.load(f)
+    return Diagnosis(
+        report=rep,
+        paths=[os.fspath(p) for p in paths],
+        output=out,
+        model=fitted,
+        effects=rep.get("effects", []),
+    )

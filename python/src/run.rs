@@ -1,0 +1,282 @@
+//! The computations: simulate, modes, identify, diagnose. Each releases
+//! the interpreter lock while it runs. Structured results cross as JSON
+//! text, parsed into dicts by the Python package, with the large arrays
+//! beside them as NumPy arrays.
+
+use crate::model::Model;
+use crate::record::Record;
+use crate::{convert, err};
+use numpy::{PyArray1, PyArray2};
+use pyo3::prelude::*;
+use std::path::{Path, PathBuf};
+use tacit::diagnose::{calibrated, report, DiagnoseSettings};
+use tacit::identify::{identify_located, LocatedSettings, Problem};
+use tacit::integrate::SimSettings;
+use tacit::record::Quantity;
+use tacit::simulate::{simulate_record, InputSpec, RecordSpec};
+
+/// Frequencies (Hz), shapes (columns) and rigid-body flags.
+type ModesOut<'py> = (
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Vec<bool>,
+);
+
+/// Summary JSON, force (ndof × samples), time.
+type IdentifyOut<'py> = (String, Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>);
+
+/// The input of a simulation from its name and parameters.
+fn input_spec(
+    input: &str,
+    rms: f64,
+    band: (f64, f64),
+    amplitude: f64,
+    sweep: (f64, f64),
+    force: Option<Vec<f64>>,
+) -> PyResult<InputSpec> {
+    Ok(match (input, force) {
+        (_, Some(f)) => InputSpec::Given(f),
+        ("random", None) => InputSpec::Random { band, rms },
+        ("sweep", None) => InputSpec::Sweep {
+            f0: sweep.0,
+            f1: sweep.1,
+            amplitude,
+        },
+        ("none", None) => InputSpec::None,
+        (other, None) => {
+            return Err(err(format!(
+                "input \"{other}\": give random, sweep or none, or a force array"
+            )))
+        }
+    })
+}
+
+/// Simulate a model (nonlinear elements included) and sample a record
+/// with its truth. `input`: `random` (band-limited, `rms` N over `band`
+/// Hz), `sweep` (`amplitude` N from `sweep[0]` to `sweep[1]` Hz), `none`,
+/// or the force history `force` (N, at least `samples` values) at
+/// `input_dof` (from 1). `sensors`: DOFs from 1 (default: every DOF);
+/// `kinds`: any of `disp`, `vel`, `accel`; `noise`: standard deviation as
+/// a fraction of each channel's RMS; `substeps`: Newmark sub-steps per
+/// sample (a stiff contact needs 40 at 512 Hz).
+#[pyfunction]
+#[pyo3(signature = (model, samples = 4096, fs = 512.0, input = "random", rms = 20.0,
+    band = (5.0, 200.0), amplitude = 10.0, sweep = (5.0, 150.0), force = None,
+    input_dof = 1, sensors = None, kinds = vec!["accel".to_string()], noise = 0.0,
+    seed = 7, substeps = 10))]
+#[allow(clippy::too_many_arguments)]
+pub fn simulate(
+    py: Python<'_>,
+    model: &Model,
+    samples: usize,
+    fs: f64,
+    input: &str,
+    rms: f64,
+    band: (f64, f64),
+    amplitude: f64,
+    sweep: (f64, f64),
+    force: Option<numpy::PyReadonlyArray1<'_, f64>>,
+    input_dof: usize,
+    sensors: Option<Vec<usize>>,
+    kinds: Vec<String>,
+    noise: f64,
+    seed: u64,
+    substeps: usize,
+) -> PyResult<Record> {
+    let kinds = kinds
+        .iter()
+        .map(|k| {
+            Quantity::from_prefix(k)
+                .filter(|q| *q != Quantity::Force)
+                .ok_or_else(|| err(format!("kind \"{k}\": give disp, vel or accel")))
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    let spec = RecordSpec {
+        fs,
+        samples,
+        input_dof,
+        input: input_spec(
+            input,
+            rms,
+            band,
+            amplitude,
+            sweep,
+            force.map(|f| convert::to_vec(&f)),
+        )?,
+        sensors: sensors.unwrap_or_else(|| (1..=model.inner.ndof()).collect()),
+        kinds,
+        noise,
+        seed,
+        settings: SimSettings {
+            substeps,
+            ..Default::default()
+        },
+        u0: vec![],
+        v0: vec![],
+    };
+    spec.settings.validate().map_err(err)?;
+    let m = &model.inner;
+    let (inner, _) = py.detach(|| simulate_record(m, &spec)).map_err(err)?;
+    Ok(Record { inner })
+}
+
+/// Modes of the undamped linear part: `(freq_hz, shapes, rigid)` with
+/// the frequencies in Hz (ascending), the mass-normalized shapes one
+/// column per mode (ndof × ndof) and a flag per rigid-body mode.
+#[pyfunction]
+pub fn modal<'py>(py: Python<'py>, model: &Model) -> PyResult<ModesOut<'py>> {
+    let lin = model.inner.linear_part();
+    let modes = tacit::modal::solve(&lin.mass_matrix(), &lin.stiffness_matrix()).map_err(err)?;
+    Ok((
+        convert::vector(py, &modes.freq_hz),
+        convert::matrix(py, &modes.shapes),
+        modes.rigid,
+    ))
+}
+
+/// Identify the internal force the linear part of `model` lacks, with
+/// the located, lifted smoother (`tacit identify`'s default). Returns
+/// `(summary_json, force, time)`: the summary as `summary.json` holds it,
+/// the force per DOF (N, ndof × samples, left-hand side of
+/// M a + C v + K u + f = f_ext) and the time of every sample (s).
+#[pyfunction]
+#[pyo3(signature = (model, record, sensors, resolution = 8, noise = 0.01, locate = true, substeps = 10))]
+#[allow(clippy::too_many_arguments)]
+pub fn identify<'py>(
+    py: Python<'py>,
+    model: &Model,
+    record: &Record,
+    sensors: Vec<usize>,
+    resolution: usize,
+    noise: f64,
+    locate: bool,
+    substeps: usize,
+) -> PyResult<IdentifyOut<'py>> {
+    let mut s = LocatedSettings {
+        substeps,
+        ..Default::default()
+    };
+    s.lifted.resolution = resolution;
+    s.lifted.noise_fraction = noise;
+    if !locate {
+        s.locate.ratio = 0.0;
+    }
+    let (m, rec) = (&model.inner, &record.inner);
+    let est = py
+        .detach(|| {
+            let prob = Problem::new(&m.linear_part(), rec, &sensors)?;
+            identify_located(m, &prob, &s)
+        })
+        .map_err(err)?;
+    let summary = serde_json::to_string(&est.summary()).map_err(err)?;
+    Ok((
+        summary,
+        convert::matrix(py, &est.force),
+        convert::vector(py, &est.time),
+    ))
+}
+
+/// Refuse an output directory that holds something unless `force`.
+fn check_output(dir: &Path, force: bool) -> PyResult<()> {
+    let busy = std::fs::read_dir(dir).is_ok_and(|mut d| d.next().is_some());
+    if busy && !force {
+        return Err(err(format!(
+            "output directory {} is not empty: give force=True to replace its files",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+/// The diagnosis of `record` against `model` (as `tacit diagnose`),
+/// written into `output` (report.json, report.md, figures, the fitted
+/// model). Returns `(paths, fitted_model)`; the Python package reads the
+/// report back as a dict.
+#[pyfunction]
+#[pyo3(signature = (model, record, output, validation = None, sensors = None,
+    linear_records = vec![], trust_linear = false, settings = None, force = false))]
+#[allow(clippy::too_many_arguments)]
+pub fn diagnose(
+    py: Python<'_>,
+    model: &Model,
+    record: &Record,
+    output: PathBuf,
+    validation: Option<PyRef<'_, Record>>,
+    sensors: Option<Vec<usize>>,
+    linear_records: Vec<PyRef<'_, Record>>,
+    trust_linear: bool,
+    settings: Option<PathBuf>,
+    force: bool,
+) -> PyResult<(Vec<PathBuf>, Model)> {
+    check_output(&output, force)?;
+    let settings = match settings {
+        Some(p) => DiagnoseSettings::from_file(&p).map_err(err)?,
+        None => DiagnoseSettings::default(),
+    };
+    settings.validate().map_err(err)?;
+    let linear: Vec<tacit::record::Record> =
+        linear_records.iter().map(|r| r.inner.clone()).collect();
+    let val = validation.as_ref().map(|v| v.inner.clone());
+    let (m, rec) = (&model.inner, &record.inner);
+    let cal = calibrated::CalibratedSettings {
+        off: trust_linear,
+        ..Default::default()
+    };
+    let meta = meta(model, record, val.as_ref(), sensors.as_deref());
+    let (paths, fitted) = py
+        .detach(|| -> tacit::error::Result<_> {
+            let d = calibrated::diagnose_calibrated(
+                m,
+                rec,
+                val.as_ref(),
+                &linear,
+                sensors.as_deref(),
+                &settings,
+                &cal,
+                &|_| {},
+            )?;
+            let mut meta = meta;
+            meta.sensors = d.prepared.channels.iter().map(|c| c.1 + 1).collect();
+            let paths = report::write(&output, &meta, &d, &settings)?;
+            Ok((paths, d.model))
+        })
+        .map_err(err)?;
+    Ok((
+        paths,
+        Model {
+            inner: fitted,
+            path: None,
+        },
+    ))
+}
+
+/// The report header: files (or `<memory>`), record-check warnings.
+fn meta(
+    model: &Model,
+    record: &Record,
+    val: Option<&tacit::record::Record>,
+    sensors: Option<&[usize]>,
+) -> report::Meta {
+    let name = |p: &Path| {
+        if p.as_os_str().is_empty() {
+            "<memory>".to_string()
+        } else {
+            p.display().to_string()
+        }
+    };
+    let checks = tacit::record::checks::CheckSettings::default();
+    let mut warnings = vec![];
+    for r in std::iter::once(&record.inner).chain(val) {
+        for f in tacit::record::checks::check_record(r, sensors, &checks) {
+            warnings.push(format!("{}: {}", name(&r.source), f.message));
+        }
+    }
+    report::Meta {
+        model: model.path.as_deref().map_or("<memory>".into(), name),
+        record: name(&record.inner.source),
+        validation_record: val.map(|v| name(&v.source)),
+        sensors: vec![],
+        tacit_version: env!("CARGO_PKG_VERSION").to_string(),
+        warnings,
+    }
+}

@@ -1,0 +1,135 @@
+"""The Python package against numbers that could come out wrong: modes
+against NumPy's eigenvalues, records written and read back, the shipped
+bumper record's identified force against its truth, a diagnosis of a
+simulated bumper record against the simulated gap and stiffness, and
+tacit's errors as Python exceptions."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import tacit
+
+DATA = Path(__file__).resolve().parents[2] / "data"
+
+
+@pytest.fixture(scope="module")
+def lanl():
+    return tacit.Model.load(DATA / "lanl8dof.toml")
+
+
+@pytest.fixture(scope="module")
+def contact():
+    return tacit.load_model(DATA / "lanl8dof-contact.toml")
+
+
+def test_model_matrices_and_modes_agree_with_numpy(lanl):
+    m, k = lanl.mass_matrix(), lanl.stiffness_matrix()
+    assert m.shape == (8, 8) and np.allclose(k, k.T)
+    assert m[0, 0] == pytest.approx(0.5593)
+    modes = tacit.modal(lanl)
+    w2 = np.sort(np.linalg.eigvals(np.linalg.solve(m, k)).real)
+    expected = np.sqrt(np.clip(w2, 0.0, None)) / (2 * np.pi)
+    assert modes.rigid == [True] + [False] * 7
+    np.testing.assert_allclose(modes.freq_hz[1:], expected[1:], rtol=1e-9)
+    # mass-normalized shapes
+    phi = modes.shapes
+    np.testing.assert_allclose(phi.T @ m @ phi, np.eye(8), atol=1e-9)
+
+
+def test_model_from_dict_round_trip(lanl):
+    d = lanl.to_dict()
+    d["spring"][4]["stiffness"] *= 0.5
+    half = tacit.Model.from_dict(d)
+    k = half.stiffness_matrix()
+    assert k[4, 5] == pytest.approx(-0.5 * 56700.0)
+    assert tacit.Model.from_toml(half.to_toml()).to_dict() == half.to_dict()
+
+
+def test_record_from_arrays_round_trips_through_hdf5_and_csv(tmp_path):
+    t = np.arange(256) / 256.0
+    f = np.sin(2 * np.pi * 10 * t)
+    a = np.cos(2 * np.pi * 10 * t)[::-1]  # a non-contiguous view
+    rec = tacit.Record(256.0, [(1, f)], [("accel", 3, a)])
+    assert len(rec) == 256 and rec.fs == 256.0
+    for name in ["r.h5", "r.csv"]:
+        rec.write(tmp_path / name)
+        back = tacit.read_record(tmp_path / name)
+        (iname, idof, iunit, idata), = back.inputs()
+        (oname, odof, ounit, odata), = back.outputs()
+        assert (iname, idof, iunit) == ("force_1", 1, "N")
+        assert (oname, odof, ounit) == ("accel_3", 3, "m/s^2")
+        np.testing.assert_allclose(idata, f, rtol=1e-12)
+        np.testing.assert_allclose(odata, a, rtol=1e-12)
+        np.testing.assert_allclose(back.time(), t, atol=1e-12)
+
+
+def test_simulate_is_reproducible_and_records_the_truth(lanl):
+    r1 = tacit.simulate(lanl, samples=512, sensors=[2, 7], seed=3)
+    r2 = tacit.simulate(lanl, samples=512, sensors=[2, 7], seed=3)
+    r3 = tacit.simulate(lanl, samples=512, sensors=[2, 7], seed=4)
+    a1 = np.array([c[3] for c in r1.outputs()])
+    a2 = np.array([c[3] for c in r2.outputs()])
+    a3 = np.array([c[3] for c in r3.outputs()])
+    assert a1.shape == (2, 512)
+    np.testing.assert_array_equal(a1, a2)
+    assert not np.allclose(a1, a3)
+    # a linear model: no internal force
+    assert np.abs(r1.truth_force()).max() == 0.0
+    # a given force history: the input channel holds it
+    force = np.linspace(0.0, 1.0, 300)
+    r4 = tacit.simulate(lanl, samples=300, force=force, sensors=[1])
+    np.testing.assert_allclose(r4.inputs()[0][3], force)
+
+
+def test_identify_finds_the_contact_force_of_the_shipped_record(lanl):
+    rec = tacit.read_record(DATA / "lanl8dof-bumper.h5")
+    idn = tacit.identify(lanl, rec, [1, 5, 6])
+    assert idn.located == [[5, 6]]
+    assert idn.force.shape == (8, len(rec))
+    truth = rec.truth_force()
+    for d in (4, 5):
+        c = np.corrcoef(idn.force[d], truth[d])[0, 1]
+        assert c >= 0.9, (d + 1, c)
+    others = np.delete(np.arange(8), [4, 5])
+    assert np.abs(idn.force[others]).max() < 1.0
+    assert idn.summary["error_after"] < 0.05 < idn.summary["error_before"]
+
+
+def test_diagnose_finds_the_simulated_contact(lanl, contact, tmp_path):
+    truth = contact.to_dict()["contact"][0]
+    rec = tacit.simulate(
+        contact, sensors=[1, 5, 6], noise=0.01, seed=11, substeps=40
+    )
+    d = tacit.diagnose(lanl, rec, tmp_path / "diag")
+    assert d.verdict == "found contact 5→6", d.verdict
+    p = d.parameters()
+    gap, k = p["contact 5→6 gap"], p["contact 5→6 stiffness"]
+    assert gap == pytest.approx(truth["gap"], rel=0.03)
+    assert k == pytest.approx(truth["stiffness"], rel=0.10)
+    e = d.errors
+    assert e["relative_before"] > 0.5 and e["relative_after"] < 0.03
+    assert (tmp_path / "diag" / "report.md").exists()
+    assert any(p.endswith("model-fitted.toml") for p in d.paths)
+    fitted = d.model.to_dict()["contact"][0]
+    assert fitted["gap"] == pytest.approx(gap)
+    # the output directory is not overwritten without force=True
+    with pytest.raises(tacit.TacitError, match="not empty"):
+        tacit.diagnose(lanl, rec, tmp_path / "diag")
+
+
+def test_errors_are_python_exceptions_with_tacit_messages(lanl, tmp_path):
+    with pytest.raises(tacit.TacitError, match="missing.toml"):
+        tacit.load_model(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "x"\nmasses = [1.0, -2.0]\n')
+    with pytest.raises(tacit.TacitError, match="masses"):
+        tacit.load_model(bad)
+    with pytest.raises(tacit.TacitError, match="quantity"):
+        tacit.Record(100.0, [(1, np.zeros(10))], [("strain", 1, np.zeros(10))])
+    with pytest.raises(tacit.TacitError):
+        tacit.Record(100.0, [(1, np.zeros(10))], [("accel", 1, np.zeros(9))])
+    with pytest.raises(tacit.TacitError, match="sensor DOF 9"):
+        rec = tacit.read_record(DATA / "lanl8dof-bumper.h5")
+        tacit.identify(lanl, rec, [1, 9])

@@ -1,0 +1,509 @@
+//! The F-16 ground vibration test (Noël & Schoukens 2017) closed end to
+//! end: a linear modal model identified from the low-level record
+//! ([`crate::correlate::modelfit`]), the close-the-loop diagnosis with the
+//! linear part calibrated on a high-level record, and the open-loop
+//! simulation error per channel over the steady-state periods, before and
+//! after, on the record and on a validation record (`docs/f16.md`).
+//!
+//! The records are the benchmark's full-grid multisine files read as they
+//! are: `Force` at the driving point, `Acceleration` rows 1–3 at the
+//! driving point (`exc`), on the wing (`wing`) and on the payload
+//! (`payload`) next to the interface, `Fs` (uint16). Nine periods of 8192
+//! samples; the first is the transient ([`Settings::warm_up`]).
+
+use crate::correlate::modelfit::{identify_model, ModelFit, ModelFitSettings};
+use crate::correlate::{FitSettings, FrfSettings, Window};
+use crate::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
+use crate::diagnose::{DiagnoseSettings, EffectReport};
+use crate::error::{Result, TacitError};
+use crate::integrate::{Integrator, SimSettings};
+use crate::model::{modal, Model};
+use crate::record::{self, MatChannel, MatMapping, MatRate, Quantity, Record, WarmUp};
+use serde::Serialize;
+use std::path::Path;
+
+/// The points, in the order of the `Acceleration` rows.
+pub const POINTS: [&str; 3] = ["exc", "wing", "payload"];
+
+/// Settings of the F-16 case.
+#[derive(Debug, Clone, Serialize)]
+pub struct Settings {
+    /// Samples of one period of the multisine.
+    pub period: usize,
+    /// Samples left out at the start of every record (the transient first
+    /// period).
+    pub warm_up: usize,
+    /// Band of the modal model, Hz (the excited band).
+    pub band_hz: (f64, f64),
+    /// Curve-fit orders.
+    pub orders: (usize, usize),
+    /// Sub-steps per sample of the open-loop simulations.
+    pub substeps: usize,
+    /// How the linear part is calibrated on the record diagnosed.
+    pub calibration: Calibration,
+    /// The diagnosis.
+    #[serde(skip)]
+    pub diagnose: DiagnoseSettings,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            period: 8192,
+            warm_up: 8192,
+            band_hz: (2.0, 15.0),
+            orders: (10, 100),
+            substeps: 10,
+            calibration: Calibration::Reidentify,
+            diagnose: DiagnoseSettings {
+                // the lifted smoother stops on this model ("the
+                // initial-state system is not positive definite"); the
+                // full-horizon smoother reconstructs its states
+                states: crate::diagnose::StatesSource::Reconstructed,
+                ..Default::default()
+            },
+        }
+    }
+}
+
+/// How the linear part is calibrated on the record diagnosed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Calibration {
+    /// The modal model identified again, the same way, on the record's
+    /// steady-state periods (its modes at the record's level); the
+    /// diagnosis then trusts it.
+    Reidentify,
+    /// The diagnosis's own calibration of springs and modal damping
+    /// ([`crate::diagnose::calibrated`]) on the Level-1 model.
+    Diagnosis,
+}
+
+/// The mapping of a benchmark file: force and the three accelerations
+/// at named points, the rate from `Fs`.
+pub fn mapping() -> MatMapping {
+    let mut channels = vec![MatChannel {
+        point: Some(POINTS[0].into()),
+        ..MatChannel::at_dof("Force", Quantity::Force, 0)
+    }];
+    for (r, p) in POINTS.iter().enumerate() {
+        channels.push(MatChannel {
+            variable: "Acceleration".into(),
+            signal: Some(r + 1),
+            quantity: Quantity::Accel,
+            dof: 0,
+            point: Some((*p).into()),
+        });
+    }
+    MatMapping {
+        channels,
+        fs: MatRate::Variable("Fs".into()),
+        remove_mean: false,
+    }
+}
+
+/// Read a benchmark file as it is.
+pub fn read(path: &Path) -> Result<Record> {
+    record::read_mat(path, &mapping())
+}
+
+/// The modal model identified from the low-level record (its
+/// steady-state periods, whole-period segments, no window).
+pub fn linear_model(rec: &Record, s: &Settings) -> Result<(ModelFit, String)> {
+    let steady = rec.without_warm_up(WarmUp::Samples(s.warm_up))?;
+    let settings = ModelFitSettings {
+        frf: FrfSettings {
+            segment: s.period,
+            overlap: 0.0,
+            window: Window::Rectangular,
+        },
+        fit: FitSettings {
+            band_hz: s.band_hz,
+            orders: s.orders,
+            ..Default::default()
+        },
+        residuals: true,
+    };
+    let fit = identify_model(std::slice::from_ref(&steady), &settings)?;
+    let text = modal::to_toml_string(
+        "f16-linear",
+        &format!(
+            "F-16 GVT (Noël & Schoukens 2017), modal model identified from {}",
+            rec.source.display()
+        ),
+        &fit.section,
+    );
+    Ok((fit, text))
+}
+
+/// Open-loop simulation of `model` from rest under the record's force;
+/// the RMS error per output channel (m/s²) over the samples after
+/// `warm_up`, in the order of the record's outputs. The record's channels
+/// are resolved to the model's DOFs ([`Model::resolve_channels`]).
+pub fn rms_per_channel(
+    model: &Model,
+    rec: &Record,
+    warm_up: usize,
+    substeps: usize,
+) -> Result<Vec<f64>> {
+    let n = rec.len();
+    let nd = model.ndof();
+    let force = crate::signal::force_matrix(rec, nd);
+    let sim = SimSettings {
+        substeps,
+        ..Default::default()
+    };
+    let run =
+        Integrator::new(model, rec.fs, sim)?.run(force.as_view(), &vec![0.0; nd], &vec![0.0; nd]);
+    if !run.completed() || run.len() < n {
+        return Err(TacitError::Numerical(format!(
+            "open-loop simulation of {} stopped: {}",
+            rec.source.display(),
+            crate::simulate::describe_status(&run.status)
+        )));
+    }
+    let mut out = Vec::with_capacity(rec.outputs.len());
+    for c in &rec.outputs {
+        if c.quantity != Quantity::Accel {
+            return Err(TacitError::record(
+                rec.source.clone(),
+                format!("channel {} is not an acceleration", c.name()),
+            ));
+        }
+        let d = c.dof - 1;
+        let ss: f64 = (warm_up..n)
+            .map(|k| (run.a[(d, k)] - c.data[k]).powi(2))
+            .sum();
+        out.push((ss / (n - warm_up) as f64).sqrt());
+    }
+    Ok(out)
+}
+
+/// Per-channel RMS errors, m/s², before, with the linear part calibrated,
+/// and after.
+#[derive(Debug, Clone, Serialize)]
+pub struct BeforeAfter {
+    /// The record.
+    pub record: String,
+    /// Channel names, in the order of the errors.
+    pub channels: Vec<String>,
+    /// RMS of the measured channels over the steady-state periods, m/s².
+    pub rms_measured: Vec<f64>,
+    /// The linear (low-level) model.
+    pub before: Errors,
+    /// The linear model calibrated on the record diagnosed, without effects.
+    pub calibrated: Errors,
+    /// The diagnosed model.
+    pub after: Errors,
+}
+
+/// Errors of one model on one record.
+#[derive(Debug, Clone, Serialize)]
+pub struct Errors {
+    /// Open-loop simulation RMS error per channel over the steady-state
+    /// periods, m/s².
+    pub rms_per_channel: Vec<f64>,
+}
+
+/// What came out.
+#[derive(Debug, Clone, Serialize)]
+pub struct F16Result {
+    /// The linear model (modes, fit errors, notes).
+    pub linear: ModelFit,
+    /// On the diagnosed record.
+    pub estimation: BeforeAfter,
+    /// On the validation record.
+    pub validation: BeforeAfter,
+    /// The diagnosis's verdict.
+    pub verdict: String,
+    /// Effects found (kind, points, parameters).
+    pub effects: Vec<EffectReport>,
+    /// Best candidates of the first trace round (label, share of the
+    /// residual removed), with the points each joins.
+    pub ranking: Vec<(String, f64, Vec<String>)>,
+    /// The points the effects join, by label.
+    pub effect_points: Vec<Vec<String>>,
+    /// Linear corrections of the calibration (name, declared, final).
+    pub linear_corrections: Vec<(String, f64, f64)>,
+    /// The modes re-identified on the record diagnosed
+    /// ([`Calibration::Reidentify`]).
+    pub calibrated_modes: Vec<crate::model::modal::ModalMode>,
+    /// Seconds: identification, diagnosis, scoring.
+    pub seconds: (f64, f64, f64),
+    /// Settings.
+    pub settings: Settings,
+}
+
+fn before_after(rec: &Record, models: [&Model; 3], s: &Settings) -> Result<BeforeAfter> {
+    let [before, calibrated, after] = models;
+    Ok(BeforeAfter {
+        record: rec.source.display().to_string(),
+        channels: rec.outputs.iter().map(|c| c.name()).collect(),
+        rms_measured: rec
+            .outputs
+            .iter()
+            .map(|c| crate::signal::rms_of(&c.data[s.warm_up..]))
+            .collect(),
+        before: Errors {
+            rms_per_channel: rms_per_channel(before, rec, s.warm_up, s.substeps)?,
+        },
+        calibrated: Errors {
+            rms_per_channel: rms_per_channel(calibrated, rec, s.warm_up, s.substeps)?,
+        },
+        after: Errors {
+            rms_per_channel: rms_per_channel(after, rec, s.warm_up, s.substeps)?,
+        },
+    })
+}
+
+/// The whole case: identify on `linear`, diagnose `estimate` (without
+/// its warm-up), score on `estimate` and `validate`. With `out`, writes
+/// the linear model file and the diagnosis report there.
+pub fn run(
+    linear: &Path,
+    estimate: &Path,
+    validate: &Path,
+    s: &Settings,
+    progress: &dyn Fn(&str),
+) -> Result<(F16Result, Model, String)> {
+    let t0 = std::time::Instant::now();
+    let lin = read(linear)?;
+    let (fit, text) = linear_model(&lin, s)?;
+    let mut est = read(estimate)?;
+    let mut val = read(validate)?;
+    let model = modal::from_toml_str(&text, "f16-linear")?;
+    model.resolve_channels(&mut est)?;
+    model.resolve_channels(&mut val)?;
+    let t1 = t0.elapsed().as_secs_f64();
+    let est_ss = est.without_warm_up(WarmUp::Samples(s.warm_up))?;
+    let val_ss = val.without_warm_up(WarmUp::Samples(s.warm_up))?;
+    let (declared, calibrated_modes, off) = match s.calibration {
+        Calibration::Reidentify => {
+            let (fit7, text7) = linear_model(&est, s)?;
+            let m = modal::from_toml_str(&text7, "f16-calibrated")?;
+            (m, fit7.section.modes, true)
+        }
+        Calibration::Diagnosis => (model.clone(), vec![], false),
+    };
+    let cal = CalibratedSettings {
+        off,
+        ..Default::default()
+    };
+    let d = diagnose_calibrated(
+        &declared,
+        &est_ss,
+        Some(&val_ss),
+        &[],
+        None,
+        &s.diagnose,
+        &cal,
+        progress,
+    )?;
+    let t2 = t0.elapsed().as_secs_f64();
+    let linear_cal = match s.calibration {
+        Calibration::Reidentify => declared.clone(),
+        Calibration::Diagnosis => d.model.linear_part(),
+    };
+    let estimation = before_after(&est, [&model, &linear_cal, &d.model], s)?;
+    let validation = before_after(&val, [&model, &linear_cal, &d.model], s)?;
+    let t3 = t0.elapsed().as_secs_f64();
+    let effect_points = d
+        .effects
+        .iter()
+        .map(|e| e.dofs.iter().map(|&k| d.model.dof_name(k)).collect())
+        .collect();
+    let ranking = d
+        .ranking
+        .iter()
+        .map(|r| {
+            let pts = r
+                .candidate
+                .dofs
+                .iter()
+                .map(|&k| d.model.dof_name(k + 1))
+                .collect();
+            (r.label.clone(), r.residual_explained, pts)
+        })
+        .collect();
+    let linear_corrections = d
+        .calibration
+        .as_ref()
+        .map(|c| {
+            c.corrections
+                .iter()
+                .map(|x| (x.name.clone(), x.declared, x.value))
+                .collect()
+        })
+        .unwrap_or_default();
+    let r = F16Result {
+        linear: fit,
+        estimation,
+        validation,
+        verdict: d.verdict.clone(),
+        effects: d.effects.clone(),
+        effect_points,
+        ranking,
+        linear_corrections,
+        calibrated_modes,
+        seconds: (t1, t2 - t1, t3 - t2),
+        settings: s.clone(),
+    };
+    Ok((r, d.model, text))
+}
+
+impl F16Result {
+    /// The per-channel table for people.
+    pub fn summary(&self) -> String {
+        let mut s = format!("verdict: {}\n", self.verdict);
+        for (e, pts) in self.effects.iter().zip(&self.effect_points) {
+            s += &format!("effect {} between {}\n", e.label, pts.join(" and "));
+        }
+        for (what, ba) in [
+            ("record", &self.estimation),
+            ("validation", &self.validation),
+        ] {
+            s += &format!("{what} {}\n", ba.record);
+            for (c, ch) in ba.channels.iter().enumerate() {
+                s += &format!(
+                    "  {ch:<14} measured RMS {:.3}  before {:.3}  calibrated {:.3}  after {:.3} m/s^2\n",
+                    ba.rms_measured[c],
+                    ba.before.rms_per_channel[c],
+                    ba.calibrated.rms_per_channel[c],
+                    ba.after.rms_per_channel[c]
+                );
+            }
+        }
+        s += &format!(
+            "seconds: identification {:.1}, diagnosis {:.1}, scoring {:.1}\n",
+            self.seconds.0, self.seconds.1, self.seconds.2
+        );
+        s
+    }
+}
+
+/// The Level-1 model with a softening-or-stiffening cubic spring and a
+/// quadratic damper between `a` and `b` (DOFs from 1), their coefficients
+/// (and the coupling spring between the two points, when the model has
+/// one) fitted by open-loop output error on the whole record from rest.
+/// `starts`: (k3, c2) to start from (the trace's estimates);
+/// `ratios_near_hz`: the modal damping ratios of the modes nearest these
+/// frequencies are fitted with them.
+pub fn interface_fit(
+    model: &Model,
+    rec: &Record,
+    pair: [usize; 2],
+    starts: (f64, f64),
+    ratios_near_hz: &[f64],
+    substeps: usize,
+) -> Result<Model> {
+    use crate::model::{Cubic, QuadraticDamper};
+    use crate::update::{
+        self, optimize::FitSettings, param::Parameter, param::Target, problem::Problem,
+    };
+    let mut m = model.clone();
+    m.cubics.push(Cubic {
+        dofs: pair.to_vec(),
+        k3: starts.0,
+    });
+    m.quadratic_dampers.push(QuadraticDamper {
+        dofs: pair.to_vec(),
+        c2: starts.1.max(1.0),
+    });
+    let mut params = vec![
+        Parameter::relative(&m, Target::CubicK3(m.cubics.len() - 1))?
+            .with_relative_bounds(-1.0, 5.0),
+        Parameter::relative(&m, Target::DamperC2(m.quadratic_dampers.len() - 1))?
+            .with_relative_bounds(-0.999, 20.0),
+    ];
+    if let Some(i) = m
+        .springs
+        .iter()
+        .position(|s| s.dofs.len() == 2 && s.dofs.contains(&pair[0]) && s.dofs.contains(&pair[1]))
+    {
+        params.push(
+            Parameter::relative(&m, Target::SpringStiffness(i))?.with_relative_bounds(-0.9, 1.0),
+        );
+    }
+    let modes = crate::modal::solve(&m.mass_matrix(), &m.stiffness_matrix())?;
+    let flex: Vec<f64> = (0..modes.freq_hz.len())
+        .filter(|&r| !modes.rigid[r])
+        .map(|r| modes.freq_hz[r])
+        .collect();
+    for f in ratios_near_hz {
+        let r = (0..flex.len())
+            .min_by(|&a, &b| (flex[a] - f).abs().total_cmp(&(flex[b] - f).abs()))
+            .ok_or_else(|| TacitError::Numerical("the model has no flexible mode".into()))?;
+        params
+            .push(Parameter::relative(&m, Target::ModalRatio(r))?.with_relative_bounds(-0.9, 10.0));
+    }
+    let n = m.ndof();
+    let mut p = Problem::from_record(
+        &m,
+        rec,
+        &[Quantity::Accel],
+        None,
+        params,
+        vec![0.0; n],
+        vec![0.0; n],
+    )?;
+    p.sim.substeps = substeps;
+    Ok(update::fit(&p, &FitSettings::default())?.model)
+}
+
+/// The interface fit ([`interface_fit`]) scored on several records.
+#[derive(Debug, Clone, Serialize)]
+pub struct InterfaceFit {
+    /// Cubic spring between `wing` and `payload`, N/m³.
+    pub k3: f64,
+    /// Quadratic damper between them, N s²/m².
+    pub c2: f64,
+    /// The coupling spring `wing`–`payload`: Level-1 value and fitted, N/m.
+    pub coupling: Option<(f64, f64)>,
+    /// Per record: file, the Level-1 model's and the interface model's
+    /// open-loop RMS error per channel (m/s², steady-state periods).
+    pub errors: Vec<(String, Vec<f64>, Vec<f64>)>,
+    /// Seconds of the fit.
+    pub seconds: f64,
+}
+
+/// Fit the interface model on `estimate` (wing bending and torsion
+/// damping freed with it) and score it with the Level-1 model on `records`.
+pub fn interface_study(
+    linear: &Path,
+    estimate: &Path,
+    records: &[&Path],
+    s: &Settings,
+) -> Result<(InterfaceFit, Model)> {
+    let lin = read(linear)?;
+    let (_, text) = linear_model(&lin, s)?;
+    let l1 = modal::from_toml_str(&text, "f16-linear")?;
+    let mut est = read(estimate)?;
+    l1.resolve_channels(&mut est)?;
+    let t = std::time::Instant::now();
+    let m = interface_fit(&l1, &est, [2, 3], (-3.0e12, 1.5e5), &[5.2, 7.3], s.substeps)?;
+    let seconds = t.elapsed().as_secs_f64();
+    let mut errors = vec![];
+    for p in records {
+        let mut r = read(p)?;
+        l1.resolve_channels(&mut r)?;
+        errors.push((
+            p.display().to_string(),
+            rms_per_channel(&l1, &r, s.warm_up, s.substeps)?,
+            rms_per_channel(&m, &r, s.warm_up, s.substeps)?,
+        ));
+    }
+    let coupling = |mm: &Model| {
+        mm.springs
+            .iter()
+            .find(|sp| sp.dofs == [2, 3])
+            .map(|sp| sp.stiffness)
+    };
+    let fit = InterfaceFit {
+        k3: m.cubics.last().map_or(0.0, |c| c.k3),
+        c2: m.quadratic_dampers.last().map_or(0.0, |d| d.c2),
+        coupling: coupling(&l1).zip(coupling(&m)),
+        errors,
+        seconds,
+    };
+    Ok((fit, m))
+}

@@ -1,0 +1,76 @@
+//! Set-up shared by the end-to-end diagnosis tests (`diagnose_effects`,
+//! `diagnose_added_effects`): records simulated from lanl8dof with an
+//! effect the model file does not declare (2048 samples, 1 % noise, 40
+//! sub-steps), diagnosed with the declared linear model and validated on a
+//! second record.
+
+use tacit::diagnose::{diagnose, DiagnoseSettings, Diagnosis};
+use tacit::integrate::SimSettings;
+use tacit::model::Model;
+use tacit::record::Record;
+use tacit::simulate::{simulate_record, RecordSpec};
+
+/// The declared model, `data/lanl8dof.toml`.
+pub fn lanl() -> Model {
+    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+    Model::from_file(std::path::Path::new(p)).unwrap()
+}
+
+/// The record (seed `seed`) and the validation record (seed `seed + 1000`)
+/// of `truth` at `sensors`.
+pub fn records(truth: &Model, sensors: &[usize], seed: u64) -> (Record, Record) {
+    let spec = |seed| RecordSpec {
+        samples: 2048,
+        sensors: sensors.to_vec(),
+        noise: 0.01,
+        seed,
+        settings: SimSettings {
+            substeps: 40,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    (
+        simulate_record(truth, &spec(seed)).unwrap().0,
+        simulate_record(truth, &spec(seed + 1000)).unwrap().0,
+    )
+}
+
+/// The records of `truth` diagnosed with the declared model (default
+/// settings); the verdict, errors and effects printed.
+pub fn run(truth: &Model, sensors: &[usize], seed: u64) -> Diagnosis {
+    let (rec, val) = records(truth, sensors, seed);
+    let settings = DiagnoseSettings::default();
+    let d = diagnose(&lanl(), &rec, Some(&val), None, &settings, &|_| {}).unwrap();
+    eprintln!(
+        "{} | before {:?} after {:?} | validation {:?} → {:?}",
+        d.verdict,
+        d.before.relative_error,
+        d.after.relative_error,
+        d.validation.as_ref().map(|v| v.before.relative_error),
+        d.validation.as_ref().map(|v| v.after.relative_error)
+    );
+    for e in &d.effects {
+        eprintln!("  {} {:?}", e.label, e.parameters);
+    }
+    d
+}
+
+/// The multiple-shooting error falls by at least `on_record` on the record
+/// and `on_validation` on the validation record.
+pub fn assert_improved_by(d: &Diagnosis, on_record: f64, on_validation: f64) {
+    let (b, a) = (
+        d.before.relative_error.unwrap(),
+        d.after.relative_error.unwrap(),
+    );
+    assert!(a <= b / on_record, "relative_error {b} → {a}");
+    let v = d.validation.as_ref().unwrap();
+    let (b, a) = (
+        v.before.relative_error.unwrap(),
+        v.after.relative_error.unwrap(),
+    );
+    assert!(
+        a <= b / on_validation,
+        "validation relative_error {b} → {a}"
+    );
+}

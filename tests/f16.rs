@@ -1,0 +1,191 @@
+//! The F-16 ground vibration test files (Noël & Schoukens 2017) read as
+//! they are, a modal model identified from the Level-1 record, its
+//! open-loop error over the steady-state periods, and the command line.
+//! Reads the shared data set beside the checkout; skips with a message
+//! when it is absent.
+
+use std::path::PathBuf;
+use std::process::Command;
+use tacit::cases::f16;
+
+fn level(n: u32) -> Option<PathBuf> {
+    tacit::record::shared_data(&format!("f16/F16Data_FullMSine_Level{n}.mat"))
+}
+
+/// RMS of each output channel over the samples after `warm_up`.
+fn steady_rms(rec: &tacit::record::Record, warm_up: usize) -> Vec<f64> {
+    rec.outputs
+        .iter()
+        .map(|c| tacit::signal::rms_of(&c.data[warm_up..]))
+        .collect()
+}
+
+const MAP: &str =
+    "Force=force:exc,Acceleration[1]=accel:exc,Acceleration[2]=accel:wing,Acceleration[3]=accel:payload";
+
+#[test]
+fn level1_modal_model_has_the_benchmark_modes_and_simulates_the_record() {
+    let (Some(l1), Some(l7)) = (level(1), level(7)) else {
+        return;
+    };
+    let s = f16::Settings::default();
+    let rec = f16::read(&l1).unwrap();
+    let (fit, text) = f16::linear_model(&rec, &s).unwrap();
+    let modes: Vec<f64> = fit
+        .section
+        .modes
+        .iter()
+        .filter(|m| !m.residual)
+        .map(|m| m.frequency_hz)
+        .collect();
+    // wing bending near 5.2 Hz and wing torsion near 7.3 Hz (SOURCE of the
+    // benchmark), both inside the band
+    assert!(modes.iter().any(|f| (f - 5.19).abs() < 0.05), "{modes:?}");
+    assert!(modes.iter().any(|f| (f - 7.32).abs() < 0.05), "{modes:?}");
+    assert!(modes.len() >= 6, "{modes:?}");
+    for e in &fit.fit_error {
+        assert!(*e < 0.16, "FRF fit error {:?}", fit.fit_error);
+    }
+    // the model simulates its own record: open loop from rest, steady
+    // periods, each channel's error well below its RMS
+    let model = tacit::model::modal::from_toml_str(&text, "l1").unwrap();
+    let mut rec = rec;
+    model.resolve_channels(&mut rec).unwrap();
+    let err = f16::rms_per_channel(&model, &rec, s.warm_up, s.substeps).unwrap();
+    let rms = steady_rms(&rec, s.warm_up);
+    for c in 0..3 {
+        assert!(
+            err[c] < 0.3 * rms[c],
+            "channel {c}: error {err:?} vs RMS {rms:?}"
+        );
+    }
+    // at Level 7 the nonlinear interface moves the torsion mode: the same
+    // model leaves a far larger error relative to the response
+    let mut r7 = f16::read(&l7).unwrap();
+    model.resolve_channels(&mut r7).unwrap();
+    let err7 = f16::rms_per_channel(&model, &r7, s.warm_up, s.substeps).unwrap();
+    let rms7 = steady_rms(&r7, s.warm_up);
+    for c in 1..3 {
+        assert!(
+            err7[c] / rms7[c] > 2.0 * err[c] / rms[c],
+            "channel {c}: Level 7 {err7:?} / {rms7:?}, Level 1 {err:?} / {rms:?}"
+        );
+    }
+}
+
+#[test]
+fn cli_writes_a_modal_model_that_commands_accept() {
+    let Some(l1) = level(1) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("f16-linear.toml");
+    let tacit = || Command::new(env!("CARGO_BIN_EXE_tacit"));
+    let out = tacit()
+        .args(["modal", "--record"])
+        .arg(&l1)
+        .args(["--mat-map", MAP, "--mat-fs", "Fs", "--warm-up", "20.48s"])
+        .args([
+            "--window",
+            "rectangular",
+            "--segment",
+            "8192",
+            "--band",
+            "2,15",
+        ])
+        .args(["--orders", "10,100", "--write-model"])
+        .arg(&model)
+        .output()
+        .unwrap();
+    let so = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{so}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        so.contains("exc, wing, payload") && so.contains("residual"),
+        "{so}"
+    );
+    let text = std::fs::read_to_string(&model).unwrap();
+    assert!(
+        text.contains("[modal]") && text.contains("driving_point = \"exc\""),
+        "{text}"
+    );
+    // the model file is accepted where a model is: its modes printed
+    let out = tacit()
+        .args(["modal", "--model"])
+        .arg(&model)
+        .output()
+        .unwrap();
+    let so = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(so.contains("7.3"), "{so}");
+    // a row the file does not have is named with the variable and the file
+    let out = tacit()
+        .args(["modal", "--record"])
+        .arg(&l1)
+        .args(["--mat-map", "Force=force:exc,Acceleration[4]=accel:exc"])
+        .args(["--mat-fs", "Fs", "--band", "2,15", "--write-model"])
+        .arg(dir.path().join("bad.toml"))
+        .output()
+        .unwrap();
+    let se = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        se.contains("Acceleration row 4") && se.contains("Level1"),
+        "{se}"
+    );
+    assert!(!dir.path().join("bad.toml").exists());
+}
+
+/// Torsion mode (near 7.3 Hz) of a set of modes: frequency, damping.
+fn torsion(modes: &[tacit::model::modal::ModalMode]) -> (f64, f64) {
+    let m = modes
+        .iter()
+        .filter(|m| !m.residual && (m.frequency_hz - 7.25).abs() < 0.3)
+        .max_by(|a, b| a.shape[1].abs().total_cmp(&b.shape[1].abs()))
+        .expect("a torsion mode near 7.3 Hz");
+    (m.frequency_hz, m.damping)
+}
+
+#[test]
+fn closed_loop_level7_validated_on_level5() {
+    let (Some(l1), Some(l7), Some(l5)) = (level(1), level(7), level(5)) else {
+        return;
+    };
+    let s = f16::Settings::default();
+    let (r, _, _) = f16::run(&l1, &l7, &l5, &s, &|_| {}).unwrap();
+    let v = &r.validation;
+    assert_eq!(v.channels, ["accel:exc", "accel:wing", "accel:payload"]);
+    for c in 0..3 {
+        let (b, a) = (v.before.rms_per_channel[c], v.after.rms_per_channel[c]);
+        // measured: 0.996 -> 0.299, 2.068 -> 0.422, 1.968 -> 0.559 m/s²
+        assert!(b > 0.8 && b < 2.5, "before {c}: {b}");
+        assert!(a <= b / 3.0, "channel {c}: after {a} vs before {b}");
+        let e = &r.estimation;
+        assert!(e.after.rms_per_channel[c] < 0.5 * e.before.rms_per_channel[c]);
+    }
+    // the interface softens and dissipates more at Level 7
+    let (f1, z1) = torsion(&r.linear.section.modes);
+    let (f7, z7) = torsion(&r.calibrated_modes);
+    assert!(
+        f7 < f1 - 0.08,
+        "torsion {f1} Hz at Level 1, {f7} Hz at Level 7"
+    );
+    assert!(
+        z7 > 2.0 * z1,
+        "torsion damping {z1} at Level 1, {z7} at Level 7"
+    );
+    // the best localized candidate joins the wing and the payload
+    let local = r
+        .ranking
+        .iter()
+        .find(|c| c.2.len() == 2)
+        .expect("a candidate between two points");
+    assert_eq!(local.2, ["wing", "payload"], "{:?}", r.ranking);
+}
