@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 /// Seed of the reference noise (fixed: the same record gives the same
 /// measurement).
-const REFERENCE_SEED: u64 = 0x6e6f_6973_65;
+const REFERENCE_SEED: u64 = 0x006e_6f69_7365;
 
 /// Band ratio over the median above which a channel's residual is called
 /// coloured: model error, not noise, dominates that band.
@@ -96,7 +96,9 @@ impl NoiseEstimate {
             .channels
             .iter()
             .map(|c| c.fraction)
-            .fold((f64::INFINITY, 0.0_f64), |(lo, hi), f| (lo.min(f), hi.max(f)));
+            .fold((f64::INFINITY, 0.0_f64), |(lo, hi), f| {
+                (lo.min(f), hi.max(f))
+            });
         let colour = match &self.status {
             NoiseStatus::White => "the residual is white".to_string(),
             NoiseStatus::Coloured {
@@ -138,7 +140,11 @@ pub struct NoiseInput<'a> {
 /// Measure the noise of every channel (module docs): `lifted` are the
 /// smoother's settings (its `noise_fraction` is the assumed level),
 /// `bands` the number of frequency bands.
-pub fn measure(input: &NoiseInput<'_>, lifted: &LiftedSettings, bands: usize) -> Result<NoiseEstimate> {
+pub fn measure(
+    input: &NoiseInput<'_>,
+    lifted: &LiftedSettings,
+    bands: usize,
+) -> Result<NoiseEstimate> {
     let (p, len) = (input.measured.nrows(), input.measured.ncols());
     if len < 2 * bands {
         return Err(TacitError::Setting(format!(
@@ -210,7 +216,11 @@ fn channel_noise(
     let width = 0.5 * input.fs / ratios.len() as f64;
     let fraction = assumed * med.sqrt();
     ChannelNoise {
-        channel: input.names.get(c).cloned().unwrap_or_else(|| format!("#{c}")),
+        channel: input
+            .names
+            .get(c)
+            .cloned()
+            .unwrap_or_else(|| format!("#{c}")),
         std: fraction * rms,
         unit: input.channels[c].0.si_unit().to_string(),
         fraction,
@@ -252,7 +262,12 @@ fn reference_noise(measured: &DMatrix<f64>) -> DMatrix<f64> {
 /// Per band, the power of row `c` of `residual` over that of `reference`
 /// (Hann window, `bands` equal bands of the one-sided spectrum without
 /// the mean).
-fn band_ratios(residual: &DMatrix<f64>, reference: &DMatrix<f64>, c: usize, bands: usize) -> Vec<f64> {
+fn band_ratios(
+    residual: &DMatrix<f64>,
+    reference: &DMatrix<f64>,
+    c: usize,
+    bands: usize,
+) -> Vec<f64> {
     let a = band_powers(&residual.row(c).iter().copied().collect::<Vec<_>>(), bands);
     let b = band_powers(&reference.row(c).iter().copied().collect::<Vec<_>>(), bands);
     a.iter()

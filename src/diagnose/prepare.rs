@@ -449,7 +449,11 @@ pub(super) fn both(
         eff.noise.level = n.level.clamp(MIN_LEVEL, MAX_LEVEL);
         // far from the assumed level: the search and the measurement
         // again at the measured level (the smoother weighs the data by it)
-        if far(eff.noise.level, settings.noise.level, settings.noise.relocate_factor) {
+        if far(
+            eff.noise.level,
+            settings.noise.level,
+            settings.noise.relocate_factor,
+        ) {
             found = search(declared, &st, &eff)?;
             n = measure_noise(&st, found.as_ref(), &eff)?;
             n.assumed = settings.noise.level;

@@ -197,7 +197,10 @@ fn noise_section(s: &mut String, d: &Diagnosis) {
         n.summary(),
         100.0 * n.assumed
     );
-    let _ = writeln!(s, "| channel | noise std | % of RMS | worst band / median |\n|---|---|---|---|");
+    let _ = writeln!(
+        s,
+        "| channel | noise std | % of RMS | worst band / median |\n|---|---|---|---|"
+    );
     for c in &n.channels {
         let _ = writeln!(
             s,

@@ -82,8 +82,8 @@ pub struct NoiseSettings {
     /// an effect in noisy ones.
     pub measure: bool,
     /// The force directions are searched again with the measured level
-    /// when it differs from `level` by more than this factor (default 1.5;
-    /// > 1). Reason: the search stops when the residual reaches 1.5 × the
+    /// when it differs from `level` by more than this factor (default 1.5,
+    /// above 1). Reason: the search stops when the residual reaches 1.5 × the
     /// noise, so a level off by more than that changes how many directions
     /// it takes.
     pub relocate_factor: f64,
