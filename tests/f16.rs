@@ -186,6 +186,6 @@ fn closed_loop_level7_validated_on_level5() {
         .ranking
         .iter()
         .find(|c| c.2.len() == 2)
-        .expect("a candidate between two points");
+        .unwrap_or_else(|| panic!("no candidate between two points: {:?}", r.ranking));
     assert_eq!(local.2, ["wing", "payload"], "{:?}", r.ranking);
 }

@@ -223,6 +223,9 @@ pub struct F16Result {
     pub ranking: Vec<(String, f64, Vec<String>)>,
     /// The points the effects join, by label.
     pub effect_points: Vec<Vec<String>>,
+    /// The noise measured on the diagnosed record (None when not
+    /// measured).
+    pub noise: Option<crate::diagnose::noise::NoiseEstimate>,
     /// Linear corrections of the calibration (name, declared, final).
     pub linear_corrections: Vec<(String, f64, f64)>,
     /// The modes re-identified on the record diagnosed
@@ -343,6 +346,7 @@ pub fn run(
         effects: d.effects.clone(),
         effect_points,
         ranking,
+        noise: d.noise.clone(),
         linear_corrections,
         calibrated_modes,
         seconds: (t1, t2 - t1, t3 - t2),
@@ -355,6 +359,9 @@ impl F16Result {
     /// The per-channel table for people.
     pub fn summary(&self) -> String {
         let mut s = format!("verdict: {}\n", self.verdict);
+        if let Some(n) = &self.noise {
+            s += &format!("noise: {}\n", n.summary());
+        }
         for (e, pts) in self.effects.iter().zip(&self.effect_points) {
             s += &format!("effect {} between {}\n", e.label, pts.join(" and "));
         }

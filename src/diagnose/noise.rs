@@ -15,9 +15,15 @@
 //! the residual is (Welch 1967 for band-averaged periodograms; the
 //! reference replaces a degrees-of-freedom count of the smoother).
 //!
-//! The record's level is the RMS of the channels' fractions; it replaces
-//! the assumed level in every noise-related threshold of the diagnosis
-//! ([`super::NoiseSettings`]).
+//! The record's level is the RMS of the channels' fractions. When it is
+//! more than [`super::NoiseSettings::relocate_factor`] from the assumed
+//! level it replaces that level in every noise-related threshold of the
+//! diagnosis ([`super::NoiseSettings`]), unless it is above the assumed
+//! level and coloured (model error, which the trace must still see, holds
+//! part of it); closer, the measurement confirms
+//! the assumed level, which stays (the stop rules already leave that much
+//! room, and the diagnosis of a record whose noise was assumed right does
+//! not move with the measurement's own scatter).
 
 use super::lifted::{self, LiftedSettings};
 use crate::error::{Result, TacitError};
@@ -83,6 +89,9 @@ pub struct NoiseEstimate {
     /// The level assumed before measuring (the channel weights of the
     /// smoother that measured).
     pub assumed: f64,
+    /// The level the diagnosis ran at after the measurement: `level` when
+    /// far from `assumed`, else `assumed` (module docs).
+    pub used: f64,
     /// Frequency bands of the measurement.
     pub bands: usize,
     /// Whether the residual looks like noise.
@@ -194,6 +203,7 @@ pub fn measure(
         channels,
         level,
         assumed,
+        used: assumed,
         bands,
         status,
     })

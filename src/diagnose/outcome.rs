@@ -154,12 +154,11 @@ pub struct Diagnosis {
 }
 
 impl Diagnosis {
-    /// The noise level the diagnosis ran at: measured, or the assumed
-    /// [`super::NoiseSettings::level`] of `settings`.
+    /// The noise level the diagnosis ran at ([`super::NoiseEstimate::used`]),
+    /// or the assumed [`super::NoiseSettings::level`] of `settings` when
+    /// the noise was not measured.
     pub fn noise_level(&self, settings: &super::DiagnoseSettings) -> f64 {
-        self.noise
-            .as_ref()
-            .map_or(settings.noise.level, |n| n.level)
+        self.noise.as_ref().map_or(settings.noise.level, |n| n.used)
     }
 
     /// The noise floor of the multiple-shooting error the diagnosis ran

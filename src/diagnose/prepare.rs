@@ -5,7 +5,7 @@
 //! the multiple-shooting error.
 
 use super::errors::Comparison;
-use super::noise::{self, NoiseEstimate, NoiseInput};
+use super::noise::{self, NoiseEstimate, NoiseInput, NoiseStatus};
 use super::{lifted, locate, DiagnoseSettings, StatesSource};
 use crate::error::{Result, TacitError};
 use crate::horizon::{self, problem::HorizonData, settings::HorizonSettings};
@@ -418,7 +418,8 @@ pub(super) struct Both {
     pub vprep: Option<Prepared>,
     /// The noise measured on the record (None when not measured).
     pub noise: Option<NoiseEstimate>,
-    /// `settings` with the measured noise level.
+    /// `settings` with the noise level the loop runs at
+    /// ([`NoiseEstimate::used`]).
     pub settings: DiagnoseSettings,
 }
 
@@ -446,19 +447,26 @@ pub(super) fn both(
     let mut noise = None;
     if settings.noise.measure {
         let mut n = measure_noise(&st, found.as_ref(), settings)?;
-        eff.noise.level = n.level.clamp(MIN_LEVEL, MAX_LEVEL);
+        let measured = n.level.clamp(MIN_LEVEL, MAX_LEVEL);
         // far from the assumed level: the search and the measurement
-        // again at the measured level (the smoother weighs the data by it)
+        // again at the measured level (the smoother weighs the data by it),
+        // and every later step at the measured level; a coloured residual
+        // above the assumed level holds model error, which the trace must
+        // still see, so it does not raise the level
+        let raises_coloured = measured > settings.noise.level && n.status != NoiseStatus::White;
         if far(
-            eff.noise.level,
+            measured,
             settings.noise.level,
             settings.noise.relocate_factor,
-        ) {
+        ) && !raises_coloured
+        {
+            eff.noise.level = measured;
             found = search(declared, &st, &eff)?;
             n = measure_noise(&st, found.as_ref(), &eff)?;
             n.assumed = settings.noise.level;
             eff.noise.level = n.level.clamp(MIN_LEVEL, MAX_LEVEL);
         }
+        n.used = eff.noise.level;
         timings.insert("noise".into(), t.elapsed().as_secs_f64());
         noise = Some(n);
     }

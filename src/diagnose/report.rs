@@ -4,6 +4,7 @@
 //! SVG); and the words for the loop's typed decisions ([`note`],
 //! [`fit_note`]).
 
+use super::noise::{NoiseEstimate, NoiseStatus};
 use super::{BelowScreen, Decision, Diagnosis, Round, WithdrawReason};
 use crate::io::{ensure_dir, write_json, write_string};
 use crate::plot::{self, Figure, Panel, Series, SeriesStyle};
@@ -185,6 +186,27 @@ fn errors_section(s: &mut String, d: &Diagnosis) {
     }
 }
 
+/// Which level the noise-related thresholds used, in words.
+fn thresholds(n: &NoiseEstimate) -> String {
+    if n.used == n.assumed && n.level > n.assumed && n.status != NoiseStatus::White {
+        format!(
+            "The residual is coloured, so part of the measured level is model error; the noise-related thresholds keep the assumed {:.2} %.",
+            100.0 * n.assumed
+        )
+    } else if n.used == n.assumed {
+        format!(
+            "It confirms the assumed {:.2} % (within the search's factor), which the noise-related thresholds use.",
+            100.0 * n.assumed
+        )
+    } else {
+        format!(
+            "The noise-related thresholds use {:.3} % instead of the assumed {:.2} %.",
+            100.0 * n.used,
+            100.0 * n.assumed
+        )
+    }
+}
+
 /// The noise measured on the record, per channel.
 fn noise_section(s: &mut String, d: &Diagnosis) {
     let Some(n) = &d.noise else {
@@ -192,10 +214,10 @@ fn noise_section(s: &mut String, d: &Diagnosis) {
     };
     let _ = writeln!(
         s,
-        "\n## Noise\n\nMeasured on the record from what the located-force reconstruction leaves (median over {} frequency bands; a band far above the median holds model error, not noise): {}. The noise-related thresholds use this level (started from {:.2} %).\n",
+        "\n## Noise\n\nMeasured on the record from what the located-force reconstruction leaves (median over {} frequency bands; a band far above the median holds model error, not noise): {}. {}\n",
         n.bands,
         n.summary(),
-        100.0 * n.assumed
+        thresholds(n)
     );
     let _ = writeln!(
         s,

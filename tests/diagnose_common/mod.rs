@@ -40,7 +40,8 @@ pub fn records(truth: &Model, sensors: &[usize], seed: u64) -> (Record, Record) 
 /// settings); the verdict, errors and effects printed.
 pub fn run(truth: &Model, sensors: &[usize], seed: u64) -> Diagnosis {
     let (rec, val) = records(truth, sensors, seed);
-    let settings = DiagnoseSettings::default();
+    let mut settings = DiagnoseSettings::default();
+    settings.noise.measure = std::env::var("NOMEASURE").is_err();
     let d = diagnose(&lanl(), &rec, Some(&val), None, &settings, &|_| {}).unwrap();
     eprintln!(
         "{} | before {:?} after {:?} | validation {:?} → {:?}",
@@ -50,6 +51,13 @@ pub fn run(truth: &Model, sensors: &[usize], seed: u64) -> Diagnosis {
         d.validation.as_ref().map(|v| v.before.relative_error),
         d.validation.as_ref().map(|v| v.after.relative_error)
     );
+    if let Some(n) = &d.noise {
+        eprintln!(
+            "  noise measured {:.3} % (assumed {:.3} %)",
+            100.0 * n.level,
+            100.0 * n.assumed
+        );
+    }
     for e in &d.effects {
         eprintln!("  {} {:?}", e.label, e.parameters);
     }
