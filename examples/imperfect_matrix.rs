@@ -7,7 +7,7 @@
 //! structure at a level where it behaves linearly (`--linear-record`).
 //! Prints a Markdown table (docs/calibration.md holds the last run).
 //!
-//! `cargo run --release --example imperfect_matrix [-- --seed N] [--only TEXT]`
+//! `cargo run --release --example imperfect_matrix [-- --seed N] [--only TEXT] [--variants no|yes]`
 
 mod matrix_common;
 
@@ -267,6 +267,9 @@ fn main() {
     };
     let seed: u64 = arg("--seed").and_then(|s| s.parse().ok()).unwrap_or(9001);
     let only = arg("--only");
+    // `--variants no` or `--variants yes`: only the diagnoses without or
+    // with the linear record
+    let variants = arg("--variants");
     println!("| record | truth | sensors | noise | linear record | found | parameters | error before → after | validation before → after | corrections significant | time |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for c in cases(seed) {
@@ -278,6 +281,12 @@ fn main() {
         let val = record(&c.truth, &c, seed * 10 + 2, samples);
         let low = record(&c.linear, &c, seed * 10 + 3, samples);
         for with_low in [false, true] {
+            if variants
+                .as_deref()
+                .is_some_and(|v| (v == "yes") != with_low)
+            {
+                continue;
+            }
             let lin = if with_low { vec![low.clone()] } else { vec![] };
             let t = std::time::Instant::now();
             let d = diagnose_calibrated(
@@ -300,6 +309,9 @@ fn main() {
                     continue;
                 }
             };
+            if let Some(cal) = &d.calibration {
+                eprintln!("{}: {}; {}", c.name, cal.refinement, cal.choice);
+            }
             let sig: Vec<String> = d
                 .calibration
                 .as_ref()
