@@ -327,11 +327,13 @@ fn refine(d: &Diagnosis, cs: &CalibratedSettings, settings: &DiagnoseSettings) -
     let refined = problem.model_at(&jf.x);
     let (after, pred) = cmp.errors(&refined, sim);
     let note = format!(
-        "{} parameters refined with the start states of {} segments ({}, {} steps): multiple-shooting error {} → {}",
+        "{} parameters refined with the start states of {} segments ({}, {} steps, fit cost {:.3e} → {:.3e}): multiple-shooting error {} → {}",
         problem.parameters.len(),
         problem.segments.len(),
         jf.termination,
         jf.iterations,
+        jf.cost.0,
+        jf.cost.1,
         pct(d.after.relative_error),
         pct(after.relative_error)
     );
