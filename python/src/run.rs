@@ -168,6 +168,9 @@ pub fn identify<'py>(
             identify_located(m, &prob, &s)
         })
         .map_err(err)?;
+    if let Some(e) = tacit::identify::finite::error(&est) {
+        return Err(err(e));
+    }
     let summary = serde_json::to_string(&est.summary()).map_err(err)?;
     Ok((
         summary,
