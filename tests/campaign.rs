@@ -172,7 +172,12 @@ fn record_checks_against_the_model_run_in_a_campaign() {
     );
     std::fs::write(&manifest, body).unwrap();
     let out = d.path().join("out");
-    let o = tacit(&["campaign", manifest.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let o = tacit(&[
+        "campaign",
+        manifest.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
     assert!(!o.status.success(), "{}", text(&o));
     assert!(
         text(&o).contains("record dead: record ")

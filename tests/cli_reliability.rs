@@ -355,13 +355,21 @@ fn identify_with_a_non_finite_force_is_an_error_naming_the_stage() {
     let o = identify(Path::new(BUMPER), &out, &args);
     let e = fails_with(
         &o,
-        &["the identification (horizon) of", "gave a non-finite identified force at f_1, sample 0", "nothing was written"],
+        &[
+            "the identification (horizon) of",
+            "gave a non-finite identified force at f_1, sample 0",
+            "nothing was written",
+        ],
     );
     assert!(!e.contains("NaN %"), "{e}");
     assert!(!String::from_utf8_lossy(&o.stdout).contains("NaN"));
     assert!(!out.exists());
     // the same method with a usable weight runs
-    let o = identify(Path::new(BUMPER), &out, &["--method", "horizon", "--lambda", "1e-8"]);
+    let o = identify(
+        Path::new(BUMPER),
+        &out,
+        &["--method", "horizon", "--lambda", "1e-8"],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
 }
 

@@ -223,7 +223,10 @@ pub fn run_record(
     let mut warnings = vec![];
     for r in std::iter::once(&rec).chain(val.as_ref()) {
         let found = model_checks::warnings(r, model, sensors)?;
-        warnings.extend(model_checks::labelled(&r.source.display().to_string(), &found));
+        warnings.extend(model_checks::labelled(
+            &r.source.display().to_string(),
+            &found,
+        ));
     }
     let cal = calibrated::CalibratedSettings {
         off: m.trust_linear,

@@ -112,7 +112,10 @@ fn unscored(declared: &Model, rec: &Record, sim: SimSettings, before: &ErrorSet)
 /// on NaN errors would mean nothing, so no report is made.
 fn finite_errors(which: &str, set: &ErrorSet) -> Result<()> {
     let parts = [&set.status.multiple_shooting, &set.status.open_loop];
-    if !parts.iter().any(|p| matches!(p, Some(ShotError::NotFinite))) {
+    if !parts
+        .iter()
+        .any(|p| matches!(p, Some(ShotError::NotFinite)))
+    {
         return Ok(());
     }
     Err(crate::error::TacitError::Numerical(format!(
@@ -123,8 +126,15 @@ fn finite_errors(which: &str, set: &ErrorSet) -> Result<()> {
 
 /// The fitted model's errors on the record and both models' on the
 /// validation record, all finite ([`finite_errors`]).
-pub(crate) fn finite_result(fitted: &Model, after: &ErrorSet, val: Option<&Validation>) -> Result<()> {
-    finite_errors(&format!("the fitted model {} on the record", fitted.name), after)?;
+pub(crate) fn finite_result(
+    fitted: &Model,
+    after: &ErrorSet,
+    val: Option<&Validation>,
+) -> Result<()> {
+    finite_errors(
+        &format!("the fitted model {} on the record", fitted.name),
+        after,
+    )?;
     if let Some(v) = val {
         finite_errors("the declared model on the validation record", &v.before)?;
         finite_errors(
@@ -297,16 +307,23 @@ mod tests {
 
     #[test]
     fn non_finite_errors_after_the_fit_are_an_error_naming_model_and_record() {
-        let e = finite_errors("the fitted model m on the record", &set(Some(ShotError::NotFinite), None))
-            .unwrap_err()
-            .to_string();
+        let e = finite_errors(
+            "the fitted model m on the record",
+            &set(Some(ShotError::NotFinite), None),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(
             e.contains("the errors of the fitted model m on the record are not finite (multiple shooting: the error is not finite")
                 && e.contains("no report is made"),
             "{e}"
         );
         let e = finite_errors("x", &set(None, Some(ShotError::NotFinite))).unwrap_err();
-        assert!(e.to_string().contains("open-loop simulation: the error is not finite"), "{e}");
+        assert!(
+            e.to_string()
+                .contains("open-loop simulation: the error is not finite"),
+            "{e}"
+        );
         // a failed simulation is reported in the errors, not refused here
         let failed = set(None, Some(ShotError::Simulation("diverged".into())));
         assert!(finite_errors("x", &failed).is_ok());

@@ -74,8 +74,11 @@ pub fn first_non_finite(est: &ForceEstimate, end: usize) -> Option<(Stage, Strin
 /// (row, column) of the first non-finite entry by column, among the first
 /// `end` columns.
 fn first_in_matrix(m: &DMatrix<f64>, end: usize) -> Option<(usize, usize)> {
-    (0..end.min(m.ncols()))
-        .find_map(|k| (0..m.nrows()).find(|&i| !m[(i, k)].is_finite()).map(|i| (i, k)))
+    (0..end.min(m.ncols())).find_map(|k| {
+        (0..m.nrows())
+            .find(|&i| !m[(i, k)].is_finite())
+            .map(|i| (i, k))
+    })
 }
 
 /// Settle the status of a finished estimate: a non-finite value (before
@@ -141,7 +144,11 @@ mod tests {
     #[test]
     fn a_nan_is_named_by_stage_component_and_sample() {
         let mut est = estimate();
-        assert!(matches!(est.status, Status::Ok | Status::Warning), "{:?}", est.status);
+        assert!(
+            matches!(est.status, Status::Ok | Status::Warning),
+            "{:?}",
+            est.status
+        );
         assert_eq!(first_non_finite(&est, est.time.len()), None);
         assert!(error(&est).is_none());
         est.states.v[(4, 301)] = f64::NAN;
@@ -168,7 +175,11 @@ mod tests {
             message: "test".into(),
         };
         settle(&mut est);
-        assert!(matches!(est.status, Status::Failed { .. }), "{:?}", est.status);
+        assert!(
+            matches!(est.status, Status::Failed { .. }),
+            "{:?}",
+            est.status
+        );
         est.status = Status::Failed {
             window: 9,
             sample: 400,
@@ -176,7 +187,14 @@ mod tests {
         };
         settle(&mut est);
         assert!(
-            matches!(&est.status, Status::NonFinite { stage: Stage::Velocity, sample: 301, .. }),
+            matches!(
+                &est.status,
+                Status::NonFinite {
+                    stage: Stage::Velocity,
+                    sample: 301,
+                    ..
+                }
+            ),
             "{:?}",
             est.status
         );

@@ -685,7 +685,9 @@ mod tests {
         let e = read_err(&p);
         assert!(
             e.contains("r.h5: ")
-                && e.contains("attribute unit: a variable-length string of 1736888698-byte characters"),
+                && e.contains(
+                    "attribute unit: a variable-length string of 1736888698-byte characters"
+                ),
             "{e}"
         );
     }

@@ -195,7 +195,9 @@ mod tests {
     use std::path::Path;
 
     fn data(name: &str) -> std::path::PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(name)
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("data")
+            .join(name)
     }
 
     fn bumper() -> (Record, Model) {
@@ -218,7 +220,9 @@ mod tests {
     fn accelerations_in_g_are_a_scale_warning_near_one_over_g() {
         let (mut rec, model) = bumper();
         for c in &mut rec.outputs {
-            c.data.iter_mut().for_each(|x| *x /= crate::record::units::G0);
+            c.data
+                .iter_mut()
+                .for_each(|x| *x /= crate::record::units::G0);
         }
         let found = warnings(&rec, &model, None).unwrap();
         assert_eq!(kinds(&found), vec![Kind::Scale], "{found:?}");
@@ -245,6 +249,9 @@ mod tests {
         rec.outputs[0].data.fill(0.0);
         let e = warnings(&rec, &model, None).unwrap_err().to_string();
         assert!(e.starts_with("record "), "{e}");
-        assert!(e.contains("lanl8dof-bumper.h5: cannot be used as it is: channel accel_1 is dead"), "{e}");
+        assert!(
+            e.contains("lanl8dof-bumper.h5: cannot be used as it is: channel accel_1 is dead"),
+            "{e}"
+        );
     }
 }
