@@ -692,6 +692,25 @@ mod tests {
         );
     }
 
+    /// A fuzzed superblock (`84000000 0040`: two bytes at offset 132 of
+    /// the validation record) makes libhdf5 ask for a 64 TB metadata
+    /// buffer on opening; the allocator refuses it and the read is an
+    /// error naming the file, at once.
+    #[test]
+    fn a_superblock_asking_for_terabytes_is_an_error() {
+        let src = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/data/lanl8dof-bumper-validation.h5"
+        );
+        let mut bytes = std::fs::read(src).unwrap();
+        bytes[132..134].copy_from_slice(&[0x00, 0x40]);
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("sb.h5");
+        std::fs::write(&p, bytes).unwrap();
+        let e = read_err(&p);
+        assert!(e.contains("sb.h5: cannot open as HDF5"), "{e}");
+    }
+
     /// A chunked, deflated channel that declares 2.4 GB in a file of a few
     /// kB: beyond what deflate can store in it, refused naming the channel.
     #[test]
