@@ -1,5 +1,6 @@
 //! Output helpers: atomic writes (temporary file, then rename) so a failed
-//! run never leaves a half-written file behind.
+//! run never leaves a half-written file behind; the memory the machine has
+//! available, against which runs and reads are bounded.
 
 use crate::error::{Result, TacitError};
 use std::path::{Path, PathBuf};
@@ -84,6 +85,20 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
 /// Create an output directory (and parents).
 pub fn ensure_dir(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| TacitError::io(dir, e))
+}
+
+/// Memory available to a new process, bytes (`MemAvailable` of
+/// /proc/meminfo); `None` where it cannot be read.
+pub fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    parse_meminfo(&text)
+}
+
+/// `MemAvailable` (kB in the text of /proc/meminfo) in bytes.
+pub fn parse_meminfo(text: &str) -> Option<u64> {
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb.saturating_mul(1024))
 }
 
 #[cfg(test)]

@@ -148,3 +148,55 @@ fn bad_manifests_and_outputs_are_refused_naming_the_fault() {
         "mine"
     );
 }
+
+/// The record checks against the model run in a campaign as in
+/// `tacit diagnose`: accelerations in g are a warning in the record's
+/// report; a dead channel that is used fails that record, by name.
+#[test]
+fn record_checks_against_the_model_run_in_a_campaign() {
+    let d = tempfile::tempdir().unwrap();
+    let mut rec = tacit::record::read(Path::new(&data("lanl8dof-bumper.h5"))).unwrap();
+    rec = rec.slice(0, 2048).unwrap();
+    let mut g = rec.clone();
+    for c in &mut g.outputs {
+        c.data.iter_mut().for_each(|x| *x /= 9.80665);
+    }
+    tacit::record::write(&g, &d.path().join("g.h5")).unwrap();
+    let dead = rec.outputs.iter_mut().find(|c| c.dof == 6).unwrap();
+    dead.data.fill(0.0);
+    tacit::record::write(&rec, &d.path().join("dead.h5")).unwrap();
+    let manifest = d.path().join("c.toml");
+    let body = format!(
+        "model = \"{}\"\ntrust_linear = true\n[joint]\noff = true\n\n[[record]]\npath = \"g.h5\"\n\n[[record]]\npath = \"dead.h5\"\n",
+        data("lanl8dof.toml")
+    );
+    std::fs::write(&manifest, body).unwrap();
+    let out = d.path().join("out");
+    let o = tacit(&[
+        "campaign",
+        manifest.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("record dead: record ")
+            && text(&o).contains("dead.h5: cannot be used as it is: channel accel_6 is dead"),
+        "{}",
+        text(&o)
+    );
+    let report = out.join("records/g/report.json");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
+    let w: Vec<&str> = json["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|w| w.as_str())
+        .collect();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].contains("g.h5: the measured responses") && w[0].contains("look like they are in g"),
+        "{w:?}"
+    );
+}

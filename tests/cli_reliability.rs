@@ -343,6 +343,36 @@ fn identify_status_in_words_and_divergence_exits_non_zero() {
     assert!(out.join("summary.json").exists());
 }
 
+/// A horizon identification whose force weight is too small for double
+/// precision (`--lambda 1e-12` on the bumper) gives a NaN force: an error
+/// naming the stage, component and sample; nothing written; never "NaN %"
+/// with status ok.
+#[test]
+fn identify_with_a_non_finite_force_is_an_error_naming_the_stage() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("nan");
+    let args = ["--method", "horizon", "--lambda", "1e-12"];
+    let o = identify(Path::new(BUMPER), &out, &args);
+    let e = fails_with(
+        &o,
+        &[
+            "the identification (horizon) of",
+            "gave a non-finite identified force at f_1, sample 0",
+            "nothing was written",
+        ],
+    );
+    assert!(!e.contains("NaN %"), "{e}");
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("NaN"));
+    assert!(!out.exists());
+    // the same method with a usable weight runs
+    let o = identify(
+        Path::new(BUMPER),
+        &out,
+        &["--method", "horizon", "--lambda", "1e-8"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
 // ---- outputs whole or not at all -----------------------------------------
 
 #[test]

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use tacit::diagnose::{calibrated, report, DiagnoseSettings};
 use tacit::identify::{identify_located, LocatedSettings, Problem};
 use tacit::integrate::SimSettings;
-use tacit::record::Quantity;
+use tacit::record::{model_checks, Quantity};
 use tacit::simulate::{simulate_record, InputSpec, RecordSpec};
 
 /// Frequencies (Hz), shapes (columns) and rigid-body flags.
@@ -168,6 +168,9 @@ pub fn identify<'py>(
             identify_located(m, &prob, &s)
         })
         .map_err(err)?;
+    if let Some(e) = tacit::identify::finite::error(&est) {
+        return Err(err(e));
+    }
     let summary = serde_json::to_string(&est.summary()).map_err(err)?;
     Ok((
         summary,
@@ -222,7 +225,7 @@ pub fn diagnose(
         off: trust_linear,
         ..Default::default()
     };
-    let meta = meta(model, record, val.as_ref(), sensors.as_deref());
+    let meta = meta(model, record, val.as_ref(), sensors.as_deref()).map_err(err)?;
     let (paths, fitted) = py
         .detach(|| -> tacit::error::Result<_> {
             let d = calibrated::diagnose_calibrated(
@@ -250,13 +253,15 @@ pub fn diagnose(
     ))
 }
 
-/// The report header: files (or `<memory>`), record-check warnings.
+/// The report header: files (or `<memory>`), the warnings of the record
+/// checks against the model (as `tacit diagnose`); an error where a
+/// record cannot be used.
 fn meta(
     model: &Model,
     record: &Record,
     val: Option<&tacit::record::Record>,
     sensors: Option<&[usize]>,
-) -> report::Meta {
+) -> tacit::Result<report::Meta> {
     let name = |p: &Path| {
         if p.as_os_str().is_empty() {
             "<memory>".to_string()
@@ -264,19 +269,17 @@ fn meta(
             p.display().to_string()
         }
     };
-    let checks = tacit::record::checks::CheckSettings::default();
     let mut warnings = vec![];
     for r in std::iter::once(&record.inner).chain(val) {
-        for f in tacit::record::checks::check_record(r, sensors, &checks) {
-            warnings.push(format!("{}: {}", name(&r.source), f.message));
-        }
+        let found = model_checks::warnings(r, &model.inner, sensors)?;
+        warnings.extend(model_checks::labelled(&name(&r.source), &found));
     }
-    report::Meta {
+    Ok(report::Meta {
         model: model.path.as_deref().map_or("<memory>".into(), name),
         record: name(&record.inner.source),
         validation_record: val.map(|v| name(&v.source)),
         sensors: vec![],
         tacit_version: env!("CARGO_PKG_VERSION").to_string(),
         warnings,
-    }
+    })
 }

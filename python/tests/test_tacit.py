@@ -133,3 +133,21 @@ def test_errors_are_python_exceptions_with_tacit_messages(lanl, tmp_path):
     with pytest.raises(tacit.TacitError, match="sensor DOF 9"):
         rec = tacit.read_record(DATA / "lanl8dof-bumper.h5")
         tacit.identify(lanl, rec, [1, 9])
+
+
+def test_diagnose_runs_the_record_checks_against_the_model(lanl, tmp_path):
+    """The checks of ``tacit diagnose`` against the model: accelerations
+    in g are a warning in the report; a dead channel that is used is an
+    error naming it."""
+    rec = tacit.read_record(DATA / "lanl8dof-bumper.h5")
+    n = 2048
+    inputs = [(dof, data[:n]) for (_, dof, _, data) in rec.inputs()]
+    outputs = [("accel", dof, data[:n]) for (_, dof, _, data) in rec.outputs()]
+    in_g = [(q, dof, data / 9.80665) for (q, dof, data) in outputs]
+    d = tacit.diagnose(lanl, tacit.Record(rec.fs, inputs, in_g), tmp_path / "g",
+                       trust_linear=True)
+    (w,) = d.report["warnings"]
+    assert w.startswith("<memory>: the measured responses") and "in g" in w, w
+    dead = [(q, dof, 0.0 * data if dof == 6 else data) for (q, dof, data) in outputs]
+    with pytest.raises(tacit.TacitError, match="<memory>: cannot be used as it is: channel accel_6 is dead"):
+        tacit.diagnose(lanl, tacit.Record(rec.fs, inputs, dead), tmp_path / "dead")

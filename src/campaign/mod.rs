@@ -19,7 +19,7 @@ pub mod summary;
 use crate::diagnose::{calibrated, report, DiagnoseSettings};
 use crate::error::{Result, TacitError};
 use crate::model::Model;
-use crate::record::Record;
+use crate::record::{model_checks, Record};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -205,7 +205,9 @@ impl Manifest {
 }
 
 /// Diagnose one record of `m` (as `tacit diagnose`) and write its report
-/// into `dir` (created; its parent must exist). `linear`: the campaign's
+/// into `dir` (created; its parent must exist). The record checks of
+/// [`model_checks`] run first: their warnings go into the report, their
+/// errors fail the record. `linear`: the campaign's
 /// linear records, read once.
 pub fn run_record(
     m: &Manifest,
@@ -218,6 +220,14 @@ pub fn run_record(
     let rec = crate::record::read(&e.path)?;
     let val = e.validate.as_deref().map(crate::record::read).transpose()?;
     let sensors = m.sensors_of(e);
+    let mut warnings = vec![];
+    for r in std::iter::once(&rec).chain(val.as_ref()) {
+        let found = model_checks::warnings(r, model, sensors)?;
+        warnings.extend(model_checks::labelled(
+            &r.source.display().to_string(),
+            &found,
+        ));
+    }
     let cal = calibrated::CalibratedSettings {
         off: m.trust_linear,
         ..Default::default()
@@ -232,15 +242,6 @@ pub fn run_record(
         &cal,
         &|_| {},
     )?;
-    let checks = crate::record::checks::CheckSettings::default();
-    let warnings = std::iter::once(&rec)
-        .chain(val.as_ref())
-        .flat_map(|r| {
-            crate::record::checks::check_record(r, sensors, &checks)
-                .into_iter()
-                .map(move |f| format!("{}: {}", r.source.display(), f.message))
-        })
-        .collect();
     let meta = report::Meta {
         model: m.model.display().to_string(),
         record: e.path.display().to_string(),

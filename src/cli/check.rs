@@ -59,25 +59,11 @@ pub fn band(option: &str, band: (f64, f64), fs: f64) -> Result<()> {
     Ok(())
 }
 
-/// Memory available to a new process, bytes (`MemAvailable` of
-/// /proc/meminfo); `None` where it cannot be read.
-pub fn available_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    parse_meminfo(&text)
-}
-
-/// `MemAvailable` (kB in the file) in bytes.
-fn parse_meminfo(text: &str) -> Option<u64> {
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb.saturating_mul(1024))
-}
-
 /// Refuse a run whose estimated memory exceeds what the machine has.
 /// `estimate` is in bytes (saturating arithmetic: an overflow is "too
 /// much"); `what` says what the estimate is made of.
 pub fn memory(estimate: f64, what: &str) -> Result<()> {
-    let Some(avail) = available_memory() else {
+    let Some(avail) = tacit::io::available_memory() else {
         return Ok(());
     };
     check_memory(estimate, avail, what)
@@ -216,7 +202,7 @@ mod tests {
     #[test]
     fn memory_estimate_is_refused_above_what_is_available() {
         let text = "MemTotal: 100 kB\nMemFree: 10 kB\nMemAvailable:   2048 kB\n";
-        assert_eq!(parse_meminfo(text), Some(2048 * 1024));
+        assert_eq!(tacit::io::parse_meminfo(text), Some(2048 * 1024));
         let e = check_memory(3e6, 2048 * 1024, "test")
             .unwrap_err()
             .to_string();

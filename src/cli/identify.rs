@@ -334,12 +334,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 }
 
 /// Write the outputs whole, print the summary, and fail (after writing)
-/// when the estimate diverged or stopped.
+/// when the estimate diverged or stopped; fail without writing when it
+/// holds a non-finite value.
 fn finish(
     a: &Args,
     est: &identify::ForceEstimate,
     staging: super::output::Staging,
 ) -> anyhow::Result<()> {
+    if let Some(e) = identify::finite::error(est) {
+        return Err(e.into());
+    }
     let files = identify::output::write_all(est, staging.dir(), !a.no_figures)
         .map_err(|e| staging.user_message(e.into()))?;
     staging.commit()?;
@@ -490,5 +494,13 @@ fn status_words(s: &Status) -> String {
         Status::Failed { window, sample, .. } => {
             format!("stopped at window {window} (sample {sample})")
         }
+        Status::NonFinite {
+            stage,
+            component,
+            sample,
+        } => format!(
+            "non-finite {} at {component} from sample {sample}",
+            stage.words()
+        ),
     }
 }

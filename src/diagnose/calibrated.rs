@@ -201,6 +201,7 @@ pub fn diagnose_calibrated(
         ),
     };
     let mut out = if use_calibrated { d } else { trusted };
+    super::finite_result(&out.model, &out.after, out.validation.as_ref())?;
     out.timings
         .insert("calibrate".into(), report.calibration.seconds);
     out.calibration = Some(report);

@@ -108,6 +108,44 @@ fn unscored(declared: &Model, rec: &Record, sim: SimSettings, before: &ErrorSet)
     )))
 }
 
+/// An error with the facts when an error set of the result is not finite
+/// (`which`: the model and the record it was scored on): a verdict resting
+/// on NaN errors would mean nothing, so no report is made.
+fn finite_errors(which: &str, set: &ErrorSet) -> Result<()> {
+    let parts = [&set.status.multiple_shooting, &set.status.open_loop];
+    if !parts
+        .iter()
+        .any(|p| matches!(p, Some(ShotError::NotFinite)))
+    {
+        return Ok(());
+    }
+    Err(crate::error::TacitError::Numerical(format!(
+        "the errors of {which} are not finite ({}): the verdict would rest on NaN, so no report is made",
+        set.status
+    )))
+}
+
+/// The fitted model's errors on the record and both models' on the
+/// validation record, all finite ([`finite_errors`]).
+pub(crate) fn finite_result(
+    fitted: &Model,
+    after: &ErrorSet,
+    val: Option<&Validation>,
+) -> Result<()> {
+    finite_errors(
+        &format!("the fitted model {} on the record", fitted.name),
+        after,
+    )?;
+    if let Some(v) = val {
+        finite_errors("the declared model on the validation record", &v.before)?;
+        finite_errors(
+            &format!("the fitted model {} on the validation record", fitted.name),
+            &v.after,
+        )?;
+    }
+    Ok(())
+}
+
 /// Run the diagnosis of `rec` with the `declared` model (module docs),
 /// validated on `validation` when given; `progress` hears each stage.
 pub fn diagnose(
@@ -176,6 +214,7 @@ pub fn diagnose(
         (Some(v), Some(r)) => Some(validate(&ctx, &mut st, v, r, (sim0, sim1), progress)?),
         _ => None,
     };
+    finite_result(&st.current, &after, validation.as_ref())?;
     st.timings
         .insert("total".into(), t_all.elapsed().as_secs_f64());
     let tolerated_failures = ctx.tolerated.into_inner();
@@ -254,5 +293,48 @@ pub fn verdict(effects: &[EffectReport]) -> String {
     } else {
         let labels: Vec<String> = effects.iter().map(|e| e.label.clone()).collect();
         format!("found {}", labels.join(", "))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn set(ms: Option<ShotError>, ol: Option<ShotError>) -> ErrorSet {
+        ErrorSet {
+            relative_error: Some(f64::NAN),
+            simulation_error: Some(0.1),
+            per_channel: vec![],
+            status: ErrorStatus {
+                multiple_shooting: ms,
+                open_loop: ol,
+            },
+            starts: None,
+        }
+    }
+
+    #[test]
+    fn non_finite_errors_after_the_fit_are_an_error_naming_model_and_record() {
+        let e = finite_errors(
+            "the fitted model m on the record",
+            &set(Some(ShotError::NotFinite), None),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("the errors of the fitted model m on the record are not finite (multiple shooting: the error is not finite")
+                && e.contains("no report is made"),
+            "{e}"
+        );
+        let e = finite_errors("x", &set(None, Some(ShotError::NotFinite))).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("open-loop simulation: the error is not finite"),
+            "{e}"
+        );
+        // a failed simulation is reported in the errors, not refused here
+        let failed = set(None, Some(ShotError::Simulation("diverged".into())));
+        assert!(finite_errors("x", &failed).is_ok());
+        assert!(finite_errors("x", &set(None, None)).is_ok());
     }
 }

@@ -13,7 +13,7 @@
 
 use super::{identify, HorizonData, HorizonResult, HorizonSettings, HorizonStatus};
 use crate::error::{Result, TacitError};
-use crate::identify::output::{ForceEstimate, Status};
+use crate::identify::output::ForceEstimate;
 use crate::identify::{Problem, System};
 use nalgebra::DMatrix;
 
@@ -136,8 +136,6 @@ pub fn to_force_estimate(
         est.warnings
             .push(format!("horizon status: {:?}", res.status));
     }
-    if est.status == Status::Ok && !est.warnings.is_empty() {
-        est.status = Status::Warning;
-    }
+    crate::identify::finite::settle(&mut est);
     est
 }

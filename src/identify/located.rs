@@ -26,7 +26,7 @@
 //! The open-loop replay runs the lifted map with the whole sub-sample
 //! force, so each impact keeps its impulse.
 
-use super::output::{ForceEstimate, Status, Timings};
+use super::output::{ForceEstimate, Timings};
 use super::settings::Reduce;
 use super::system::{Problem, System};
 use crate::diagnose::lifted::{self, LiftedSettings};
@@ -163,9 +163,7 @@ pub fn identify_located(
     let mut ident = super::identifiability::analyse(&sys, 3, None, 1e-6);
     ident.note = format!("{}. {}", visible_note(located.as_ref(), n), ident.note);
     est.diagnostics.identifiability = Some(ident);
-    if est.status == Status::Ok && !est.warnings.is_empty() {
-        est.status = Status::Warning;
-    }
+    super::finite::settle(&mut est);
     est.timings = Timings {
         setup,
         selection,

@@ -28,6 +28,7 @@
 //! [`ForceEstimate`], written by [`output::write_all`]. Theory and the
 //! comparison with the paper's Figs 8–10: `docs/identification.md`.
 
+pub mod finite;
 pub mod identifiability;
 pub mod located;
 pub mod mhe;
@@ -162,9 +163,8 @@ pub fn identify_with_progress(
             "stopped at window {} (sample {}): {}; later samples are NaN",
             fl.window, fl.sample, fl.message
         ));
-    } else if est.status == Status::Ok && !est.warnings.is_empty() {
-        est.status = Status::Warning;
     }
+    finite::settle(&mut est);
     est.timings = output::Timings {
         setup,
         selection,

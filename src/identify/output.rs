@@ -62,6 +62,16 @@ pub enum Status {
         /// Largest state norm over the largest no-force state norm.
         growth: f64,
     },
+    /// Finished, but a value that should be a number is NaN or infinite
+    /// ([`super::finite`]): the estimate means nothing.
+    NonFinite {
+        /// The stage that produced it.
+        stage: super::finite::Stage,
+        /// The component: `f_5`, `u_3` (DOF from 1) or a channel's name.
+        component: String,
+        /// The first sample where it is not finite.
+        sample: usize,
+    },
     /// Stopped early; the values after `sample` are NaN.
     Failed {
         /// Window index.

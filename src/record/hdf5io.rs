@@ -314,25 +314,100 @@ fn read_channel(g: &Group, gname: &str, name: &str) -> Msg<Channel> {
     })
 }
 
+/// Deflate, the strongest of HDF5's standard filters, stores at most
+/// about 1032 values' bytes in one byte (RFC 1951: a 258-byte match in a
+/// code of about 2 bits).
+const MAX_DEFLATE_RATIO: u64 = 1032;
+
 /// Refuse a dataset that declares more values than its file can hold:
-/// unfiltered, its values are stored in the file; through deflate, the
-/// strongest of HDF5's standard filters, at most about 1032 times the
-/// file (RFC 1951: a 258-byte match in a code of about 2 bits). A larger
-/// declared size is a corrupt header, not data (a fuzzed header of the
-/// 1.4 MB shipped record asked for 2.5 GB).
+/// unfiltered, its values are stored in the file; through a filter, at
+/// most [`MAX_DEFLATE_RATIO`] times the file. A larger declared size is a
+/// corrupt header, not data (a fuzzed header of the 1.4 MB shipped record
+/// asked for 2.5 GB). Then refuse a read larger than the memory the
+/// machine has available.
 fn check_declared_size(ds: &Dataset, label: &str) -> Msg<()> {
     let file_len = ds.file().map(|f| f.size()).unwrap_or(0);
     let item = ds.dtype().map_or(8, |t| t.size()) as u64;
     let needed = (ds.size() as u64).saturating_mul(item);
-    let ratio = if ds.filters().is_empty() { 1 } else { 1032 };
+    let filtered = !ds.filters().is_empty();
+    let ratio = if filtered { MAX_DEFLATE_RATIO } else { 1 };
     let limit = file_len.saturating_mul(ratio).max(1 << 20);
     if needed > limit {
+        let how = if filtered {
+            format!(", {MAX_DEFLATE_RATIO} times what deflate stores in one byte")
+        } else {
+            String::new()
+        };
         return Err(format!(
-            "{label}: declares {} values ({needed} bytes stored), more than a file of {file_len} bytes can hold; the file is corrupt or truncated",
-            ds.size()
+            "{label}: declares {} values (shape {:?}, {needed} bytes stored), more than a file of {file_len} bytes can hold{how}; the file is corrupt or truncated",
+            ds.size(),
+            ds.shape()
         ));
     }
-    Ok(())
+    // the values as stored, and as f64
+    let bytes = needed.saturating_add((ds.size() as u64).saturating_mul(8));
+    fits_in_memory(bytes, crate::io::available_memory(), label)
+}
+
+/// Refuse reading `bytes` when more than `available` (`None`: unknown).
+fn fits_in_memory(bytes: u64, available: Option<u64>, label: &str) -> Msg<()> {
+    match available {
+        Some(avail) if bytes > avail => Err(format!(
+            "{label}: reading it needs about {:.1} GB of memory; the machine has {:.1} GB available",
+            bytes as f64 / 1e9,
+            avail as f64 / 1e9
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Refuse an attribute whose declared size no file of this size holds:
+/// more bytes of values than the file, or a variable-length string of
+/// characters wider than 4 bytes (HDF5 strings hold 1-byte characters;
+/// libhdf5 allocates length × width bytes to convert one: a fuzzed width
+/// of 1.7 GB in the shipped record's `unit` attribute asked for 8.7 GB).
+fn check_attr(attr: &hdf5::Attribute, name: &str) -> Msg<()> {
+    let file_len = attr.file().map(|f| f.size()).unwrap_or(0);
+    let dtype = attr
+        .dtype()
+        .map_err(h5(format!("attribute {name}: cannot read its type")))?;
+    let needed = (attr.size() as u64).saturating_mul(dtype.size() as u64);
+    if needed > file_len.max(1 << 16) {
+        return Err(format!(
+            "attribute {name}: declares {} values ({needed} bytes), more than a file of {file_len} bytes can hold; the file is corrupt",
+            attr.size()
+        ));
+    }
+    match vlen_char_width(&dtype) {
+        Some(w) if w > 4 => Err(format!(
+            "attribute {name}: a variable-length string of {w}-byte characters (HDF5 strings hold 1-byte characters); the file is corrupt"
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Width in bytes of the characters of a variable-length string type (the
+/// size of its base type); `None` for any other type. The safe API does
+/// not expose the base type of a string.
+fn vlen_char_width(t: &hdf5::Datatype) -> Option<usize> {
+    use hdf5_sys::h5t::{H5Tclose, H5Tget_size, H5Tget_super, H5Tis_variable_str};
+    hdf5::sync::sync(|| {
+        // SAFETY: `t` keeps its datatype id open for the whole call, the
+        // library lock is held, and the id H5Tget_super opens is closed
+        // before returning.
+        unsafe {
+            if H5Tis_variable_str(t.id()) <= 0 {
+                return None;
+            }
+            let base = H5Tget_super(t.id());
+            if base < 0 {
+                return None;
+            }
+            let width = H5Tget_size(base);
+            H5Tclose(base);
+            Some(width)
+        }
+    })
 }
 
 /// A dataset with at most one dimension larger than 1, as f64.
@@ -388,15 +463,18 @@ fn read_matrix(g: &Group, name: &str, n: usize) -> Msg<Vec<Vec<f64>>> {
     Ok(arr.outer_iter().map(|r| r.to_vec()).collect())
 }
 
-/// An attribute, or `None` when absent.
+/// An attribute, or `None` when absent; refused when its declared size
+/// cannot be real ([`check_attr`]).
 fn get_attr(loc: &Location, name: &str) -> Msg<Option<hdf5::Attribute>> {
     let names = loc.attr_names().map_err(h5("cannot list attributes"))?;
     if !names.iter().any(|n| n == name) {
         return Ok(None);
     }
-    loc.attr(name)
-        .map(Some)
-        .map_err(h5(format!("cannot open attribute {name}")))
+    let attr = loc
+        .attr(name)
+        .map_err(h5(format!("cannot open attribute {name}")))?;
+    check_attr(&attr, name)?;
+    Ok(Some(attr))
 }
 
 /// A one-element attribute of type `T`.
@@ -586,6 +664,89 @@ mod tests {
             e.contains("declares") && e.contains("corrupt or truncated"),
             "{e}"
         );
+    }
+
+    /// The fuzzer's second out-of-memory input (`58cb586bfa3a7ad18667`):
+    /// six bytes of the validation record changed so that a `unit`
+    /// attribute's string declares 1.7 GB characters, which libhdf5
+    /// allocated 5 of (8.7 GB) to convert; refused before the read.
+    #[test]
+    fn a_string_of_giant_characters_is_refused_before_libhdf5_converts_it() {
+        let src = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/data/lanl8dof-bumper-validation.h5"
+        );
+        let mut bytes = std::fs::read(src).unwrap();
+        let at = u32::from_le_bytes([0x58, 0xcb, 0x58, 0x6b]) as usize % bytes.len();
+        bytes[at..at + 6].copy_from_slice(&[0xfa, 0x3a, 0x7a, 0xd1, 0x86, 0x67]);
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("r.h5");
+        std::fs::write(&p, bytes).unwrap();
+        let e = read_err(&p);
+        assert!(
+            e.contains("r.h5: ")
+                && e.contains(
+                    "attribute unit: a variable-length string of 1736888698-byte characters"
+                ),
+            "{e}"
+        );
+    }
+
+    /// A fuzzed superblock (`84000000 0040`: two bytes at offset 132 of
+    /// the validation record) makes libhdf5 ask for a 64 TB metadata
+    /// buffer on opening; the allocator refuses it and the read is an
+    /// error naming the file, at once.
+    #[test]
+    fn a_superblock_asking_for_terabytes_is_an_error() {
+        let src = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/data/lanl8dof-bumper-validation.h5"
+        );
+        let mut bytes = std::fs::read(src).unwrap();
+        bytes[132..134].copy_from_slice(&[0x00, 0x40]);
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("sb.h5");
+        std::fs::write(&p, bytes).unwrap();
+        let e = read_err(&p);
+        assert!(e.contains("sb.h5: cannot open as HDF5"), "{e}");
+    }
+
+    /// A chunked, deflated channel that declares 2.4 GB in a file of a few
+    /// kB: beyond what deflate can store in it, refused naming the channel.
+    #[test]
+    fn a_compressed_dataset_declaring_gigabytes_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("huge.h5");
+        write_raw(&p, |f| {
+            put_scalar(f, "fs", &100.0f64).unwrap();
+            f.create_group("inputs").unwrap();
+            let g = f.create_group("outputs").unwrap();
+            g.new_dataset::<f64>()
+                .chunk(4096)
+                .deflate(4)
+                .shape(300_000_000)
+                .create("accel_3")
+                .unwrap();
+        });
+        let len = std::fs::metadata(&p).unwrap().len();
+        assert!(len < 100_000, "{len}");
+        let e = read_err(&p);
+        assert!(
+            e.contains("huge.h5: channel accel_3: declares 300000000 values (shape [300000000], 2400000000 bytes stored)")
+                && e.contains("1032 times what deflate stores in one byte"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_read_beyond_the_available_memory_is_refused() {
+        let e = fits_in_memory(3_000_000_000, Some(2_000_000_000), "channel accel_1").unwrap_err();
+        assert_eq!(
+            e,
+            "channel accel_1: reading it needs about 3.0 GB of memory; the machine has 2.0 GB available"
+        );
+        assert!(fits_in_memory(3_000_000_000, None, "x").is_ok());
+        assert!(fits_in_memory(1_000, Some(2_000), "x").is_ok());
     }
 
     fn write_raw(p: &Path, build: impl FnOnce(&hdf5::File)) {

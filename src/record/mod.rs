@@ -15,6 +15,7 @@ pub mod checks;
 pub mod csvio;
 pub mod hdf5io;
 pub mod matio;
+pub mod model_checks;
 pub mod uff;
 pub mod units;
 
