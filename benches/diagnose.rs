@@ -47,6 +47,7 @@ fn bench(c: &mut Criterion) {
 fn testbed_record(model: &Model, seed: u64) -> Record {
     let spec = RecordSpec {
         samples: 4096,
+        sensors: (1..=8).collect(),
         noise: 0.01,
         seed,
         settings: SimSettings {
