@@ -80,6 +80,10 @@ pub struct Comparison {
     pub segments: Vec<Segment>,
     /// The open-loop segment (whole record from the estimated start).
     pub whole: Segment,
+    /// Samples at the start of the open-loop run simulated but not scored
+    /// ([`super::DiagnoseSettings::unscored`]; less than the record's
+    /// length).
+    pub unscored: usize,
     /// The segment start-state refinement ([`super::starts`];
     /// `iterations` 0: the reconstructed start states as they are).
     pub starts: StartSettings,
@@ -114,6 +118,33 @@ impl Comparison {
             crate::update::predict(&p, &[]).map_err(|e| ShotError::Simulation(e.to_string()))?;
         let ns = self.force.ncols();
         Ok(DMatrix::from_fn(rows.len(), ns, |c, k| rows[c][k]))
+    }
+
+    /// Open-loop RMS error of channel `c` in the channel's units over the
+    /// finite samples of `y` (p × N) from [`Self::unscored`] on.
+    pub fn channel_rms(&self, y: &DMatrix<f64>, c: usize) -> f64 {
+        let d = &self.observations[c].data;
+        let (mut num, mut count) = (0.0, 0usize);
+        for (k, m) in d.iter().enumerate().skip(self.unscored) {
+            let v = y[(c, k)];
+            if v.is_finite() {
+                num += (v - m) * (v - m);
+                count += 1;
+            }
+        }
+        if count == 0 {
+            f64::NAN
+        } else {
+            (num / count as f64).sqrt()
+        }
+    }
+
+    /// The open-loop prediction `y` (p × N) with its unscored samples
+    /// blanked (NaN), as the errors count it.
+    pub fn scored(&self, mut y: DMatrix<f64>) -> DMatrix<f64> {
+        let n = self.unscored.min(y.ncols());
+        y.columns_mut(0, n).fill(f64::NAN);
+        y
     }
 
     fn sums(&self, y: &DMatrix<f64>, c: usize) -> (f64, f64) {

@@ -10,8 +10,10 @@
 use crate::error::{Result, TacitError};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+pub use cut::{compensate_linear_interpolation, SampleRange};
 
 pub mod checks;
+pub mod cut;
 pub mod csvio;
 pub mod hdf5io;
 pub mod matio;
