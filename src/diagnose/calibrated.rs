@@ -110,6 +110,8 @@ pub struct CalibrationReport {
     pub corrections: Vec<LinearCorrection>,
     /// The calibrated linear model's errors on the record.
     pub calibrated_errors: ErrorSet,
+    /// Its errors on the validation record (None without one).
+    pub calibrated_validation_errors: Option<ErrorSet>,
     /// Why the refinement was kept or not.
     pub refinement: String,
     /// Whether the diagnosis reported is the calibrated one (else the
@@ -214,8 +216,9 @@ pub fn diagnose_calibrated(
     update_effects(&mut d, &std);
     let corrections = corrections(&calibration, &d.model, &std, &cal.calibration);
     let calibrated_errors = std::mem::replace(&mut d.before, declared_errors);
+    let mut calibrated_validation_errors = None;
     if let (Some(v), Some(b)) = (d.validation.as_mut(), declared_validation) {
-        v.before = b;
+        calibrated_validation_errors = Some(std::mem::replace(&mut v.before, b));
     }
     d.verdict = super::verdict(&d.effects);
     let calibrated_err = d.after.relative_error;
@@ -225,6 +228,7 @@ pub fn diagnose_calibrated(
         calibration,
         corrections,
         calibrated_errors,
+        calibrated_validation_errors,
         refinement: note,
         used: use_calibrated,
         choice: match trusted {
