@@ -8,7 +8,9 @@
 //! small error of a resonance frequency or of the damping costs little,
 //! while over a long record it accumulates into the open-loop error.
 //!
-//! Kept when it lowers the record's open-loop error (`simulation_error`).
+//! Kept when it lowers the record's open-loop error (`simulation_error`);
+//! the record's open-loop error is then simulated from the fitted start
+//! state (the validation record's from its reconstructed one).
 
 use super::calibrated::{refinement_parameters, Estimated};
 use super::report::pct;
@@ -50,7 +52,11 @@ pub(super) fn refine(
         Err(e) => return Ok((format!("open-loop refinement failed: {e}"), None)),
     };
     let refined = problem.model_at(&jf.x);
-    let (after, pred) = cmp.errors(&refined, sim);
+    // the open-loop error from the fitted start state (a parameter of
+    // this fit), not the one reconstructed with the linear model
+    let mut fitted_start = cmp.clone();
+    fitted_start.whole = jf.segments[0].clone();
+    let (after, pred) = fitted_start.errors(&refined, sim);
     let note = format!(
         "open-loop refinement of {} parameters and the start state over the {} samples ({}, {} steps): simulation error {} → {}",
         problem.parameters.len(),
@@ -78,6 +84,7 @@ pub(super) fn refine(
         .unwrap_or_else(|| vec![None; at.parameters.len()]);
     d.model = refined;
     d.after = after;
+    d.prepared.comparison = fitted_start;
     d.predictions.1 = pred;
     if let (Some(c), Some(v)) = (vcmp, d.validation.as_mut()) {
         v.after = c.errors(&d.model, sim).0;
