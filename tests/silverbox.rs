@@ -83,7 +83,10 @@ fn silverbox_through_the_cli_finds_the_cubic_and_reaches_the_arrow_bound() {
     // the free mass is calibrated (starting value 5e-6)
     let corr = r["calibration"]["corrections"].as_array().unwrap();
     let m = corr.iter().find(|c| c["name"] == "m1").unwrap();
-    assert!((m["value"].as_f64().unwrap() - 5.376e-6).abs() < 0.02e-6, "{m}");
+    assert!(
+        (m["value"].as_f64().unwrap() - 5.376e-6).abs() < 0.02e-6,
+        "{m}"
+    );
 }
 
 #[test]
@@ -96,11 +99,23 @@ fn silverbox_ranges_and_skip_are_checked_naming_the_option() {
         (&["--samples", "40650..200000"], "--samples 40650..200000"),
         (&["--samples", "500..400"], "--samples"),
         (
-            &["--samples", "0..1000", "--validation-samples", "131000..131073"],
+            &[
+                "--samples",
+                "0..1000",
+                "--validation-samples",
+                "131000..131073",
+            ],
             "--validation-samples 131000..131073",
         ),
         (
-            &["--samples", "0..1000", "--validation-samples", "0..100", "--skip", "100"],
+            &[
+                "--samples",
+                "0..1000",
+                "--validation-samples",
+                "0..100",
+                "--skip",
+                "100",
+            ],
             "--skip 100",
         ),
     ];

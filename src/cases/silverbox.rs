@@ -150,11 +150,25 @@ pub fn run(path: &Path, s: &Settings, out: Option<&Path>) -> Result<SilverboxRes
         open_loop: true,
         ..Default::default()
     };
-    let d = diagnose_calibrated(&model, &est, Some(&test), &[], None, &settings, &cal, &|_| {})?;
+    let d = diagnose_calibrated(
+        &model,
+        &est,
+        Some(&test),
+        &[],
+        None,
+        &settings,
+        &cal,
+        &|_| {},
+    )?;
     if let Some(dir) = out {
         let meta = diagnose::report::Meta {
             model: s.model.display().to_string(),
-            record: format!("{} [{}..{})", path.display(), s.estimation.0, s.estimation.1),
+            record: format!(
+                "{} [{}..{})",
+                path.display(),
+                s.estimation.0,
+                s.estimation.1
+            ),
             validation_record: Some(format!("{} [{}..{})", path.display(), s.test.0, s.test.1)),
             sensors: vec![1],
             tacit_version: env!("CARGO_PKG_VERSION").into(),

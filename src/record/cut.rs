@@ -30,12 +30,17 @@ impl SampleRange {
     /// Parse `START..END` (0-based, END excluded, START < END); the error
     /// repeats the value and the rule.
     pub fn parse(s: &str) -> std::result::Result<SampleRange, String> {
-        let rule = "give START..END, whole samples from 0, END excluded, START < END (e.g. 40650..127400)";
+        let rule =
+            "give START..END, whole samples from 0, END excluded, START < END (e.g. 40650..127400)";
         let (a, b) = s
             .trim()
             .split_once("..")
             .ok_or_else(|| format!("'{s}': {rule}"))?;
-        let num = |t: &str| t.trim().parse::<usize>().map_err(|_| format!("'{s}': {rule}"));
+        let num = |t: &str| {
+            t.trim()
+                .parse::<usize>()
+                .map_err(|_| format!("'{s}': {rule}"))
+        };
         let (start, end) = (num(a)?, num(b)?);
         if start >= end {
             return Err(format!("'{s}': START must be below END; {rule}"));
@@ -151,7 +156,10 @@ mod tests {
         assert!((cut.t0 - 1.0).abs() < 1e-12);
         let e = SampleRange::parse("10..51").unwrap().cut(&rec).unwrap_err();
         let m = e.to_string();
-        assert!(m.contains("rec.mat") && m.contains("10..51") && m.contains("50"), "{m}");
+        assert!(
+            m.contains("rec.mat") && m.contains("10..51") && m.contains("50"),
+            "{m}"
+        );
     }
 
     /// A sine at a third of the sample rate: the piecewise-linear
@@ -178,7 +186,10 @@ mod tests {
         };
         let plain = amplitude(&x);
         let comp = amplitude(&compensate_linear_interpolation(&x));
-        assert!((plain - 0.6839).abs() < 0.01, "linear interpolation: {plain}");
+        assert!(
+            (plain - 0.6839).abs() < 0.01,
+            "linear interpolation: {plain}"
+        );
         assert!((comp - 1.0).abs() < 2e-3, "compensated: {comp}");
     }
 }
