@@ -184,3 +184,54 @@ impl Comparison {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::Quantity;
+
+    fn comparison(unscored: usize) -> Comparison {
+        let data = vec![1.0, -1.0, 2.0, -2.0, 0.5, 0.0];
+        let seg = Segment {
+            start: 0,
+            len: data.len(),
+            u0: vec![0.0],
+            v0: vec![0.0],
+        };
+        Comparison {
+            fs: 10.0,
+            force: DMatrix::zeros(1, data.len()),
+            observations: vec![Observation {
+                quantity: Quantity::Disp,
+                dof: 1,
+                weight: 1.0,
+                data,
+            }],
+            segments: vec![seg.clone()],
+            whole: seg,
+            unscored,
+            starts: StartSettings::default(),
+        }
+    }
+
+    /// The RMS error in the channel's units over the samples scored: the
+    /// unscored ones and non-finite predictions left out.
+    #[test]
+    fn channel_rms_leaves_out_the_unscored_samples() {
+        // prediction errors 3, 0, 0.1, −0.1, NaN, 0.2
+        let y = DMatrix::from_row_slice(1, 6, &[4.0, -1.0, 2.1, -2.1, f64::NAN, 0.2]);
+        let all = comparison(0).channel_rms(&y, 0);
+        let want = ((9.0 + 0.0 + 0.01 + 0.01 + 0.04) / 5.0f64).sqrt();
+        assert!((all - want).abs() < 1e-12, "{all} vs {want}");
+        let c = comparison(2);
+        let skipped = c.channel_rms(&y, 0);
+        assert!((skipped - (0.06f64 / 3.0).sqrt()).abs() < 1e-12, "{skipped}");
+        // the relative error counts the same samples once blanked
+        let blanked = c.scored(y);
+        assert!(blanked[(0, 0)].is_nan() && blanked[(0, 1)].is_nan());
+        assert_eq!(blanked[(0, 2)], 2.1);
+        let rel = c.channel_error(&blanked, 0);
+        let den = 4.0 + 4.0 + 0.0;
+        assert!((rel - (0.06f64 / den).sqrt()).abs() < 1e-12, "{rel}");
+    }
+}
