@@ -225,7 +225,10 @@ mod tests {
         assert!((all - want).abs() < 1e-12, "{all} vs {want}");
         let c = comparison(2);
         let skipped = c.channel_rms(&y, 0);
-        assert!((skipped - (0.06f64 / 3.0).sqrt()).abs() < 1e-12, "{skipped}");
+        assert!(
+            (skipped - (0.06f64 / 3.0).sqrt()).abs() < 1e-12,
+            "{skipped}"
+        );
         // the relative error counts the same samples once blanked
         let blanked = c.scored(y);
         assert!(blanked[(0, 0)].is_nan() && blanked[(0, 1)].is_nan());
