@@ -102,9 +102,10 @@ pub fn per_mode(model: &Model) -> Result<Model> {
     Ok(m)
 }
 
-/// What a calibration may correct.
+/// What a calibration may correct (also the `[free]` table of a model
+/// file, where a missing key takes its default).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct Freedom {
     /// Every spring's stiffness (default true).
     pub springs: bool,

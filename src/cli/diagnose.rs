@@ -7,6 +7,7 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use tacit::diagnose::{self, report, DiagnoseSettings};
 use tacit::model::Model;
+use tacit::record::SampleRange;
 
 /// Arguments of `tacit diagnose`.
 #[derive(Debug, clap::Args)]
@@ -67,6 +68,34 @@ pub struct Args {
     /// kept.
     #[arg(long, value_name = "SAMPLES|SECONDS", value_parser = tacit::record::WarmUp::parse)]
     warm_up: Option<tacit::record::WarmUp>,
+    /// Keep samples START..END of the record (0-based, END excluded), cut
+    /// after the whole file is read (and its mean removed); e.g. a
+    /// benchmark's estimation range.
+    #[arg(long, value_name = "START..END", value_parser = SampleRange::parse)]
+    samples: Option<SampleRange>,
+    /// Keep samples START..END of the validation record (as --samples).
+    /// Without --validate, the record file itself is cut again: a
+    /// benchmark's test range of the same file.
+    #[arg(long, value_name = "START..END", value_parser = SampleRange::parse)]
+    validation_samples: Option<SampleRange>,
+    /// Samples at the start of every record that the open-loop error
+    /// simulates but does not score (`simulation_error`,
+    /// `rms_per_channel`; `unscored` of the settings): a benchmark's
+    /// state initialisation (the Silverbox: 50).
+    #[arg(long, value_name = "SAMPLES")]
+    skip: Option<usize>,
+    /// The force channels were measured band-limited (an anti-aliased
+    /// acquisition): their samples are compensated for the linear
+    /// interpolation of tacit's integrators (spectrum divided by
+    /// sinc²(f/fs), on the whole file before --samples), so that the
+    /// simulations see the measured force up to the Nyquist frequency.
+    #[arg(long)]
+    band_limited_force: bool,
+    /// After the diagnosis and the joint refinement, refine every
+    /// parameter (linear ones included) by the open-loop simulation error
+    /// over the whole record.
+    #[arg(long)]
+    refine_open_loop: bool,
     #[command(flatten)]
     rec: RecordOpts,
     /// Output directory (created with its parents; written whole at the
@@ -99,7 +128,30 @@ fn settings(a: &Args) -> anyhow::Result<DiagnoseSettings> {
     if a.truth_states {
         s.states = diagnose::StatesSource::Truth;
     }
+    if let Some(v) = a.skip {
+        s.unscored = v;
+    }
     Ok(s)
+}
+
+/// `--skip` must leave samples of every record to score; the error names
+/// the option and the record.
+fn check_skip(
+    skip: Option<usize>,
+    rec: &tacit::record::Record,
+    val: Option<&tacit::record::Record>,
+) -> anyhow::Result<()> {
+    let Some(k) = skip else { return Ok(()) };
+    for r in std::iter::once(rec).chain(val) {
+        if k >= r.len() {
+            anyhow::bail!(
+                "--skip {k}: the record {} has only {} samples (after --samples / --validation-samples); the skip must leave some to score",
+                r.source.display(),
+                r.len()
+            );
+        }
+    }
+    Ok(())
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
@@ -111,28 +163,45 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     )?;
     settings.validate()?;
     let staging = super::output::Staging::begin(&a.output, a.force)?;
-    let load = |p: &std::path::Path| -> anyhow::Result<tacit::record::Record> {
-        let r = load_record(p, &a.rec)?;
-        Ok(match a.warm_up {
+    let load = |p: &std::path::Path, range: Option<(&str, SampleRange)>| {
+        let mut r = load_record(p, &a.rec)?;
+        if a.band_limited_force {
+            r = r.with_band_limited_force();
+        }
+        if let Some((option, range)) = range {
+            r = range
+                .cut(&r)
+                .map_err(|e| anyhow::anyhow!("{option} {range}: {e}"))?;
+        }
+        Ok::<_, anyhow::Error>(match a.warm_up {
             Some(w) => r.without_warm_up(w)?,
             None => r,
         })
     };
-    let mut rec = load(&a.record)?;
-    let mut val = match &a.validate {
-        Some(p) => Some(load(p)?),
-        None => None,
+    let mut rec = load(&a.record, a.samples.map(|r| ("--samples", r)))?;
+    let vrange = a.validation_samples.map(|r| ("--validation-samples", r));
+    let mut val = match (&a.validate, vrange) {
+        (Some(p), _) => Some(load(p, vrange)?),
+        (None, Some(_)) => Some(load(&a.record, vrange)?),
+        (None, None) => None,
     };
+    check_skip(a.skip, &rec, val.as_ref())?;
     let mut linear = a
         .linear_records
         .iter()
-        .map(|p| load(p))
+        .map(|p| load(p, None))
         .collect::<anyhow::Result<Vec<_>>>()?;
     // a model from matrices is reduced onto the records' points
     let mut recs: Vec<&mut tacit::record::Record> = vec![&mut rec];
     recs.extend(val.as_mut());
     recs.extend(linear.iter_mut());
     let model = Model::load(&a.model, &mut recs)?;
+    if a.trust_linear && model.free.is_some() {
+        anyhow::bail!(
+            "{}: the model marks its linear parameters free ([free]); --trust-linear would leave them at their starting values",
+            a.model.display()
+        );
+    }
     let chosen = a.sensors.as_ref().map(|d| d.0.as_slice());
     let mut warnings = super::records::check(&rec, &model, chosen)?;
     if let Some(v) = &val {
@@ -155,6 +224,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     let cal = diagnose::calibrated::CalibratedSettings {
         off: a.trust_linear,
+        open_loop: a.refine_open_loop,
         ..Default::default()
     };
     let d = diagnose::calibrated::diagnose_calibrated(

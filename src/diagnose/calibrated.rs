@@ -54,6 +54,12 @@ pub struct CalibratedSettings {
     pub refine_segments: usize,
     /// Most accepted steps of the joint refinement (default 40).
     pub refine_iterations: usize,
+    /// After the joint refinement, refine every parameter again by the
+    /// open-loop simulation error over the whole record
+    /// ([`super::open_loop`]; default false).
+    pub open_loop: bool,
+    /// Most accepted steps of the open-loop refinement (default 40).
+    pub open_loop_iterations: usize,
 }
 
 impl Default for CalibratedSettings {
@@ -63,6 +69,8 @@ impl Default for CalibratedSettings {
             off: false,
             refine_segments: 40,
             refine_iterations: 40,
+            open_loop: false,
+            open_loop_iterations: 40,
         }
     }
 }
@@ -102,6 +110,8 @@ pub struct CalibrationReport {
     pub corrections: Vec<LinearCorrection>,
     /// The calibrated linear model's errors on the record.
     pub calibrated_errors: ErrorSet,
+    /// Its errors on the validation record (None without one).
+    pub calibrated_validation_errors: Option<ErrorSet>,
     /// Why the refinement was kept or not.
     pub refinement: String,
     /// Whether the diagnosis reported is the calibrated one (else the
@@ -112,7 +122,10 @@ pub struct CalibrationReport {
 }
 
 /// Diagnose `rec` against `declared`, its linear part calibrated first (on
-/// `linear_records` when given) and refined with the effects found.
+/// `linear_records` when given) and refined with the effects found. A
+/// model whose linear parameters are marked free (`[free]`,
+/// [`Model::free`]) is calibrated with that freedom and without the
+/// trusted alternative: its values are starting values only.
 #[allow(clippy::too_many_arguments)]
 pub fn diagnose_calibrated(
     declared: &Model,
@@ -127,17 +140,32 @@ pub fn diagnose_calibrated(
     if cal.off {
         return super::diagnose(declared, rec, validation, sensors, settings, progress);
     }
+    let cal = &CalibratedSettings {
+        calibration: CalibrationSettings {
+            freedom: declared.free.unwrap_or(cal.calibration.freedom),
+            ..cal.calibration.clone()
+        },
+        ..cal.clone()
+    };
     // the declared model trusted, as the alternative the calibrated
-    // diagnosis must beat on the record
-    let trusted = super::diagnose(declared, rec, validation, sensors, settings, progress)?;
+    // diagnosis must beat on the record (none when its linear values are
+    // only starting values)
+    let trusted = match declared.free {
+        Some(_) => None,
+        None => Some(super::diagnose(
+            declared, rec, validation, sensors, settings, progress,
+        )?),
+    };
     // without a linear record, a declared model that explains the record
     // up to the noise floor is not recalibrated on it
-    let explained = trusted
-        .after
-        .relative_error
-        .is_some_and(|e| e <= trusted.noise_floor(settings));
-    if linear_records.is_empty() && explained {
-        return Ok(trusted);
+    if let Some(t) = trusted.as_ref() {
+        let explained = t
+            .after
+            .relative_error
+            .is_some_and(|e| e <= t.noise_floor(settings));
+        if linear_records.is_empty() && explained {
+            return Ok(trusted.expect("checked above"));
+        }
     }
     progress("calibrate the linear part");
     let on: Vec<&Record> = if linear_records.is_empty() {
@@ -177,30 +205,49 @@ pub fn diagnose_calibrated(
     };
     let declared_errors = d.prepared.comparison.errors(declared, sim0).0;
     let declared_validation = vcmp.map(|c| c.errors(declared, sim0).0);
-    let (note, std) = refine_once(&mut d, cal, settings, vcmp)?;
+    let (mut note, mut std) = refine_once(&mut d, cal, settings, vcmp)?;
+    if cal.open_loop {
+        progress("refine every parameter by the open-loop error");
+        let it = cal.open_loop_iterations;
+        let (n, est) = super::open_loop::refine(&mut d, &cal.calibration, settings, it, vcmp)?;
+        note = format!("{note}; {n}");
+        std = est.unwrap_or(std);
+    }
     update_effects(&mut d, &std);
     let corrections = corrections(&calibration, &d.model, &std, &cal.calibration);
     let calibrated_errors = std::mem::replace(&mut d.before, declared_errors);
+    let mut calibrated_validation_errors = None;
     if let (Some(v), Some(b)) = (d.validation.as_mut(), declared_validation) {
-        v.before = b;
+        calibrated_validation_errors = Some(std::mem::replace(&mut v.before, b));
     }
     d.verdict = super::verdict(&d.effects);
-    let (calibrated_err, trusted_err) = (d.after.relative_error, trusted.after.relative_error);
-    let use_calibrated = lower(calibrated_err, trusted_err);
+    let calibrated_err = d.after.relative_error;
+    let trusted_err = trusted.as_ref().and_then(|t| t.after.relative_error);
+    let use_calibrated = trusted.is_none() || lower(calibrated_err, trusted_err);
     let report = CalibrationReport {
         calibration,
         corrections,
         calibrated_errors,
+        calibrated_validation_errors,
         refinement: note,
         used: use_calibrated,
-        choice: format!(
-            "multiple-shooting error on the record after the diagnosis: {} with the calibrated linear part, {} with the declared one; the {} is reported",
-            pct(calibrated_err),
-            pct(trusted_err),
-            if use_calibrated { "calibrated" } else { "declared" }
-        ),
+        choice: match trusted {
+            Some(_) => format!(
+                "multiple-shooting error on the record after the diagnosis: {} with the calibrated linear part, {} with the declared one; the {} is reported",
+                pct(calibrated_err),
+                pct(trusted_err),
+                if use_calibrated { "calibrated" } else { "declared" }
+            ),
+            None => format!(
+                "the model marks its linear parameters free: calibrated only ({} on the record)",
+                pct(calibrated_err)
+            ),
+        },
     };
-    let mut out = if use_calibrated { d } else { trusted };
+    let mut out = match trusted {
+        Some(t) if !use_calibrated => t,
+        _ => d,
+    };
     super::finite_result(&out.model, &out.after, out.validation.as_ref())?;
     out.timings
         .insert("calibrate".into(), report.calibration.seconds);
@@ -248,7 +295,7 @@ fn sim_of(d: &Diagnosis) -> SimSettings {
 
 /// The free parameters of the refinement: the linear ones the calibration
 /// opens and every nonlinear element's.
-fn refinement_parameters(
+pub(super) fn refinement_parameters(
     model: &Model,
     added: &[super::effects::AddedEffect],
     cal: &CalibrationSettings,
@@ -278,7 +325,7 @@ fn refinement_parameters(
 }
 
 /// A refined parameter and its standard error.
-type Estimated = (Parameter, Option<f64>);
+pub(super) type Estimated = (Parameter, Option<f64>);
 
 /// What the refinement gave.
 enum Refined {

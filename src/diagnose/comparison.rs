@@ -80,6 +80,10 @@ pub struct Comparison {
     pub segments: Vec<Segment>,
     /// The open-loop segment (whole record from the estimated start).
     pub whole: Segment,
+    /// Samples at the start of the open-loop run simulated but not scored
+    /// ([`super::DiagnoseSettings::unscored`]; less than the record's
+    /// length).
+    pub unscored: usize,
     /// The segment start-state refinement ([`super::starts`];
     /// `iterations` 0: the reconstructed start states as they are).
     pub starts: StartSettings,
@@ -114,6 +118,33 @@ impl Comparison {
             crate::update::predict(&p, &[]).map_err(|e| ShotError::Simulation(e.to_string()))?;
         let ns = self.force.ncols();
         Ok(DMatrix::from_fn(rows.len(), ns, |c, k| rows[c][k]))
+    }
+
+    /// Open-loop RMS error of channel `c` in the channel's units over the
+    /// finite samples of `y` (p × N) from [`Self::unscored`] on.
+    pub fn channel_rms(&self, y: &DMatrix<f64>, c: usize) -> f64 {
+        let d = &self.observations[c].data;
+        let (mut num, mut count) = (0.0, 0usize);
+        for (k, m) in d.iter().enumerate().skip(self.unscored) {
+            let v = y[(c, k)];
+            if v.is_finite() {
+                num += (v - m) * (v - m);
+                count += 1;
+            }
+        }
+        if count == 0 {
+            f64::NAN
+        } else {
+            (num / count as f64).sqrt()
+        }
+    }
+
+    /// The open-loop prediction `y` (p × N) with its unscored samples
+    /// blanked (NaN), as the errors count it.
+    pub fn scored(&self, mut y: DMatrix<f64>) -> DMatrix<f64> {
+        let n = self.unscored.min(y.ncols());
+        y.columns_mut(0, n).fill(f64::NAN);
+        y
     }
 
     fn sums(&self, y: &DMatrix<f64>, c: usize) -> (f64, f64) {
@@ -151,5 +182,59 @@ impl Comparison {
         DMatrix::from_fn(self.observations.len(), self.force.ncols(), |c, k| {
             self.observations[c].data[k]
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::Quantity;
+
+    fn comparison(unscored: usize) -> Comparison {
+        let data = vec![1.0, -1.0, 2.0, -2.0, 0.5, 0.0];
+        let seg = Segment {
+            start: 0,
+            len: data.len(),
+            u0: vec![0.0],
+            v0: vec![0.0],
+        };
+        Comparison {
+            fs: 10.0,
+            force: DMatrix::zeros(1, data.len()),
+            observations: vec![Observation {
+                quantity: Quantity::Disp,
+                dof: 1,
+                weight: 1.0,
+                data,
+            }],
+            segments: vec![seg.clone()],
+            whole: seg,
+            unscored,
+            starts: StartSettings::default(),
+        }
+    }
+
+    /// The RMS error in the channel's units over the samples scored: the
+    /// unscored ones and non-finite predictions left out.
+    #[test]
+    fn channel_rms_leaves_out_the_unscored_samples() {
+        // prediction errors 3, 0, 0.1, −0.1, NaN, 0.2
+        let y = DMatrix::from_row_slice(1, 6, &[4.0, -1.0, 2.1, -2.1, f64::NAN, 0.2]);
+        let all = comparison(0).channel_rms(&y, 0);
+        let want = ((9.0 + 0.0 + 0.01 + 0.01 + 0.04) / 5.0f64).sqrt();
+        assert!((all - want).abs() < 1e-12, "{all} vs {want}");
+        let c = comparison(2);
+        let skipped = c.channel_rms(&y, 0);
+        assert!(
+            (skipped - (0.06f64 / 3.0).sqrt()).abs() < 1e-12,
+            "{skipped}"
+        );
+        // the relative error counts the same samples once blanked
+        let blanked = c.scored(y);
+        assert!(blanked[(0, 0)].is_nan() && blanked[(0, 1)].is_nan());
+        assert_eq!(blanked[(0, 2)], 2.1);
+        let rel = c.channel_error(&blanked, 0);
+        let den = 4.0 + 4.0 + 0.0;
+        assert!((rel - (0.06f64 / den).sqrt()).abs() < 1e-12, "{rel}");
     }
 }

@@ -10,6 +10,7 @@ use crate::model::Model;
 use crate::update::shooting::Segment;
 use nalgebra::DMatrix;
 use serde::Serialize;
+use std::collections::BTreeMap;
 
 /// Errors of one channel.
 #[derive(Debug, Clone, Serialize)]
@@ -32,6 +33,10 @@ pub struct ErrorSet {
     pub simulation_error: Option<f64>,
     /// Per channel.
     pub per_channel: Vec<ChannelError>,
+    /// Open-loop RMS error per channel (by name) in the channel's units
+    /// (SI: m, m/s, m/s²), over the samples scored (null where the
+    /// open-loop run failed).
+    pub rms_per_channel: BTreeMap<String, Option<f64>>,
     /// What failed, if anything (written `"ok"` or the failures joined by
     /// `; ` in report.json).
     pub status: ErrorStatus,
@@ -134,7 +139,7 @@ impl Comparison {
             }
         };
         let whole = match self.predict(model, std::slice::from_ref(&self.whole), sim) {
-            Ok(y) => Some(y),
+            Ok(y) => Some(self.scored(y)),
             Err(e) => {
                 status.open_loop = Some(e);
                 None
@@ -151,6 +156,15 @@ impl Comparison {
                 simulation_error: rel(&whole, c),
             })
             .collect();
+        let rms_per_channel = self
+            .observations
+            .iter()
+            .enumerate()
+            .map(|(c, o)| {
+                let rms = whole.as_ref().map(|y| self.channel_rms(y, c));
+                (o.name(), rms.filter(|v| v.is_finite()))
+            })
+            .collect();
         let relative_error = seg.as_ref().map(|y| self.total_error(y));
         let simulation_error = whole.as_ref().map(|y| self.total_error(y));
         let finite = |e: Option<f64>| e.is_none_or(f64::is_finite);
@@ -164,6 +178,7 @@ impl Comparison {
             relative_error,
             simulation_error,
             per_channel,
+            rms_per_channel,
             status,
             starts,
         };

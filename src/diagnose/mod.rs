@@ -55,6 +55,7 @@ pub mod joint;
 pub mod lifted;
 pub mod locate;
 pub mod noise;
+mod open_loop;
 mod outcome;
 mod polish;
 pub mod prepare;

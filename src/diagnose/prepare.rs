@@ -251,6 +251,7 @@ fn prepare_from(
                 u0,
                 v0,
             },
+            unscored: settings.unscored.min(rec.len().saturating_sub(1)),
             starts: settings.starts,
         },
         recon,

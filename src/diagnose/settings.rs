@@ -43,6 +43,13 @@ pub struct DiagnoseSettings {
     pub fit: FitGroup,
     /// The segment start states.
     pub starts: StartSettings,
+    /// Samples at the start of every record that the open-loop error
+    /// simulates but does not score (`simulation_error`,
+    /// `rms_per_channel`; default 0, every sample scored; a value beyond
+    /// a record leaves its last sample scored). Reason: a benchmark's
+    /// test records allow their first samples for the state's
+    /// initialisation (the Silverbox: 50).
+    pub unscored: usize,
 }
 
 /// Source of the states the trace and the segments use.
@@ -514,6 +521,7 @@ impl Default for DiagnoseSettings {
             screen: ScreenSettings::default(),
             fit: FitGroup::default(),
             starts: StartSettings::default(),
+            unscored: 0,
         }
     }
 }

@@ -131,6 +131,14 @@ pub struct Model {
         skip_serializing_if = "Vec::is_empty"
     )]
     pub relative_frictions: Vec<RelativeFriction>,
+    /// Linear parameters marked free (`[free]`: `masses`, `springs`,
+    /// `damping`, each true or false, defaults those of
+    /// [`crate::calibrate::Freedom`]): their values are starting values,
+    /// estimated from the records by the calibration and the refinement,
+    /// not declared ones. None: the declared linear part (calibrated with
+    /// the calibration's own settings).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub free: Option<crate::calibrate::Freedom>,
     /// Point labels of DOFs `1..=points.len()` (models built from
     /// matrices: the kept points; the DOFs after them are modal
     /// coordinates). Empty for a lumped model.

@@ -8,11 +8,13 @@
 //! documented in `docs/formats.md`.
 
 use crate::error::{Result, TacitError};
+pub use cut::{compensate_linear_interpolation, SampleRange};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 pub mod checks;
 pub mod csvio;
+pub mod cut;
 pub mod hdf5io;
 pub mod matio;
 pub mod model_checks;
