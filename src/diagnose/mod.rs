@@ -48,6 +48,7 @@ mod alternative;
 pub mod calibrated;
 pub mod comparison;
 mod decide;
+mod figures;
 pub mod effects;
 pub mod errors;
 mod fit;
