@@ -992,7 +992,9 @@ fn draw_xy<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panel: &Panel) -> 
 
     for (i, s) in panel.series.iter().enumerate() {
         let c = s.colour.map_or(color(i), |(r, g, b)| RGBColor(r, g, b));
-        let dense = s.x.len() > 2 * grid.width;
+        // thick lines through many sharp turns grow miter spikes: thin
+        // lines once there are more points than half the pixel columns
+        let dense = 2 * s.x.len() > grid.width;
         let line = c.stroke_width(if dense { 1 } else { 2 });
         let label = s.label.as_str();
         labelled |= !label.is_empty();

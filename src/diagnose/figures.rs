@@ -5,7 +5,8 @@
 //! data.
 
 use super::Diagnosis;
-use crate::correlate::frf::{h1, FrfSettings, Measurement};
+use crate::correlate::frf::{h1, FrfSettings, Measurement, Window};
+use rustfft::{num_complex::Complex, FftPlanner};
 use crate::plot::{self, Figure, Panel, Series, SeriesStyle};
 use crate::trace::{Candidate, EffectKind};
 use crate::Result;
@@ -24,7 +25,7 @@ const LAW: (u8, u8, u8) = (214, 39, 40);
 /// Colour of a gap line (grey).
 const GAP: (u8, u8, u8) = (110, 110, 110);
 /// Length of the responses' overview window, s.
-const OVERVIEW_S: f64 = 1.0;
+const OVERVIEW_S: f64 = 0.5;
 /// Length of the responses' zoom window, s.
 const ZOOM_S: f64 = 0.1;
 
@@ -153,7 +154,7 @@ fn response_panel(d: &Diagnosis, c: usize, t: &[f64], (k0, k1): (usize, usize)) 
     Panel::xy(title, "time [s]", channel_axis(d, c, quantity_word(o.quantity)), series)
 }
 
-/// Per channel, the first second and a zoom on 0.1 s around its largest
+/// Per channel, the first half second and a zoom on 0.1 s around its largest
 /// peak there: measured (black dots) over the segment predictions.
 fn responses_figure(d: &Diagnosis, t: &[f64]) -> Figure {
     let cmp = &d.prepared.comparison;
@@ -182,6 +183,34 @@ fn frf_segment(ns: usize) -> usize {
         n *= 2;
     }
     n
+}
+
+/// The lines `[lo, hi)` of a Welch spectrum of `force` (Hann segments of
+/// `nseg` samples, half overlapping) within 30 dB of its peak: where the
+/// input excites the structure and an FRF estimate means something.
+fn input_band(force: &[f64], nseg: usize) -> (usize, usize) {
+    let nl = nseg / 2 + 1;
+    let win = Window::Hann.values(nseg);
+    let fft = FftPlanner::new().plan_fft_forward(nseg);
+    let mut g = vec![0.0; nl];
+    let mut start = 0;
+    while start + nseg <= force.len() {
+        let mut buf: Vec<Complex<f64>> = force[start..start + nseg]
+            .iter()
+            .zip(&win)
+            .map(|(v, w)| Complex::new(v * w, 0.0))
+            .collect();
+        fft.process(&mut buf);
+        for (gl, b) in g.iter_mut().zip(&buf) {
+            *gl += b.norm_sqr();
+        }
+        start += nseg / 2;
+    }
+    let max = g.iter().copied().fold(0.0, f64::max);
+    let keep = |l: &usize| max > 0.0 && g[*l] >= 1e-3 * max;
+    let lo = (0..nl).find(keep).unwrap_or(0);
+    let hi = (0..nl).rev().find(keep).map_or(nl, |h| h + 1);
+    (lo, hi)
 }
 
 /// H1 from the largest input force to every channel, of the measurement
@@ -218,10 +247,14 @@ fn frf_figure(d: &Diagnosis) -> Option<Figure> {
     };
     let before = model(&d.before.open_loop_prediction);
     let after = model(&d.after.open_loop_prediction);
+    let (lo, hi) = input_band(&force, settings.segment);
     let db = |h: &crate::correlate::Frf, c: usize| -> Vec<f64> {
-        h.h[c].iter().map(|z| 20.0 * z.norm().max(1e-300).log10()).collect()
+        h.h[c][lo..hi]
+            .iter()
+            .map(|z| 20.0 * z.norm().max(1e-300).log10())
+            .collect()
     };
-    let f = measured.freq_hz.clone();
+    let f = measured.freq_hz[lo..hi].to_vec();
     let panels = cmp
         .observations
         .iter()
@@ -235,7 +268,7 @@ fn frf_figure(d: &Diagnosis) -> Option<Figure> {
                 series.push(Series::line("fitted model", f.clone(), db(h, c)).with_colour(AFTER));
             }
             series.push(Series::line("measured", f.clone(), db(&measured, c)).with_colour(MEASURED));
-            let unit = format!("{}/N", o.quantity.si_unit());
+            let unit = format!("({})/N", o.quantity.si_unit());
             Panel::xy(
                 format!("{} / force_{}", o.name(), input + 1),
                 "frequency [Hz]",
@@ -444,7 +477,13 @@ fn restoring_figure(r: &Restoring, (dx, dv, fy): (Vec<f64>, Vec<f64>, Vec<f64>))
             LawAxis::Displacement => (grid_over(&dx, 400), 1e3, &mut disp),
             LawAxis::Velocity => (grid_over(&dv, 400), 1.0, &mut vel),
         };
-        let ys: Vec<f64> = xs.iter().map(|&x| f(x)).collect();
+        // the law where the data are (a stiff contact's law leaves them fast)
+        let top = 1.5 * fy.iter().filter(|v| v.is_finite()).fold(0.0, |m: f64, v| m.max(v.abs()));
+        let ys: Vec<f64> = xs
+            .iter()
+            .map(|&x| f(x))
+            .map(|y| if y.abs() <= top { y } else { f64::NAN })
+            .collect();
         let xs: Vec<f64> = xs.iter().map(|x| scale * x).collect();
         into.push(Series::line(r.label, xs, ys).with_colour(LAW));
     }
@@ -517,6 +556,17 @@ mod tests {
         assert_eq!(zoom_window(&y, (10, 100), 20), (40, 60));
         y[98] = 10.0;
         assert_eq!(zoom_window(&y, (10, 100), 20), (80, 100));
+    }
+
+    #[test]
+    fn input_band_finds_the_excited_lines() {
+        let fs = 512.0;
+        let f = crate::signal::random_band(4096, fs, (5.0, 200.0), 20.0, 7).unwrap();
+        let (lo, hi) = input_band(&f, 512);
+        // lines of 1 Hz: the band's edges within 2 Hz
+        assert!((3..=7).contains(&lo), "{lo}");
+        assert!((199..=203).contains(&hi), "{hi}");
+        assert_eq!(input_band(&[0.0; 1024], 512), (0, 257));
     }
 
     #[test]

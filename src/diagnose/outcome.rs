@@ -36,11 +36,11 @@ pub struct EffectReport {
 }
 
 impl EffectReport {
-    /// The standard error of `name` implied by its values on the quarters
-    /// of the record ([`EffectReport::group_estimates`]): their sample
-    /// standard deviation over the square root of their number (None with
-    /// fewer than two).
-    pub fn spread_error(&self, name: &str) -> Option<f64> {
+    /// The mean and the standard error (sample standard deviation over the
+    /// square root of their number) of `name`'s values on the quarters of
+    /// the record ([`EffectReport::group_estimates`]); None with fewer
+    /// than two.
+    pub fn quarters(&self, name: &str) -> Option<(f64, f64)> {
         let g = self.group_estimates.get(name)?;
         let n = g.len();
         if n < 2 {
@@ -48,7 +48,17 @@ impl EffectReport {
         }
         let mean = g.iter().sum::<f64>() / n as f64;
         let var = g.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-        Some((var / n as f64).sqrt()).filter(|v| v.is_finite())
+        Some((mean, (var / n as f64).sqrt())).filter(|(m, s)| m.is_finite() && s.is_finite())
+    }
+
+    /// The uncertainty of `name` seen across the record: the quarters'
+    /// standard error ([`EffectReport::quarters`]) combined (root sum of
+    /// squares) with the distance of their mean from the reported value,
+    /// which is large when the fit stopped short of its minimum.
+    pub fn spread_error(&self, name: &str) -> Option<f64> {
+        let (mean, se) = self.quarters(name)?;
+        let v = *self.parameters.get(name)?;
+        Some(se.hypot(mean - v))
     }
 }
 

@@ -261,8 +261,11 @@ fn effects_section(s: &mut String, d: &Diagnosis) {
     }
     let _ = writeln!(
         s,
-        "\n**What ± means.** *± noise* is one standard error from measurement noise alone (white noise at the level measured below, through the fit's Jacobian with the segments' start states free); it ignores every model error and is a lower bound. *± across the record* is the same parameter fitted on each quarter of the record separately (the values in the last column): the standard deviation of the quarters' values divided by 2 (√4); it includes model error and coloured residual, and is the one to quote."
+        "\n**What ± means.** *± noise* is one standard error from measurement noise alone (white noise at the level measured below, through the fit's Jacobian with the segments' start states free); it ignores every model error and is a lower bound. *± across the record* comes from the same parameter fitted on each quarter of the record separately (the values in the last column; one linearized step from the fit, the start states re-estimated): the standard deviation of the quarters' values divided by 2 (√4), combined with how far their mean lies from the value reported; it includes model error, coloured residual and a fit stopped short of its minimum, and is the one to quote."
     );
+    for e in &d.effects {
+        offset_note(s, e);
+    }
     if let Some((name, label, ratio)) = worst_ratio(&d.effects) {
         let _ = writeln!(
             s,
@@ -270,6 +273,34 @@ fn effects_section(s: &mut String, d: &Diagnosis) {
         );
     }
     let _ = writeln!(s);
+}
+
+/// A sentence when the quarters agree with each other but their mean lies
+/// far from the value reported (more than 3 of their standard errors and
+/// 3 noise standard errors): the fit stopped short of its minimum.
+fn offset_note(s: &mut String, e: &EffectReport) {
+    let far: Vec<String> = e
+        .parameters
+        .iter()
+        .filter_map(|(k, v)| {
+            let (mean, se_q) = e.quarters(k)?;
+            let se = e.std_errors.get(k).copied().flatten().unwrap_or(0.0);
+            let off = (mean - v).abs();
+            (off > 3.0 * se_q && off > 3.0 * se).then(|| {
+                let sh = shown(k);
+                let dec = sh.decimals(*v, &[Some(se_q), Some(se)]);
+                format!("{k} {} against {}", sh.value(mean, dec), sh.value(*v, dec))
+            })
+        })
+        .collect();
+    if !far.is_empty() {
+        let _ = writeln!(
+            s,
+            "\n**{}: the quarters agree with each other but not with the value reported** ({}): a further Gauss–Newton step on the whole record points to the quarters' mean, so the fit stopped short of its minimum (see how the fit ended in the appendix); the ± across the record includes that distance.",
+            e.label,
+            far.join("; ")
+        );
+    }
 }
 
 /// The parameter whose spread across the record is the most times its
