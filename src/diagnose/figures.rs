@@ -6,12 +6,12 @@
 
 use super::Diagnosis;
 use crate::correlate::frf::{h1, FrfSettings, Measurement, Window};
-use rustfft::{num_complex::Complex, FftPlanner};
 use crate::plot::{self, Figure, Panel, Series, SeriesStyle};
 use crate::trace::{Candidate, EffectKind};
 use crate::Result;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use rustfft::{num_complex::Complex, FftPlanner};
 use std::path::{Path, PathBuf};
 
 /// Colour of the measurement (black), drawn over the predictions.
@@ -122,7 +122,9 @@ fn zoom_window(y: &[f64], (from, to): (usize, usize), len: usize) -> (usize, usi
     let peak = (from..to)
         .max_by(|&a, &b| y[a].abs().total_cmp(&y[b].abs()))
         .unwrap_or(0);
-    let k0 = peak.saturating_sub(len / 2).min(y.len().saturating_sub(len));
+    let k0 = peak
+        .saturating_sub(len / 2)
+        .min(y.len().saturating_sub(len));
     (k0, (k0 + len).min(y.len()))
 }
 
@@ -147,11 +149,14 @@ fn response_panel(d: &Diagnosis, c: usize, t: &[f64], (k0, k1): (usize, usize)) 
             series.push(s.with_colour(colour));
         }
     }
-    series.push(
-        Series::points("measured", tt, o.data[k0..k1].to_vec()).with_colour(MEASURED),
-    );
+    series.push(Series::points("measured", tt, o.data[k0..k1].to_vec()).with_colour(MEASURED));
     let title = format!("{}, {:.2}–{:.2} s", o.name(), t[k0], t[k1 - 1]);
-    Panel::xy(title, "time [s]", channel_axis(d, c, quantity_word(o.quantity)), series)
+    Panel::xy(
+        title,
+        "time [s]",
+        channel_axis(d, c, quantity_word(o.quantity)),
+        series,
+    )
 }
 
 /// Per channel, the first half second and a zoom on 0.1 s around its largest
@@ -262,12 +267,15 @@ fn frf_figure(d: &Diagnosis) -> Option<Figure> {
         .map(|(c, o)| {
             let mut series = vec![];
             if let Some(h) = &before {
-                series.push(Series::dashed("declared model", f.clone(), db(h, c)).with_colour(BEFORE));
+                series.push(
+                    Series::dashed("declared model", f.clone(), db(h, c)).with_colour(BEFORE),
+                );
             }
             if let Some(h) = &after {
                 series.push(Series::line("fitted model", f.clone(), db(h, c)).with_colour(AFTER));
             }
-            series.push(Series::line("measured", f.clone(), db(&measured, c)).with_colour(MEASURED));
+            series
+                .push(Series::line("measured", f.clone(), db(&measured, c)).with_colour(MEASURED));
             let unit = format!("({})/N", o.quantity.si_unit());
             Panel::xy(
                 format!("{} / force_{}", o.name(), input + 1),
@@ -474,11 +482,14 @@ fn restoring_figure(r: &Restoring, (dx, dv, fy): (Vec<f64>, Vec<f64>, Vec<f64>))
     let mut vel = vec![Series::points("identified", dv.clone(), fy.clone()).with_colour(AFTER)];
     if let Some((axis, f)) = law(c, &p, r.nominal) {
         let (xs, scale, into) = match axis {
-            LawAxis::Displacement => (grid_over(&dx, 400), 1e3, &mut disp),
-            LawAxis::Velocity => (grid_over(&dv, 400), 1.0, &mut vel),
+            LawAxis::Displacement => (grid_over(&dx, 150), 1e3, &mut disp),
+            LawAxis::Velocity => (grid_over(&dv, 150), 1.0, &mut vel),
         };
         // the law where the data are (a stiff contact's law leaves them fast)
-        let top = 1.5 * fy.iter().filter(|v| v.is_finite()).fold(0.0, |m: f64, v| m.max(v.abs()));
+        let top = 1.5
+            * fy.iter()
+                .filter(|v| v.is_finite())
+                .fold(0.0, |m: f64, v| m.max(v.abs()));
         let ys: Vec<f64> = xs
             .iter()
             .map(|&x| f(x))
@@ -501,7 +512,12 @@ fn restoring_figure(r: &Restoring, (dx, dv, fy): (Vec<f64>, Vec<f64>, Vec<f64>))
             disp.push(Series::dashed("", vec![-g, -g], vec![lo, hi]).with_colour(GAP));
         }
     }
-    let p1 = Panel::xy("force vs displacement", format!("{what} [mm]"), "f_int [N]", disp);
+    let p1 = Panel::xy(
+        "force vs displacement",
+        format!("{what} [mm]"),
+        "f_int [N]",
+        disp,
+    );
     let p2 = Panel::xy(
         "force vs velocity",
         format!("d/dt({what}) [m/s]"),
@@ -515,7 +531,7 @@ fn restoring_figure(r: &Restoring, (dx, dv, fy): (Vec<f64>, Vec<f64>, Vec<f64>))
 mod tests {
     use super::*;
 
-    fn params(v: &[(&str, f64)]) -> impl Fn(&str) -> f64 + '_ {
+    fn params<'a>(v: &'a [(&'a str, f64)]) -> impl Fn(&str) -> f64 + 'a {
         move |n: &str| v.iter().find(|p| p.0 == n).map_or(f64::NAN, |p| p.1)
     }
 

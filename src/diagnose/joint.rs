@@ -734,13 +734,19 @@ mod tests {
             (k3, mean, sd, u.std_errors[0])
         };
         let (k3, mean, sd, se) = spread(&t);
-        assert!(sd < 1e-4 * k3, "right model: groups {sd:.3e} around {k3:.4e}");
+        assert!(
+            sd < 1e-4 * k3,
+            "right model: groups {sd:.3e} around {k3:.4e}"
+        );
         assert!((mean - k3).abs() < 1e-4 * k3, "{mean:.4e} vs {k3:.4e}");
         assert!(se > 0.0);
         let mut stiff = t.clone();
         stiff.springs[0].stiffness *= 1.05;
         let (k3, mean, sd, se) = spread(&stiff);
-        assert!(sd > 10.0 * se, "wrong spring: groups {sd:.3e}, noise {se:.3e}");
+        assert!(
+            sd > 10.0 * se,
+            "wrong spring: groups {sd:.3e}, noise {se:.3e}"
+        );
         assert!((mean - k3).abs() < sd, "{mean:.4e} vs {k3:.4e} ± {sd:.3e}");
     }
 }

@@ -6,10 +6,10 @@
 //! SVG, `super::figures`); and the words for the loop's typed decisions
 //! ([`note`], [`fit_note`]).
 
-use super::{BelowScreen, Decision, Diagnosis, Round, WithdrawReason};
-use crate::io::{ensure_dir, write_json, write_string};
 use super::noise::{NoiseEstimate, NoiseStatus};
 use super::EffectReport;
+use super::{BelowScreen, Decision, Diagnosis, Round, WithdrawReason};
+use crate::io::{ensure_dir, write_json, write_string};
 use crate::Result;
 use nalgebra::DMatrix;
 use serde::ser::SerializeStruct;
@@ -269,7 +269,7 @@ fn effects_section(s: &mut String, d: &Diagnosis) {
     if let Some((name, label, ratio)) = worst_ratio(&d.effects) {
         let _ = writeln!(
             s,
-            "Here the spread across the record is up to {ratio:.0} × the noise-only value ({name} of {label}): the model's remaining error, not the noise, limits how well the parameters are known.",
+            "\nThe quarters' values scatter by up to {ratio:.0} × the noise-only value ({name} of {label}): the model's remaining error or a coloured residual, not the noise, limits how well the parameters are known.",
         );
     }
     let _ = writeln!(s);
@@ -303,15 +303,16 @@ fn offset_note(s: &mut String, e: &EffectReport) {
     }
 }
 
-/// The parameter whose spread across the record is the most times its
-/// noise-only standard error, when that is above 3.
+/// The parameter whose quarters' standard error
+/// ([`EffectReport::quarters`]) is the most times its noise-only standard
+/// error, when that is above 3.
 fn worst_ratio(effects: &[EffectReport]) -> Option<(String, String, f64)> {
     effects
         .iter()
         .flat_map(|e| {
             e.parameters.keys().filter_map(move |k| {
                 let se = e.std_errors.get(k).copied().flatten()?;
-                let r = e.spread_error(k)? / se;
+                let r = e.quarters(k)?.1 / se;
                 r.is_finite().then(|| (k.clone(), e.label.clone(), r))
             })
         })
@@ -427,10 +428,12 @@ fn open_loop_note(d: &Diagnosis) -> Option<String> {
             pct(w.last().copied())
         ),
     };
-    let impacts = d
-        .effects
-        .iter()
-        .any(|e| matches!(e.kind, crate::trace::EffectKind::Contact | crate::trace::EffectKind::Clearance));
+    let impacts = d.effects.iter().any(|e| {
+        matches!(
+            e.kind,
+            crate::trace::EffectKind::Contact | crate::trace::EffectKind::Clearance
+        )
+    });
     let nonlinear = d.effects.iter().any(|e| !e.kind.linear_in_state());
     let why = if impacts {
         "each impact's timing depends on the exact state when the gap closes, so small differences grow from impact to impact and the simulated response drifts out of phase with the measured one"
@@ -514,13 +517,22 @@ fn caption(stem: &str) -> String {
 /// The figures, each with a caption, in reading order.
 fn figures_section(s: &mut String, figs: &[PathBuf]) {
     let _ = writeln!(s, "\n## Figures\n");
-    let order = ["responses", "residual", "frf", "restoring_", "identified_force"];
+    let order = [
+        "responses",
+        "residual",
+        "frf",
+        "restoring_",
+        "identified_force",
+    ];
     let mut pngs: Vec<(usize, String, String)> = figs
         .iter()
         .filter(|f| f.extension().is_some_and(|e| e == "png"))
         .filter_map(|f| {
             let stem = f.file_stem()?.to_string_lossy().into_owned();
-            let rank = order.iter().position(|o| stem.starts_with(o)).unwrap_or(order.len());
+            let rank = order
+                .iter()
+                .position(|o| stem.starts_with(o))
+                .unwrap_or(order.len());
             Some((rank, stem.clone(), format!("{stem}.png")))
         })
         .collect();
@@ -541,7 +553,11 @@ fn appendix(s: &mut String, d: &Diagnosis) {
     start_states(s, d);
     loop_section(s, d);
     if let Some(c) = &d.calibration {
-        let _ = writeln!(s, "\nLinear part refined with the effects found: {}.", c.refinement);
+        let _ = writeln!(
+            s,
+            "\nLinear part refined with the effects found: {}.",
+            c.refinement
+        );
     }
     for f in &d.tolerated_failures {
         let _ = writeln!(
@@ -796,5 +812,145 @@ impl Serialize for Round {
         r.serialize_field("decision", &self.decision)?;
         r.serialize_field("alternative", &self.alternative)?;
         r.end()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Model;
+    use crate::trace::{Candidate, EffectKind, RankedEffect};
+    use std::collections::BTreeMap;
+
+    /// Every parameter name an effect of each kind is reported with has a
+    /// unit (none falls through to "(SI)").
+    #[test]
+    fn every_effect_parameter_has_a_unit() {
+        let toml = "masses = [1.0, 1.0]\n[[spring]]\ndofs = [1]\nstiffness = 1000.0\n[[spring]]\ndofs = [1, 2]\nstiffness = 1000.0\n[damping]\nkind = \"modal\"\nratio = 0.02\n";
+        let kinds = [
+            EffectKind::Contact,
+            EffectKind::Friction,
+            EffectKind::Cubic,
+            EffectKind::Stiffness,
+            EffectKind::GroundSpring,
+            EffectKind::Damping,
+            EffectKind::Quadratic,
+            EffectKind::QuadraticDamping,
+            EffectKind::CubicDamping,
+            EffectKind::Clearance,
+            EffectKind::RelativeFriction,
+        ];
+        for kind in kinds {
+            let mut model = Model::from_toml_str(toml, "two").unwrap();
+            let mut candidate = Candidate::new(kind, vec![0, 1]);
+            candidate.spring = Some(1);
+            let r = RankedEffect {
+                candidate,
+                label: kind.name().into(),
+                parameters: vec![],
+                std_errors: vec![],
+                residual_explained: 0.5,
+                force_explained: None,
+                bic_change: -1.0,
+                hidden: vec![],
+            };
+            let added = super::super::effects::add(&mut model, &r);
+            for name in &added.names {
+                let sh = shown(name);
+                assert_ne!(sh.unit, "(SI)", "{kind:?}: {name}");
+                assert!(with_unit(name, 1e-3).ends_with(sh.unit), "{name}");
+            }
+        }
+    }
+
+    fn contact() -> EffectReport {
+        let map = |v: &[(&str, f64)]| -> BTreeMap<String, f64> {
+            v.iter().map(|(k, x)| (k.to_string(), *x)).collect()
+        };
+        EffectReport {
+            kind: EffectKind::Contact,
+            dofs: vec![5, 6],
+            label: "contact 5→6".into(),
+            parameters: map(&[("gap", 3.9305e-4), ("stiffness", 2.1453e6)]),
+            std_errors: [("gap", Some(1.4e-7)), ("stiffness", Some(1.9e3))]
+                .iter()
+                .map(|(k, v)| (k.to_string(), *v))
+                .collect(),
+            group_estimates: [
+                ("gap", vec![3.8155e-4, 3.8033e-4, 3.8172e-4, 3.8249e-4]),
+                ("stiffness", vec![2.026e6, 2.005e6, 1.997e6, 2.056e6]),
+            ]
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.clone()))
+            .collect(),
+            traced: BTreeMap::new(),
+            score: super::super::outcome::Score {
+                residual_explained: 0.428,
+                bic_change: -1.0,
+                force_explained: None,
+                error_before: Some(0.694),
+                error_after: Some(0.0319),
+            },
+        }
+    }
+
+    /// The gap in mm with both ± in mm: the noise one as given, the one
+    /// across the record the quarters' standard error combined with their
+    /// mean's distance from the value (0.3815 against 0.39305 mm).
+    #[test]
+    fn parameter_rows_carry_units_and_both_spreads() {
+        let e = contact();
+        let (mean, se_q) = e.quarters("gap").unwrap();
+        approx::assert_relative_eq!(mean, 3.815225e-4, max_relative = 1e-9);
+        approx::assert_relative_eq!(se_q, 4.5e-7, max_relative = 0.05);
+        let spread = e.spread_error("gap").unwrap();
+        approx::assert_relative_eq!(
+            spread,
+            (mean - 3.9305e-4f64).hypot(se_q),
+            max_relative = 1e-12
+        );
+        let row = parameter_row(&e, "gap", 3.9305e-4, true);
+        assert_eq!(
+            row,
+            "| contact 5→6 | gap | 0.39305 mm | 0.00014 mm | 0.01154 mm | 0.38155, 0.38033, 0.38172, 0.38249 mm |"
+        );
+        let row = parameter_row(&e, "stiffness", 2.1453e6, false);
+        assert!(
+            row.starts_with("|  | stiffness | 2.1453e6 N/m | 1.9e3 N/m | 1."),
+            "{row}"
+        );
+        let mut s = String::new();
+        offset_note(&mut s, &e);
+        assert!(s.contains("gap 0.38152 mm against 0.39305 mm"), "{s}");
+        let mut near = e.clone();
+        near.parameters.insert("gap".into(), 3.8152e-4);
+        near.parameters.insert("stiffness".into(), 2.02e6);
+        let mut s = String::new();
+        offset_note(&mut s, &near);
+        assert!(s.is_empty(), "{s}");
+    }
+
+    #[test]
+    fn stiffness_changes_show_in_percent_and_ranking_parameters_in_units() {
+        assert_eq!(with_unit("delta", 0.10571), "delta = +10.571 %");
+        assert_eq!(with_unit("gap", 3.1569e-4), "gap = 0.31569 mm");
+        assert_eq!(with_unit("stiffness", 4.6421e5), "stiffness = 4.6421e5 N/m");
+        assert_eq!(with_unit("level", 0.3), "level = 0.30000 N");
+    }
+
+    /// The open-loop error per window: exact in the first, as large as the
+    /// response (200 %: the sign flipped) in the second.
+    #[test]
+    fn window_errors_follow_the_drift() {
+        let meas = DMatrix::from_fn(2, 8, |c, k| (k + c + 1) as f64);
+        let pred = DMatrix::from_fn(
+            2,
+            8,
+            |c, k| if k < 4 { meas[(c, k)] } else { -meas[(c, k)] },
+        );
+        let w = window_errors(&meas, &pred, 4);
+        assert_eq!(w.len(), 2);
+        assert!(w[0].abs() < 1e-15);
+        approx::assert_relative_eq!(w[1], 2.0, max_relative = 1e-12);
     }
 }
