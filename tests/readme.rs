@@ -95,7 +95,10 @@ fn bumper_report(dir: &Path) {
     let row = |name: &str| {
         md.lines()
             .find(|l| l.contains(&format!("| {name} |")) && l.contains("contact"))
-            .or_else(|| md.lines().find(|l| l.starts_with(&format!("|  | {name} |"))))
+            .or_else(|| {
+                md.lines()
+                    .find(|l| l.starts_with(&format!("|  | {name} |")))
+            })
             .unwrap_or_else(|| panic!("no {name} row: {md}"))
             .to_string()
     };
@@ -104,10 +107,15 @@ fn bumper_report(dir: &Path) {
     let k = row("stiffness");
     assert_eq!(k.matches(" N/m").count(), 4, "{k}");
     assert!(md.contains("**What ± means.**"), "{md}");
-    assert!(md.contains("**Why the open-loop error stays high**"), "{md}");
+    assert!(
+        md.contains("**Why the open-loop error stays high**"),
+        "{md}"
+    );
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
-    let quarters = json["effects"][0]["group_estimates"]["gap"].as_array().unwrap();
+    let quarters = json["effects"][0]["group_estimates"]["gap"]
+        .as_array()
+        .unwrap();
     assert_eq!(quarters.len(), 4, "{json}");
     for q in quarters {
         // the record's truth is 0.381 mm

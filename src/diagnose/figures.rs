@@ -83,35 +83,43 @@ fn quantity_word(q: crate::record::Quantity) -> &'static str {
 }
 
 /// Measured minus the segment predictions before and after, per channel,
-/// with each residual's RMS in the legend.
+/// with each residual's RMS in the legend; beside it the fitted model's
+/// residual alone, on its own scale (what is left to explain).
 fn residual_figure(d: &Diagnosis, t: &[f64]) -> Figure {
     let cmp = &d.prepared.comparison;
     let meas = cmp.measured();
     let ns = t.len();
-    let panels = cmp
-        .observations
-        .iter()
-        .enumerate()
-        .map(|(c, o)| {
-            let unit = o.quantity.si_unit();
-            let mut series = vec![];
-            for (name, pred, colour) in [
-                ("before", &d.predictions.0, BEFORE),
-                ("after", &d.predictions.1, AFTER),
-            ] {
-                if let Some(p) = pred {
-                    let r: Vec<f64> = (0..ns).map(|k| meas[(c, k)] - p[(c, k)]).collect();
-                    let label = format!("{name} (RMS {:.3} {unit})", rms(&r));
-                    series.push(Series::line(label, t.to_vec(), r).with_colour(colour));
-                }
-            }
-            Panel::xy(o.name(), "time [s]", channel_axis(d, c, "residual"), series)
-        })
-        .collect();
+    let mut panels = vec![];
+    for (c, o) in cmp.observations.iter().enumerate() {
+        let unit = o.quantity.si_unit();
+        let residual = |name: &str, p: &DMatrix<f64>, colour| {
+            let r: Vec<f64> = (0..ns).map(|k| meas[(c, k)] - p[(c, k)]).collect();
+            let label = format!("{name} (RMS {:.3} {unit})", rms(&r));
+            Series::line(label, t.to_vec(), r).with_colour(colour)
+        };
+        let before = d
+            .predictions
+            .0
+            .as_ref()
+            .map(|p| residual("before", p, BEFORE));
+        let after = d
+            .predictions
+            .1
+            .as_ref()
+            .map(|p| residual("after", p, AFTER));
+        let axis = channel_axis(d, c, "residual");
+        let both: Vec<Series> = before.into_iter().chain(after.clone()).collect();
+        panels.push(Panel::xy(o.name(), "time [s]", axis.clone(), both));
+        if let Some(a) = after {
+            let title = format!("{}, after alone", o.name());
+            panels.push(Panel::xy(title, "time [s]", axis, vec![a]));
+        }
+    }
+    let columns = if d.predictions.1.is_some() { 2 } else { 1 };
     Figure::new(
-        "Residual: measured − segment prediction, declared model (before) and fitted (after)",
+        "Residual: measured − segment prediction, before and after",
         panels,
-        1,
+        columns,
     )
 }
 
@@ -333,15 +341,14 @@ pub(super) enum LawAxis {
     Velocity,
 }
 
+/// A force law, N, of a displacement (m) or velocity (m/s).
+pub(super) type Law = Box<dyn Fn(f64) -> f64>;
+
 /// A fitted effect's force law `f(δ)` (N) as the model computes it
 /// (`crate::model::elements`), from its parameters `p(name)` (SI; a
 /// stiffness change relative to the spring's `nominal` N/m), or None for
 /// a change of the modal damping (no single law).
-pub(super) fn law(
-    c: &Candidate,
-    p: &dyn Fn(&str) -> f64,
-    nominal: f64,
-) -> Option<(LawAxis, Box<dyn Fn(f64) -> f64>)> {
+pub(super) fn law(c: &Candidate, p: &dyn Fn(&str) -> f64, nominal: f64) -> Option<(LawAxis, Law)> {
     use LawAxis::{Displacement as D, Velocity as V};
     let (k, g) = (p("stiffness"), p("gap"));
     let vreg = c.vreg;
@@ -490,6 +497,16 @@ fn restoring_figure(r: &Restoring, (dx, dv, fy): (Vec<f64>, Vec<f64>, Vec<f64>))
             * fy.iter()
                 .filter(|v| v.is_finite())
                 .fold(0.0, |m: f64, v| m.max(v.abs()));
+        let mut xs = xs;
+        if matches!(c.kind, EffectKind::Contact | EffectKind::Clearance) {
+            // the kink at the gap exactly, where the data reach it
+            let (lo, hi) = (xs.first().copied(), xs.last().copied());
+            if let (Some(lo), Some(hi)) = (lo, hi) {
+                let g = p("gap");
+                xs.extend([g, -g].into_iter().filter(|x| (lo..=hi).contains(x)));
+                xs.sort_by(f64::total_cmp);
+            }
+        }
         let ys: Vec<f64> = xs
             .iter()
             .map(|&x| f(x))
