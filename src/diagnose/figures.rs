@@ -5,7 +5,7 @@
 //! data.
 
 use super::Diagnosis;
-use crate::correlate::frf::{h1, FrfSettings, Measurement, Window};
+use crate::correlate::frf::{h1, Frf, FrfSettings, Measurement, Window};
 use crate::plot::{self, Figure, Panel, Series, SeriesStyle};
 use crate::trace::{Candidate, EffectKind};
 use crate::Result;
@@ -226,12 +226,22 @@ fn input_band(force: &[f64], nseg: usize) -> (usize, usize) {
     (lo, hi)
 }
 
+/// The H1 estimates of a diagnosis: of the measurement and of both
+/// models' open-loop simulations, from the force at `input` (from 0).
+struct Frfs {
+    input: usize,
+    segment: usize,
+    band: (usize, usize),
+    measured: Frf,
+    before: Option<Frf>,
+    after: Option<Frf>,
+}
+
 /// H1 from the largest input force to every channel, of the measurement
 /// and of both models' open-loop simulations (None without an input
 /// force, or when the record is too short).
-fn frf_figure(d: &Diagnosis) -> Option<Figure> {
+fn frfs(d: &Diagnosis) -> Option<Frfs> {
     let cmp = &d.prepared.comparison;
-    let ns = cmp.force.ncols();
     let input = (0..cmp.force.nrows())
         .map(|i| (i, cmp.force.row(i).norm()))
         .max_by(|a, b| a.1.total_cmp(&b.1))
@@ -239,7 +249,7 @@ fn frf_figure(d: &Diagnosis) -> Option<Figure> {
         .0;
     let force: Vec<f64> = row(&cmp.force, input);
     let settings = FrfSettings {
-        segment: frf_segment(ns),
+        segment: frf_segment(cmp.force.ncols()),
         ..Default::default()
     };
     let outputs: Vec<usize> = cmp.observations.iter().map(|o| o.dof).collect();
@@ -251,58 +261,70 @@ fn frf_figure(d: &Diagnosis) -> Option<Figure> {
         }];
         h1(&m, cmp.fs, input + 1, &outputs, quantity, &settings).ok()
     };
-    let measured = estimate(cmp.observations.iter().map(|o| o.data.clone()).collect())?;
     let model = |p: &Option<DMatrix<f64>>| {
         let p = p.as_ref()?;
         let rows: Vec<Vec<f64>> = (0..p.nrows()).map(|c| row(p, c)).collect();
         rows.iter().flatten().all(|v| v.is_finite()).then_some(())?;
         estimate(rows)
     };
-    let before = model(&d.before.open_loop_prediction);
-    let after = model(&d.after.open_loop_prediction);
-    let (lo, hi) = input_band(&force, settings.segment);
-    let db = |h: &crate::correlate::Frf, c: usize| -> Vec<f64> {
+    Some(Frfs {
+        input,
+        segment: settings.segment,
+        band: input_band(&force, settings.segment),
+        measured: estimate(cmp.observations.iter().map(|o| o.data.clone()).collect())?,
+        before: model(&d.before.open_loop_prediction),
+        after: model(&d.after.open_loop_prediction),
+    })
+}
+
+/// The FRFs of [`frfs`] in dB over the band the force excites, one panel
+/// per channel.
+fn frf_figure(d: &Diagnosis) -> Option<Figure> {
+    let e = frfs(d)?;
+    let (lo, hi) = e.band;
+    let db = |h: &Frf, c: usize| -> Vec<f64> {
         h.h[c][lo..hi]
             .iter()
             .map(|z| 20.0 * z.norm().max(1e-300).log10())
             .collect()
     };
-    let f = measured.freq_hz[lo..hi].to_vec();
-    let panels = cmp
+    let f = e.measured.freq_hz[lo..hi].to_vec();
+    let panels = d
+        .prepared
+        .comparison
         .observations
         .iter()
         .enumerate()
         .map(|(c, o)| {
             let mut series = vec![];
-            if let Some(h) = &before {
+            if let Some(h) = &e.before {
                 series.push(
                     Series::dashed("declared model", f.clone(), db(h, c)).with_colour(BEFORE),
                 );
             }
-            if let Some(h) = &after {
+            if let Some(h) = &e.after {
                 series.push(Series::line("fitted model", f.clone(), db(h, c)).with_colour(AFTER));
             }
-            series
-                .push(Series::line("measured", f.clone(), db(&measured, c)).with_colour(MEASURED));
+            series.push(
+                Series::line("measured", f.clone(), db(&e.measured, c)).with_colour(MEASURED),
+            );
             let unit = format!("({})/N", o.quantity.si_unit());
+            let title = format!("{} / force_{}", o.name(), e.input + 1);
             Panel::xy(
-                format!("{} / force_{}", o.name(), input + 1),
+                title,
                 "frequency [Hz]",
                 format!("|H1| [dB re 1 {unit}]"),
                 series,
             )
         })
         .collect();
-    Some(Figure::new(
-        format!(
-            "FRF (H1, {} averages of {} samples) from the force at DOF {}: measured and open-loop simulations",
-            measured.averages,
-            settings.segment,
-            input + 1
-        ),
-        panels,
-        2,
-    ))
+    let title = format!(
+        "FRF (H1, {} averages of {} samples) from the force at DOF {}: measured and open-loop simulations",
+        e.measured.averages,
+        e.segment,
+        e.input + 1
+    );
+    Some(Figure::new(title, panels, 2))
 }
 
 /// The internal force identified at each DOF; a DOF where no force was
@@ -429,15 +451,9 @@ fn restoring_list(d: &Diagnosis) -> Vec<Restoring> {
 
 /// Evenly spaced abscissae over the finite range of `x`.
 fn grid_over(x: &[f64], n: usize) -> Vec<f64> {
-    let (lo, hi) = x
-        .iter()
-        .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    if lo > hi {
+    let Some((lo, hi)) = extent(x) else {
         return vec![];
-    }
+    };
     (0..n)
         .map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64)
         .collect()
@@ -471,6 +487,54 @@ fn restoring_figures(d: &Diagnosis) -> Vec<Figure> {
         .collect()
 }
 
+/// The range of the finite values of `x` (None when there are none).
+fn extent(x: &[f64]) -> Option<(f64, f64)> {
+    let (lo, hi) = x
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    (lo <= hi).then_some((lo, hi))
+}
+
+/// The law `f` over the data's abscissae `x` (SI), with the kink of a
+/// contact or clearance exactly at its gap `g`, drawn where its force
+/// stays within 1.5 × the data's largest |force| `fmax` (a stiff
+/// contact's law leaves the data fast); abscissae × `scale`.
+fn law_series(
+    label: &str,
+    f: &Law,
+    x: &[f64],
+    (gap, fmax): (Option<f64>, f64),
+    scale: f64,
+) -> Series {
+    let mut xs = grid_over(x, 150);
+    if let (Some(g), Some((lo, hi))) = (gap, extent(x)) {
+        xs.extend([g, -g].into_iter().filter(|v| (lo..=hi).contains(v)));
+        xs.sort_by(f64::total_cmp);
+    }
+    let ys: Vec<f64> = xs
+        .iter()
+        .map(|&v| f(v))
+        .map(|y| if y.abs() <= 1.5 * fmax { y } else { f64::NAN })
+        .collect();
+    let xs = xs.iter().map(|v| scale * v).collect();
+    Series::line(label, xs, ys).with_colour(LAW)
+}
+
+/// Dashed vertical lines at the gap `g` m (and at −g for a clearance),
+/// drawn in mm over the force range `(lo, hi)`.
+fn gap_lines(g: f64, clearance: bool, (lo, hi): (f64, f64)) -> Vec<Series> {
+    let g = 1e3 * g;
+    let mut out =
+        vec![Series::dashed(format!("gap {g:.4} mm"), vec![g, g], vec![lo, hi]).with_colour(GAP)];
+    if clearance {
+        out.push(Series::dashed("", vec![-g, -g], vec![lo, hi]).with_colour(GAP));
+    }
+    out
+}
+
 /// One restoring-force figure from the data `(δ m, δ̇ m/s, f N)`.
 fn restoring_figure(r: &Restoring, (dx, dv, fy): (Vec<f64>, Vec<f64>, Vec<f64>)) -> Figure {
     let c = &r.candidate;
@@ -484,50 +548,22 @@ fn restoring_figure(r: &Restoring, (dx, dv, fy): (Vec<f64>, Vec<f64>, Vec<f64>))
             .find(|q| q.0 == name)
             .map_or(f64::NAN, |q| q.1)
     };
+    let gapped = matches!(c.kind, EffectKind::Contact | EffectKind::Clearance);
+    let gap = Some(p("gap")).filter(|g| gapped && g.is_finite());
+    let frange = extent(&fy);
+    let fmax = frange.map_or(0.0, |(lo, hi)| lo.abs().max(hi.abs()));
     let mm: Vec<f64> = dx.iter().map(|v| 1e3 * v).collect();
-    let mut disp = vec![Series::points("identified", mm.clone(), fy.clone()).with_colour(AFTER)];
-    let mut vel = vec![Series::points("identified", dv.clone(), fy.clone()).with_colour(AFTER)];
-    if let Some((axis, f)) = law(c, &p, r.nominal) {
-        let (xs, scale, into) = match axis {
-            LawAxis::Displacement => (grid_over(&dx, 150), 1e3, &mut disp),
-            LawAxis::Velocity => (grid_over(&dv, 150), 1.0, &mut vel),
-        };
-        // the law where the data are (a stiff contact's law leaves them fast)
-        let top = 1.5
-            * fy.iter()
-                .filter(|v| v.is_finite())
-                .fold(0.0, |m: f64, v| m.max(v.abs()));
-        let mut xs = xs;
-        if matches!(c.kind, EffectKind::Contact | EffectKind::Clearance) {
-            // the kink at the gap exactly, where the data reach it
-            let (lo, hi) = (xs.first().copied(), xs.last().copied());
-            if let (Some(lo), Some(hi)) = (lo, hi) {
-                let g = p("gap");
-                xs.extend([g, -g].into_iter().filter(|x| (lo..=hi).contains(x)));
-                xs.sort_by(f64::total_cmp);
-            }
+    let mut disp = vec![Series::points("identified", mm, fy.clone()).with_colour(AFTER)];
+    let mut vel = vec![Series::points("identified", dv.clone(), fy).with_colour(AFTER)];
+    match law(c, &p, r.nominal) {
+        Some((LawAxis::Displacement, f)) => {
+            disp.push(law_series(r.label, &f, &dx, (gap, fmax), 1e3))
         }
-        let ys: Vec<f64> = xs
-            .iter()
-            .map(|&x| f(x))
-            .map(|y| if y.abs() <= top { y } else { f64::NAN })
-            .collect();
-        let xs: Vec<f64> = xs.iter().map(|x| scale * x).collect();
-        into.push(Series::line(r.label, xs, ys).with_colour(LAW));
+        Some((LawAxis::Velocity, f)) => vel.push(law_series(r.label, &f, &dv, (None, fmax), 1.0)),
+        None => {}
     }
-    if matches!(c.kind, EffectKind::Contact | EffectKind::Clearance) && p("gap").is_finite() {
-        let (lo, hi) = fy
-            .iter()
-            .filter(|v| v.is_finite())
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            });
-        let g = 1e3 * p("gap");
-        let label = format!("gap {g:.4} mm");
-        disp.push(Series::dashed(label, vec![g, g], vec![lo, hi]).with_colour(GAP));
-        if c.kind == EffectKind::Clearance {
-            disp.push(Series::dashed("", vec![-g, -g], vec![lo, hi]).with_colour(GAP));
-        }
+    if let (Some(g), Some(fr)) = (gap, frange) {
+        disp.extend(gap_lines(g, c.kind == EffectKind::Clearance, fr));
     }
     let p1 = Panel::xy(
         "force vs displacement",
