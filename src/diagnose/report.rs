@@ -505,7 +505,7 @@ fn noise_section(s: &mut String, d: &Diagnosis) {
 /// What each figure shows, by its file stem.
 fn caption(stem: &str) -> String {
     match stem {
-        "responses" => "Measured response (black dots) and the segment predictions of the declared (orange, dashed) and fitted (blue) models: the first second of each channel and a 0.1 s zoom around its largest peak.".into(),
+        "responses" => "Measured response (black dots) and the segment predictions of the declared (orange, dashed) and fitted (blue) models: the first half second of each channel and a 0.1 s zoom around its largest peak.".into(),
         "residual" => "Measured minus the segment prediction over the whole record, before and after, with each residual's RMS in the legend.".into(),
         "frf" => "Frequency response (H1, from the largest input force to each channel) of the measurement and of both models' open-loop simulations driven by the same force: it does not depend on phase, so it judges a model whose open-loop response drifts.".into(),
         "identified_force" => "The internal force identified from the measurements at each DOF (N): the force the declared model lacks; zero where no force was located.".into(),
@@ -634,6 +634,13 @@ fn record_warnings(s: &mut String, warnings: &[String]) {
     let _ = writeln!(s);
 }
 
+/// `text` with its first letter in upper case (a sentence).
+fn sentence(text: &str) -> String {
+    let mut c = text.chars();
+    c.next()
+        .map_or(String::new(), |f| f.to_uppercase().chain(c).collect())
+}
+
 /// The linear corrections, apart from the effects.
 fn linear_corrections(s: &mut String, c: &super::calibrated::CalibrationReport) {
     let _ = writeln!(s, "\n## Linear part: corrections to the declared model\n");
@@ -644,7 +651,7 @@ fn linear_corrections(s: &mut String, c: &super::calibrated::CalibrationReport) 
         on.join(", "),
         100.0 * c.calibration.error_before,
         100.0 * c.calibration.error_after,
-        c.choice
+        sentence(&c.choice)
     );
     let _ = writeln!(
         s,
@@ -928,6 +935,15 @@ mod tests {
         let mut s = String::new();
         offset_note(&mut s, &near);
         assert!(s.is_empty(), "{s}");
+    }
+
+    #[test]
+    fn sentences_start_in_upper_case() {
+        assert_eq!(
+            sentence("multiple-shooting error"),
+            "Multiple-shooting error"
+        );
+        assert_eq!(sentence(""), "");
     }
 
     #[test]
