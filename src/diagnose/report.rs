@@ -277,7 +277,8 @@ fn effects_section(s: &mut String, d: &Diagnosis) {
 
 /// A sentence when the quarters agree with each other but their mean lies
 /// far from the value reported (more than 3 of their standard errors and
-/// 3 noise standard errors): the fit stopped short of its minimum.
+/// 3 noise standard errors): the fit stopped short of its minimum, or the
+/// cost is too rough for the linearized step.
 fn offset_note(s: &mut String, e: &EffectReport) {
     let far: Vec<String> = e
         .parameters
@@ -296,7 +297,7 @@ fn offset_note(s: &mut String, e: &EffectReport) {
     if !far.is_empty() {
         let _ = writeln!(
             s,
-            "\n**{}: the quarters agree with each other but not with the value reported** ({}): a further Gauss–Newton step on the whole record points to the quarters' mean, so the fit stopped short of its minimum (see how the fit ended in the appendix); the ± across the record includes that distance.",
+            "\n**{}: the quarters agree with each other but not with the value reported** ({}): one linearized step on the whole record would move the value to the quarters' mean, so either the fit stopped short of its minimum (how it ended is in the appendix) or the cost is too rough there for one linearized step (a contact's cost is rough at the sub-step scale); the ± across the record includes that distance.",
             e.label,
             far.join("; ")
         );
