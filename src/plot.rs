@@ -79,7 +79,7 @@ pub enum SeriesStyle {
 }
 
 /// One curve of an XY panel. Its colour is chosen automatically from
-/// [`PALETTE`] by its position in [`Panel::series`].
+/// [`PALETTE`] by its position in [`Panel::series`] unless `colour` is set.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Series {
     /// Legend text; an empty label gives no legend entry.
@@ -90,6 +90,9 @@ pub struct Series {
     pub y: Vec<f64>,
     /// Line, dashed line or points.
     pub style: SeriesStyle,
+    /// Colour as RGB; None takes the [`PALETTE`] colour of the series'
+    /// position.
+    pub colour: Option<(u8, u8, u8)>,
 }
 
 impl Series {
@@ -100,7 +103,13 @@ impl Series {
             x,
             y,
             style,
+            colour: None,
         }
+    }
+    /// The same series in the colour `rgb`.
+    pub fn with_colour(mut self, rgb: (u8, u8, u8)) -> Self {
+        self.colour = Some(rgb);
+        self
     }
     /// A solid line.
     pub fn line(label: impl Into<String>, x: Vec<f64>, y: Vec<f64>) -> Self {
@@ -982,8 +991,10 @@ fn draw_xy<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panel: &Panel) -> 
     }
 
     for (i, s) in panel.series.iter().enumerate() {
-        let c = color(i);
-        let dense = s.x.len() > 2 * grid.width;
+        let c = s.colour.map_or(color(i), |(r, g, b)| RGBColor(r, g, b));
+        // thick lines through many sharp turns grow miter spikes: thin
+        // lines once there are more points than half the pixel columns
+        let dense = 2 * s.x.len() > grid.width;
         let line = c.stroke_width(if dense { 1 } else { 2 });
         let label = s.label.as_str();
         labelled |= !label.is_empty();

@@ -188,6 +188,37 @@ fn diagnose_writes_the_report_on_a_linear_record() {
     assert!(before < 0.05, "linear record, linear model: {before}");
     assert_eq!(j["effects"].as_array().unwrap().len(), 0);
     assert!(out.join("report.md").exists() && out.join("residual.png").exists());
+    // the figures, drawn (a blank 800×500 PNG is about 5 KB)
+    for f in ["responses", "residual", "frf", "identified_force"] {
+        for ext in ["png", "svg"] {
+            let path = out.join(format!("{f}.{ext}"));
+            let size = std::fs::metadata(&path).map_or(0, |m| m.len());
+            assert!(size > 20_000, "{} is {size} bytes", path.display());
+        }
+    }
+    // people's report: plain errors with a caption per figure, the
+    // solver's words folded away
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let details = md.find("<details>").expect("an appendix");
+    for plain in [
+        "| before (declared model) |",
+        "Segment error",
+        "![frf.png](frf.png)",
+    ] {
+        assert!(md[..details].contains(plain), "{plain} missing: {md}");
+    }
+    for jargon in [
+        "Riccati",
+        "reweighting",
+        "Gauss–Newton iterations",
+        "BIC change",
+    ] {
+        assert!(
+            !md[..details].contains(jargon),
+            "{jargon} in the main text: {md}"
+        );
+    }
+    assert!(md[details..].contains("Best candidates of the first trace round"));
 }
 
 /// report.json without its timings (the only field that may differ

@@ -76,6 +76,7 @@ fn readme_tour_runs_as_written() {
     }
     let so = String::from_utf8_lossy(&o.stdout);
     assert!(so.contains("found contact 5→6"), "{so}");
+    bumper_report(&out.join("diagnose"));
     // the shipped test modes: force-residue updating finds k5 near -14 %
     let k5 = so
         .lines()
@@ -84,6 +85,48 @@ fn readme_tour_runs_as_written() {
         .and_then(|v| v.trim_end_matches('%').parse::<f64>().ok())
         .expect("a k5 line");
     assert!((k5 + 14.0).abs() < 0.5, "k5 {k5} %");
+}
+
+/// The tour's diagnosis of the bumper, as a person reads it: the gap in
+/// mm and the stiffness in N/m with both ± (noise, across the record),
+/// the open-loop error explained, the FRF and the restoring force drawn.
+fn bumper_report(dir: &Path) {
+    let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    let row = |name: &str| {
+        md.lines()
+            .find(|l| l.contains(&format!("| {name} |")) && l.contains("contact"))
+            .or_else(|| {
+                md.lines()
+                    .find(|l| l.starts_with(&format!("|  | {name} |")))
+            })
+            .unwrap_or_else(|| panic!("no {name} row: {md}"))
+            .to_string()
+    };
+    let gap = row("gap");
+    assert_eq!(gap.matches(" mm").count(), 4, "{gap}");
+    let k = row("stiffness");
+    assert_eq!(k.matches(" N/m").count(), 4, "{k}");
+    assert!(md.contains("**What ± means.**"), "{md}");
+    assert!(
+        md.contains("**Why the open-loop error stays high**"),
+        "{md}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    let quarters = json["effects"][0]["group_estimates"]["gap"]
+        .as_array()
+        .unwrap();
+    assert_eq!(quarters.len(), 4, "{json}");
+    for q in quarters {
+        // the record's truth is 0.381 mm
+        let q = q.as_f64().unwrap();
+        assert!((q / 0.381e-3 - 1.0).abs() < 0.05, "quarter gap {q}");
+    }
+    for f in ["frf.png", "restoring_1.png", "responses.png"] {
+        let size = std::fs::metadata(dir.join(f)).map_or(0, |m| m.len());
+        assert!(size > 50_000, "{f}: {size} bytes");
+        assert!(md.contains(&format!("![{f}]({f})")), "{f} not in report.md");
+    }
 }
 
 #[test]

@@ -43,6 +43,10 @@ pub struct ErrorSet {
     /// The start-state refinement of the multiple-shooting error (None
     /// when off or when the segments could not be simulated).
     pub starts: Option<StartFit>,
+    /// The open-loop prediction of the record (p × N; None when it
+    /// failed), for the report's figures.
+    #[serde(skip)]
+    pub open_loop_prediction: Option<DMatrix<f64>>,
 }
 
 /// The failures behind an [`ErrorSet`]'s missing errors.
@@ -181,6 +185,7 @@ impl Comparison {
             rms_per_channel,
             status,
             starts,
+            open_loop_prediction: whole,
         };
         (set, seg)
     }

@@ -50,6 +50,7 @@ pub mod comparison;
 mod decide;
 pub mod effects;
 pub mod errors;
+mod figures;
 mod fit;
 pub mod joint;
 pub mod lifted;

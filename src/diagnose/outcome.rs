@@ -21,12 +21,45 @@ pub struct EffectReport {
     /// Fitted parameters, SI (`gap` m, `stiffness` N/m, `level` N, `k3`
     /// N/m³, `delta` relative change).
     pub parameters: BTreeMap<String, f64>,
-    /// Standard errors of the parameters (null when not determined).
+    /// Standard errors of the parameters from measurement noise alone
+    /// (null when not determined).
     pub std_errors: BTreeMap<String, Option<f64>>,
+    /// Each parameter fitted on each quarter of the fit's segments alone
+    /// (one linearized step from the fit, start states re-estimated; empty
+    /// when not computed): their scatter includes model error and
+    /// coloured residual, which the standard errors do not.
+    pub group_estimates: BTreeMap<String, Vec<f64>>,
     /// Parameters from the trace regression (the fit's start).
     pub traced: BTreeMap<String, f64>,
     /// Scores.
     pub score: Score,
+}
+
+impl EffectReport {
+    /// The mean and the standard error (sample standard deviation over the
+    /// square root of their number) of `name`'s values on the quarters of
+    /// the record ([`EffectReport::group_estimates`]); None with fewer
+    /// than two.
+    pub fn quarters(&self, name: &str) -> Option<(f64, f64)> {
+        let g = self.group_estimates.get(name)?;
+        let n = g.len();
+        if n < 2 {
+            return None;
+        }
+        let mean = g.iter().sum::<f64>() / n as f64;
+        let var = g.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+        Some((mean, (var / n as f64).sqrt())).filter(|(m, s)| m.is_finite() && s.is_finite())
+    }
+
+    /// The uncertainty of `name` seen across the record: the quarters'
+    /// standard error ([`EffectReport::quarters`]) combined (root sum of
+    /// squares) with the distance of their mean from the reported value,
+    /// which is large when the fit stopped short of its minimum.
+    pub fn spread_error(&self, name: &str) -> Option<f64> {
+        let (mean, se) = self.quarters(name)?;
+        let v = *self.parameters.get(name)?;
+        Some(se.hypot(mean - v))
+    }
 }
 
 /// How much an effect pays.

@@ -1,4 +1,6 @@
-//! The effects found, as reported: fitted values and standard errors.
+//! The effects found, as reported: fitted values, their standard errors
+//! from measurement noise, and their values fitted on each quarter of the
+//! fit's segments ([`joint::uncertainty`]).
 
 use super::effects;
 use super::errors::Comparison;
@@ -12,6 +14,15 @@ use crate::trace::EffectKind;
 use crate::update::optimize::FitSettings;
 use crate::update::shooting::Segment;
 use std::collections::BTreeMap;
+
+/// The fit's segments are cut into this many runs of consecutive segments
+/// (quarters of the record) for the spread of the parameters across the
+/// record ([`EffectReport::group_estimates`]).
+pub const SPREAD_GROUPS: usize = 4;
+
+/// Per (effect, parameter) index: the standard error, and the values
+/// fitted on each group of segments.
+type Spreads = BTreeMap<(usize, usize), (f64, Vec<f64>)>;
 
 /// Effect reports with fitted values and standard errors: from the joint
 /// Jacobian of the fit's multiple-shooting residual in the parameters and
@@ -33,13 +44,24 @@ pub(super) fn report_effects(
             let (e, r, score) = (&k.effect, &k.ranked, &k.score);
             let vals = effects::values(model, e);
             let mut std_errors = BTreeMap::new();
+            let mut group_estimates = BTreeMap::new();
+            // a stiffness change is reported relative to the nominal spring
+            let relative = |v: f64| match e.candidate.kind {
+                EffectKind::Stiffness if e.nominal != 0.0 => v / e.nominal,
+                _ => v,
+            };
             for (pi, (name, _)) in vals.iter().enumerate() {
-                let se = ses.get(&(ei, pi)).copied().filter(|x| x.is_finite());
-                let se = match e.candidate.kind {
-                    EffectKind::Stiffness if e.nominal != 0.0 => se.map(|s| s / e.nominal),
-                    _ => se,
-                };
-                std_errors.insert(name.clone(), se);
+                let got = ses.get(&(ei, pi));
+                let se = got.map(|g| g.0).filter(|x| x.is_finite());
+                std_errors.insert(name.clone(), se.map(relative));
+                let groups: Vec<f64> = got.map_or(vec![], |g| g.1.clone());
+                if !groups.is_empty() {
+                    let change = |v: f64| match e.candidate.kind {
+                        EffectKind::Stiffness if e.nominal != 0.0 => v / e.nominal - 1.0,
+                        _ => v,
+                    };
+                    group_estimates.insert(name.clone(), groups.into_iter().map(change).collect());
+                }
             }
             EffectReport {
                 kind: e.candidate.kind,
@@ -47,6 +69,7 @@ pub(super) fn report_effects(
                 label: e.label.clone(),
                 parameters: vals.into_iter().collect(),
                 std_errors,
+                group_estimates,
                 traced: r.parameters.iter().cloned().collect(),
                 score: score.clone(),
             }
@@ -54,16 +77,18 @@ pub(super) fn report_effects(
         .collect()
 }
 
-/// The standard error of each parameter, by (effect, parameter) index.
+/// The standard error of each parameter, and its values fitted on each
+/// quarter of the fit's segments (none without the fit's segments), by
+/// (effect, parameter) index.
 fn standard_errors(
     ctx: &Context<'_>,
     (model, added): (&Model, &[KeptEffect]),
     sim: SimSettings,
     fitted: Option<&(Vec<Segment>, SimSettings)>,
     sims: &mut usize,
-) -> BTreeMap<(usize, usize), f64> {
+) -> Spreads {
     let (cmp, settings): (&Comparison, &DiagnoseSettings) = (ctx.cmp(), ctx.settings);
-    let mut ses: BTreeMap<(usize, usize), f64> = BTreeMap::new();
+    let mut ses: Spreads = BTreeMap::new();
     if added.is_empty() {
         return ses;
     }
@@ -91,12 +116,13 @@ fn standard_errors(
         problem.parameters = params.clone();
         *sims += segs.len();
         let x = vec![0.0; problem.parameters.len()];
-        joint::std_errors(&problem, &x, settings.noise.level)
+        joint::uncertainty(&problem, &x, settings.noise.level, SPREAD_GROUPS)
     });
-    if let Some(sd) = joint {
-        for (k, v) in sd.into_iter().enumerate() {
+    if let Some(u) = joint {
+        for (k, v) in u.std_errors.into_iter().enumerate() {
             if let Some(&o) = owner.get(k) {
-                ses.insert(o, v);
+                let groups = u.groups.iter().filter_map(|g| g.get(k).copied()).collect();
+                ses.insert(o, (v, groups));
             }
         }
         return ses;
@@ -126,7 +152,7 @@ fn standard_errors(
             if let Some(id) = &r.identifiability {
                 for (k, pid) in id.parameters.iter().enumerate() {
                     if let Some(&o) = owner.get(k) {
-                        ses.insert(o, pid.std_value);
+                        ses.insert(o, (pid.std_value, vec![]));
                     }
                 }
             }
