@@ -54,6 +54,12 @@ pub struct CalibratedSettings {
     pub refine_segments: usize,
     /// Most accepted steps of the joint refinement (default 40).
     pub refine_iterations: usize,
+    /// Rounds of diagnosis and refinement from the calibrated linear part
+    /// (default 2): each round after the first, when the refinement before
+    /// was kept, diagnoses again with the linear part that refinement gave
+    /// (its location and trace no longer see the calibration's bias) and is
+    /// kept when it lowers the record's error.
+    pub rounds: usize,
 }
 
 impl Default for CalibratedSettings {
@@ -63,6 +69,7 @@ impl Default for CalibratedSettings {
             off: false,
             refine_segments: 40,
             refine_iterations: 40,
+            rounds: 2,
         }
     }
 }
@@ -150,7 +157,7 @@ pub fn diagnose_calibrated(
         .map(|r| calibrate::data_of(r, declared.ndof(), sensors, 0))
         .collect::<Result<Vec<_>>>()?;
     let calibration = calibrate::calibrate(declared, &data, &cal.calibration)?;
-    let mut d = super::diagnose(
+    let d = super::diagnose(
         &calibration.model,
         rec,
         validation,
@@ -158,53 +165,156 @@ pub fn diagnose_calibrated(
         settings,
         progress,
     )?;
+    let ctx = Context {
+        declared,
+        validation,
+        sensors,
+        settings,
+        cal,
+    };
     progress("refine the linear part with the effects");
-    let vprep = validation
-        .map(|v| {
-            prepare_located(
-                &calibration.model,
-                v,
-                sensors,
-                settings,
-                d.prepared.located.as_ref(),
-            )
-        })
-        .transpose()?;
-    let vcmp = vprep.as_ref().map(|p| &p.comparison);
-    let sim0 = SimSettings {
-        substeps: d.substeps.0,
-        ..Default::default()
-    };
-    let declared_errors = d.prepared.comparison.errors(declared, sim0).0;
-    let declared_validation = vcmp.map(|c| c.errors(declared, sim0).0);
-    let (note, std) = refine_once(&mut d, cal, settings, vcmp)?;
-    update_effects(&mut d, &std);
-    let corrections = corrections(&calibration, &d.model, &std, &cal.calibration);
-    let calibrated_errors = std::mem::replace(&mut d.before, declared_errors);
-    if let (Some(v), Some(b)) = (d.validation.as_mut(), declared_validation) {
-        v.before = b;
+    let mut from_calibrated = ctx.refined(d, &calibration.model)?;
+    for round in 1..cal.rounds {
+        if !from_calibrated.kept {
+            break;
+        }
+        progress(&format!("round {}: diagnose with the refined linear part", round + 1));
+        let linear = from_calibrated.d.model.linear_part();
+        let d = super::diagnose(&linear, rec, validation, sensors, settings, progress)?;
+        let mut next = ctx.refined(d, &linear)?;
+        next.note = format!("round {}: {}", round + 1, next.note);
+        if !lower(next.d.after.relative_error, from_calibrated.d.after.relative_error) {
+            break;
+        }
+        from_calibrated = next;
     }
-    d.verdict = super::verdict(&d.effects);
-    let (calibrated_err, trusted_err) = (d.after.relative_error, trusted.after.relative_error);
-    let use_calibrated = lower(calibrated_err, trusted_err);
-    let report = CalibrationReport {
-        calibration,
-        corrections,
-        calibrated_errors,
-        refinement: note,
-        used: use_calibrated,
-        choice: format!(
-            "multiple-shooting error on the record after the diagnosis: {} with the calibrated linear part, {} with the declared one; the {} is reported",
-            pct(calibrated_err),
-            pct(trusted_err),
-            if use_calibrated { "calibrated" } else { "declared" }
-        ),
+    // the declared linear part refined with the effects it found: the
+    // calibration on a record with an effect is biased by it, and a start
+    // from the declared values may land nearer
+    progress("refine the declared linear part with its effects");
+    let from_declared = ctx.refined(trusted.clone(), declared)?;
+    let errs = [
+        trusted.after.relative_error,
+        from_calibrated.d.after.relative_error,
+        from_declared.d.after.relative_error,
+    ];
+    let (best, declared_used) = if lower(errs[1], errs[0]) && !lower(errs[2], errs[1]) {
+        (from_calibrated, false)
+    } else if from_declared.kept && lower(errs[2], errs[0]) {
+        (from_declared, true)
+    } else {
+        let mut t = trusted;
+        let chosen = ("the declared model as diagnosed", false);
+        t.calibration = Some(ctx.report(&from_calibrated, calibration, chosen, &errs));
+        return Ok(t);
     };
-    let mut out = if use_calibrated { d } else { trusted };
-    out.timings
-        .insert("calibrate".into(), report.calibration.seconds);
+    let seconds = calibration.seconds;
+    let chosen = if declared_used {
+        "the declared linear part refined with its effects"
+    } else {
+        "the calibrated linear part refined with its effects"
+    };
+    let mut report = ctx.report(&best, calibration, (chosen, true), &errs);
+    let mut out = best.d;
+    out.timings.insert("calibrate".into(), seconds);
+    if declared_used {
+        report.corrections.iter_mut().for_each(|c| c.calibrated = c.declared);
+    }
     out.calibration = Some(report);
     Ok(out)
+}
+
+/// What a diagnosis refined with its linear part gives.
+struct RefinedPath {
+    /// The diagnosis after the refinement, errors `before` of the declared
+    /// model.
+    d: Diagnosis,
+    /// Errors of the linear model the diagnosis ran on.
+    start_errors: ErrorSet,
+    /// The refinement's note.
+    note: String,
+    /// The refined parameters and their standard errors (empty when not
+    /// kept).
+    std: Vec<Estimated>,
+    /// The refinement lowered the error and was kept.
+    kept: bool,
+}
+
+/// The inputs of the calibrated diagnosis its steps share.
+struct Context<'a> {
+    declared: &'a Model,
+    validation: Option<&'a Record>,
+    sensors: Option<&'a [usize]>,
+    settings: &'a DiagnoseSettings,
+    cal: &'a CalibratedSettings,
+}
+
+impl Context<'_> {
+    /// Refine `d` (diagnosed on the linear model `linear`): every linear
+    /// parameter and the effects' together; `before` holds the declared
+    /// model's errors.
+    fn refined(&self, mut d: Diagnosis, linear: &Model) -> Result<RefinedPath> {
+        let vprep = self
+            .validation
+            .map(|v| {
+                prepare_located(
+                    linear,
+                    v,
+                    self.sensors,
+                    self.settings,
+                    d.prepared.located.as_ref(),
+                )
+            })
+            .transpose()?;
+        let vcmp = vprep.as_ref().map(|p| &p.comparison);
+        let sim0 = SimSettings {
+            substeps: d.substeps.0,
+            ..Default::default()
+        };
+        let declared_errors = d.prepared.comparison.errors(self.declared, sim0).0;
+        let declared_validation = vcmp.map(|c| c.errors(self.declared, sim0).0);
+        let (note, std) = refine_once(&mut d, self.cal, self.settings, vcmp)?;
+        update_effects(&mut d, &std);
+        let start_errors = std::mem::replace(&mut d.before, declared_errors);
+        if let (Some(v), Some(b)) = (d.validation.as_mut(), declared_validation) {
+            v.before = b;
+        }
+        d.verdict = super::verdict(&d.effects);
+        Ok(RefinedPath {
+            d,
+            start_errors,
+            note,
+            kept: !std.is_empty(),
+            std,
+        })
+    }
+
+    /// The calibration report of `p`; `chosen` says which diagnosis is
+    /// reported (`used`: one refined with its linear part); `errs`: the
+    /// record's errors of the declared, calibrated and declared-refined
+    /// diagnoses.
+    fn report(
+        &self,
+        p: &RefinedPath,
+        calibration: Calibration,
+        (chosen, used): (&str, bool),
+        errs: &[Option<f64>; 3],
+    ) -> CalibrationReport {
+        CalibrationReport {
+            corrections: corrections(&calibration, &p.d.model, &p.std, &self.cal.calibration),
+            calibration,
+            calibrated_errors: p.start_errors.clone(),
+            refinement: p.note.clone(),
+            used,
+            choice: format!(
+                "multiple-shooting error on the record after the diagnosis: {} with the declared linear part, {} with the calibrated one refined with its effects, {} with the declared one refined with its effects; {} is reported",
+                pct(errs[0]),
+                pct(errs[1]),
+                pct(errs[2]),
+                chosen
+            ),
+        }
+    }
 }
 
 /// One joint refinement of `d`'s model; the note and, when kept, the
@@ -256,7 +366,8 @@ fn refinement_parameters(
     for p in params::select(model, &cal.freedom) {
         let (lo, hi) = match p {
             LinearParam::Spring(_) => (-0.9, 10.0),
-            LinearParam::Mass(_) => (-0.5, 1.0),
+            LinearParam::Mass(_) | LinearParam::MassScale => (-0.5, 1.0),
+            LinearParam::StiffnessScale => (-0.5, 1.0),
             _ => (-0.99, 20.0),
         };
         if p.get(model)? > 0.0 {
@@ -267,8 +378,7 @@ fn refinement_parameters(
     // damping change is already a linear parameter
     for e in added {
         for p in effects::parameters(model, e)? {
-            let linear = matches!(p.target, Target::SpringStiffness(_) | Target::DampingRatio);
-            if !linear && !out.iter().any(|q| q.target == p.target) {
+            if !is_linear(model, p.target) && !out.iter().any(|q| q.target == p.target) {
                 out.push(p);
             }
         }
@@ -357,18 +467,31 @@ fn refine(d: &Diagnosis, cs: &CalibratedSettings, settings: &DiagnoseSettings) -
     })))
 }
 
+/// True when an effect's target is a number the calibration corrects: a
+/// spring of a lumped model (or of one written as matrices), or the modal
+/// damping (moved by its ratios). A stiffness change between two points of
+/// a model from matrices calibrated by scales is a localized effect.
+fn is_linear(model: &Model, target: Target) -> bool {
+    match target {
+        Target::SpringStiffness(_) => model.stiffness_in_springs(),
+        Target::DampingRatio => true,
+        _ => false,
+    }
+}
+
 /// The effects' reported values from the final model and their standard
 /// errors from the refinement; a stiffness or damping change is a linear
-/// correction here, reported with the corrections, not as an effect.
+/// correction here ([`is_linear`]), reported with the corrections, not as
+/// an effect.
 fn update_effects(d: &mut Diagnosis, std: &[Estimated]) {
     let keep: Vec<bool> = d
         .added
         .iter()
         .map(|e| {
-            !matches!(
+            !(matches!(
                 e.candidate.kind,
                 EffectKind::Stiffness | EffectKind::Damping
-            )
+            ) && e.targets.iter().all(|t| is_linear(&d.model, *t)))
         })
         .collect();
     for (rep, e) in d.effects.iter_mut().zip(&d.added) {

@@ -486,13 +486,75 @@ impl Model {
     }
 
     /// Mass matrix: the masses on the diagonal, plus the off-diagonal mass
-    /// of a model from matrices.
+    /// of a model from matrices (times its mass scale).
     pub fn mass_matrix(&self) -> DMatrix<f64> {
         let d = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(self.masses.clone()));
         match &self.matrices {
-            Some(lin) => d + &lin.m_offdiag,
+            Some(lin) => d + &lin.m_offdiag * lin.mass_scale,
             None => d,
         }
+    }
+
+    /// True for a model from matrices whose stiffness is all in
+    /// point-to-point springs (a lumped model written as matrices, within
+    /// 1e-9 of its stiffest spring): its springs are the structure's own
+    /// numbers, not the couplings of a reduction.
+    pub fn stiffness_in_springs(&self) -> bool {
+        let Some(lin) = &self.matrices else {
+            return true;
+        };
+        let top = self.springs.iter().fold(0.0f64, |a, s| a.max(s.stiffness));
+        let rest = lin.k_rest.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        lin.derived_springs > 0 && rest <= 1e-9 * top
+    }
+
+    /// The stiffness or mass scale of a model from matrices
+    /// ([`matrix::LinearMatrices`]); None for a lumped model.
+    pub fn matrix_scale(&self, stiffness: bool) -> Option<f64> {
+        self.matrices.as_ref().map(|l| {
+            if stiffness {
+                l.stiffness_scale
+            } else {
+                l.mass_scale
+            }
+        })
+    }
+
+    /// Set the stiffness scale (the derived springs move with it) or the
+    /// mass scale (the diagonal masses move with it) of a model from
+    /// matrices; nothing on a lumped model.
+    pub fn set_matrix_scale(&mut self, stiffness: bool, value: f64) {
+        let Some(lin) = self.matrices.as_mut() else {
+            return;
+        };
+        let lin = Arc::make_mut(lin);
+        if stiffness {
+            let ratio = value / lin.stiffness_scale;
+            lin.stiffness_scale = value;
+            for s in self.springs.iter_mut().take(lin.derived_springs) {
+                s.stiffness *= ratio;
+            }
+        } else {
+            let ratio = value / lin.mass_scale;
+            lin.mass_scale = value;
+            self.masses.iter_mut().for_each(|m| *m *= ratio);
+        }
+    }
+
+    /// `∂K/∂(stiffness scale)` or `∂M/∂(mass scale)` of a model from
+    /// matrices: the matrices' part of K (without the springs of the
+    /// file's elements) or the whole M, over the scale.
+    pub fn matrix_scale_derivative(&self, stiffness: bool) -> Option<DMatrix<f64>> {
+        let lin = self.matrices.as_ref()?;
+        Some(if stiffness {
+            let mut k = lin.k_rest.clone();
+            for s in self.springs.iter().take(lin.derived_springs) {
+                add_spring(&mut k, s.ends(), s.stiffness / lin.stiffness_scale);
+            }
+            k
+        } else {
+            self.mass_matrix() / lin.mass_scale
+        })
     }
 
     /// Linear stiffness matrix: the springs, plus the rest of the
@@ -500,7 +562,7 @@ impl Model {
     pub fn stiffness_matrix(&self) -> DMatrix<f64> {
         let n = self.ndof();
         let mut k = match &self.matrices {
-            Some(lin) => lin.k_rest.clone(),
+            Some(lin) => &lin.k_rest * lin.stiffness_scale,
             None => DMatrix::zeros(n, n),
         };
         for s in &self.springs {

@@ -178,6 +178,27 @@ pub fn target_seed(
                 ..Default::default()
             }
         }
+        Target::StiffnessScale | Target::MassScale => {
+            let stiffness = target == Target::StiffnessScale;
+            let d = model
+                .matrix_scale_derivative(stiffness)
+                .ok_or("the model is not given by matrices")?
+                * s;
+            let dc = damping_derivative(model, target, s, &d)?;
+            if stiffness {
+                ParamSeed {
+                    dc,
+                    dk: Some(d),
+                    ..Default::default()
+                }
+            } else {
+                ParamSeed {
+                    dc,
+                    dm: Some(d),
+                    ..Default::default()
+                }
+            }
+        }
         Target::DampingRatio | Target::ModalRatio(_) => {
             let unit = unit_damping(model, target)?;
             let c1 = crate::model::damping_matrix(
@@ -281,7 +302,7 @@ fn damping_derivative(
     match model.damping {
         Damping::None => Ok(None),
         Damping::Rayleigh { alpha, beta } => {
-            let c = if matches!(target, Target::Mass(_)) {
+            let c = if matches!(target, Target::Mass(_) | Target::MassScale) {
                 alpha
             } else {
                 beta
