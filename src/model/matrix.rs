@@ -194,7 +194,8 @@ pub struct LinearMatrices {
     /// matrices (the elements of the file come after them).
     pub derived_springs: usize,
     /// Multiplier of the matrices' stiffness (`k_rest` and the derived
-    /// springs; 1 as read): the calibration's `stiffness_scale`.
+    /// springs, which are stored unscaled; 1 as read): the calibration's
+    /// `stiffness_scale`.
     pub stiffness_scale: f64,
     /// Multiplier of the matrices' mass (1 as read): `mass_scale`.
     pub mass_scale: f64,

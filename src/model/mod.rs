@@ -520,8 +520,9 @@ impl Model {
         })
     }
 
-    /// Set the stiffness scale (the derived springs move with it) or the
-    /// mass scale (the diagonal masses move with it) of a model from
+    /// Set the stiffness scale (it multiplies the matrices' stiffness and
+    /// the derived springs as stored, see [`Model::stiffness_matrix`]) or
+    /// the mass scale (the diagonal masses move with it) of a model from
     /// matrices; nothing on a lumped model.
     pub fn set_matrix_scale(&mut self, stiffness: bool, value: f64) {
         let Some(lin) = self.matrices.as_mut() else {
@@ -529,11 +530,7 @@ impl Model {
         };
         let lin = Arc::make_mut(lin);
         if stiffness {
-            let ratio = value / lin.stiffness_scale;
             lin.stiffness_scale = value;
-            for s in self.springs.iter_mut().take(lin.derived_springs) {
-                s.stiffness *= ratio;
-            }
         } else {
             let ratio = value / lin.mass_scale;
             lin.mass_scale = value;
@@ -541,15 +538,24 @@ impl Model {
         }
     }
 
+    /// The factor spring `i` enters the stiffness with: the stiffness
+    /// scale for a spring derived from the matrices, else 1.
+    pub fn spring_factor(&self, i: usize) -> f64 {
+        match &self.matrices {
+            Some(lin) if i < lin.derived_springs => lin.stiffness_scale,
+            _ => 1.0,
+        }
+    }
+
     /// `∂K/∂(stiffness scale)` or `∂M/∂(mass scale)` of a model from
-    /// matrices: the matrices' part of K (without the springs of the
-    /// file's elements) or the whole M, over the scale.
+    /// matrices: the matrices' part of K as stored (without the springs of
+    /// the file's elements), or the whole M over the scale.
     pub fn matrix_scale_derivative(&self, stiffness: bool) -> Option<DMatrix<f64>> {
         let lin = self.matrices.as_ref()?;
         Some(if stiffness {
             let mut k = lin.k_rest.clone();
             for s in self.springs.iter().take(lin.derived_springs) {
-                add_spring(&mut k, s.ends(), s.stiffness / lin.stiffness_scale);
+                add_spring(&mut k, s.ends(), s.stiffness);
             }
             k
         } else {
@@ -558,15 +564,18 @@ impl Model {
     }
 
     /// Linear stiffness matrix: the springs, plus the rest of the
-    /// stiffness of a model from matrices.
+    /// stiffness of a model from matrices; the stiffness scale of a model
+    /// from matrices multiplies that rest and the springs derived from the
+    /// matrices (a stiffness change of a derived spring is stored in it, so
+    /// it scales too), not the springs of the file's elements.
     pub fn stiffness_matrix(&self) -> DMatrix<f64> {
         let n = self.ndof();
         let mut k = match &self.matrices {
             Some(lin) => &lin.k_rest * lin.stiffness_scale,
             None => DMatrix::zeros(n, n),
         };
-        for s in &self.springs {
-            add_spring(&mut k, s.ends(), s.stiffness);
+        for (i, s) in self.springs.iter().enumerate() {
+            add_spring(&mut k, s.ends(), s.stiffness * self.spring_factor(i));
         }
         k
     }

@@ -162,7 +162,8 @@ pub fn target_seed(
     Ok(match target {
         Target::SpringStiffness(i) => {
             let mut dk = DMatrix::zeros(n, n);
-            crate::model::add_spring(&mut dk, model.springs[i].ends(), s);
+            let f = model.spring_factor(i);
+            crate::model::add_spring(&mut dk, model.springs[i].ends(), s * f);
             ParamSeed {
                 dc: damping_derivative(model, target, s, &dk)?,
                 dk: Some(dk),
