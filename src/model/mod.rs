@@ -175,6 +175,20 @@ impl Model {
             .unwrap_or_else(|| d.to_string())
     }
 
+    /// An effect's label with the points of its DOFs (0-based) when the
+    /// model names them: `contact @5 (n100:uy)`, `stiffness 2–3
+    /// (n40:uy–n60:uy)`; the label as it is otherwise.
+    pub fn label_at_points(&self, label: &str, dofs: &[usize]) -> String {
+        let names: Option<Vec<&str>> = dofs
+            .iter()
+            .map(|&d| self.points.get(d).map(String::as_str))
+            .collect();
+        match names {
+            Some(n) if !n.is_empty() => format!("{label} ({})", n.join("–")),
+            _ => label.to_string(),
+        }
+    }
+
     /// Read a model file for the given records: a lumped model as
     /// [`Model::from_file`]; a model from matrices ([`matrix`]) reduced
     /// onto its element and interface points and the records' labelled
