@@ -102,7 +102,7 @@ pub fn flexible_modes(model: &Model) -> Result<usize> {
 /// as one number), are returned as they are.
 pub fn per_mode(model: &Model) -> Result<Model> {
     let mut m = model.clone();
-    if !model.stiffness_in_springs() {
+    if model.calibrated_by_scales() {
         return Ok(m);
     }
     if let Damping::Modal { ratio, ratios } = &model.damping {
@@ -157,7 +157,7 @@ impl Default for Freedom {
 /// The parameters `freedom` opens on `model` (after [`per_mode`]).
 pub fn select(model: &Model, freedom: &Freedom) -> Vec<LinearParam> {
     let mut out = vec![];
-    let scales = !model.stiffness_in_springs();
+    let scales = model.calibrated_by_scales();
     if freedom.springs && scales {
         out.push(LinearParam::StiffnessScale);
     } else if freedom.springs {

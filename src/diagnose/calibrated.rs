@@ -178,12 +178,18 @@ pub fn diagnose_calibrated(
         if !from_calibrated.kept {
             break;
         }
-        progress(&format!("round {}: diagnose with the refined linear part", round + 1));
+        progress(&format!(
+            "round {}: diagnose with the refined linear part",
+            round + 1
+        ));
         let linear = from_calibrated.d.model.linear_part();
         let d = super::diagnose(&linear, rec, validation, sensors, settings, progress)?;
         let mut next = ctx.refined(d, &linear)?;
         next.note = format!("round {}: {}", round + 1, next.note);
-        if !lower(next.d.after.relative_error, from_calibrated.d.after.relative_error) {
+        if !lower(
+            next.d.after.relative_error,
+            from_calibrated.d.after.relative_error,
+        ) {
             break;
         }
         from_calibrated = next;
@@ -218,7 +224,10 @@ pub fn diagnose_calibrated(
     let mut out = best.d;
     out.timings.insert("calibrate".into(), seconds);
     if declared_used {
-        report.corrections.iter_mut().for_each(|c| c.calibrated = c.declared);
+        report
+            .corrections
+            .iter_mut()
+            .for_each(|c| c.calibrated = c.declared);
     }
     out.calibration = Some(report);
     Ok(out)
@@ -473,7 +482,7 @@ fn refine(d: &Diagnosis, cs: &CalibratedSettings, settings: &DiagnoseSettings) -
 /// a model from matrices calibrated by scales is a localized effect.
 fn is_linear(model: &Model, target: Target) -> bool {
     match target {
-        Target::SpringStiffness(_) => model.stiffness_in_springs(),
+        Target::SpringStiffness(_) => !model.calibrated_by_scales(),
         Target::DampingRatio => true,
         _ => false,
     }

@@ -199,10 +199,15 @@ pub struct LinearMatrices {
     pub stiffness_scale: f64,
     /// Multiplier of the matrices' mass (1 as read): `mass_scale`.
     pub mass_scale: f64,
+    /// Calibrated by the scales (a finite element model: true) rather than
+    /// by its springs (a modal model: false); see
+    /// [`Model::calibrated_by_scales`].
+    pub by_scales: bool,
 }
 
 impl LinearMatrices {
-    /// Reduced matrices as read (scales 1, no reduction report).
+    /// Reduced matrices as read (scales 1, no reduction report, calibrated
+    /// by springs until `by_scales` is set).
     pub fn new(
         m_offdiag: DMatrix<f64>,
         k_rest: DMatrix<f64>,
@@ -219,6 +224,7 @@ impl LinearMatrices {
             derived_springs,
             stiffness_scale: 1.0,
             mass_scale: 1.0,
+            by_scales: false,
         }
     }
 }
@@ -604,13 +610,10 @@ impl MatrixModel {
             .map(|[a, b]| [reduced_index[a.as_str()], reduced_index[b.as_str()]])
             .collect();
         model.points = kept;
-        model.matrices = Some(Arc::new(LinearMatrices::new(
-            m_off,
-            k_rest,
-            cb.c,
-            vec![],
-            derived,
-        )));
+        model.matrices = Some(Arc::new(LinearMatrices {
+            by_scales: true,
+            ..LinearMatrices::new(m_off, k_rest, cb.c, vec![], derived)
+        }));
         model.validate(&src)?;
         Ok(model)
     }

@@ -509,17 +509,20 @@ impl Model {
         }
     }
 
-    /// True for a model from matrices whose stiffness is all in
-    /// point-to-point springs (a lumped model written as matrices, within
-    /// 1e-9 of its stiffest spring): its springs are the structure's own
-    /// numbers, not the couplings of a reduction.
-    pub fn stiffness_in_springs(&self) -> bool {
-        let Some(lin) = &self.matrices else {
-            return true;
+    /// True for a model from Matrix Market matrices whose stiffness is not
+    /// all in point-to-point springs: its springs are the couplings of a
+    /// reduction, and the calibration corrects the scales of the whole
+    /// stiffness and mass instead ([`crate::calibrate::Freedom`]). False for
+    /// a lumped model, a lumped model written as matrices (all its
+    /// stiffness in springs, within 1e-9 of the stiffest) and a modal model
+    /// (`[modal]`, calibrated by its springs and modal ratios).
+    pub fn calibrated_by_scales(&self) -> bool {
+        let Some(lin) = self.matrices.as_ref().filter(|l| l.by_scales) else {
+            return false;
         };
         let top = self.springs.iter().fold(0.0f64, |a, s| a.max(s.stiffness));
         let rest = lin.k_rest.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        lin.derived_springs > 0 && rest <= 1e-9 * top
+        !(lin.derived_springs > 0 && rest <= 1e-9 * top)
     }
 
     /// The stiffness or mass scale of a model from matrices
