@@ -167,70 +167,22 @@ pub fn diagnose_calibrated(
     )?;
     let ctx = Context {
         declared,
+        rec,
         validation,
         sensors,
         settings,
         cal,
+        progress,
     };
     progress("refine the linear part with the effects");
-    let mut from_calibrated = ctx.refined(d, &calibration.model)?;
-    for round in 1..cal.rounds {
-        if !from_calibrated.kept {
-            break;
-        }
-        progress(&format!(
-            "round {}: diagnose with the refined linear part",
-            round + 1
-        ));
-        let linear = from_calibrated.d.model.linear_part();
-        let d = super::diagnose(&linear, rec, validation, sensors, settings, progress)?;
-        let mut next = ctx.refined(d, &linear)?;
-        next.note = format!("round {}: {}", round + 1, next.note);
-        if !lower(
-            next.d.after.relative_error,
-            from_calibrated.d.after.relative_error,
-        ) {
-            break;
-        }
-        from_calibrated = next;
-    }
+    let first = ctx.refined(d, &calibration.model)?;
+    let from_calibrated = ctx.more_rounds(first)?;
     // the declared linear part refined with the effects it found: the
     // calibration on a record with an effect is biased by it, and a start
     // from the declared values may land nearer
     progress("refine the declared linear part with its effects");
     let from_declared = ctx.refined(trusted.clone(), declared)?;
-    let errs = [
-        trusted.after.relative_error,
-        from_calibrated.d.after.relative_error,
-        from_declared.d.after.relative_error,
-    ];
-    let (best, declared_used) = if lower(errs[1], errs[0]) && !lower(errs[2], errs[1]) {
-        (from_calibrated, false)
-    } else if from_declared.kept && lower(errs[2], errs[0]) {
-        (from_declared, true)
-    } else {
-        let mut t = trusted;
-        let chosen = ("the declared model as diagnosed", false);
-        t.calibration = Some(ctx.report(&from_calibrated, calibration, chosen, &errs));
-        return Ok(t);
-    };
-    let seconds = calibration.seconds;
-    let chosen = if declared_used {
-        "the declared linear part refined with its effects"
-    } else {
-        "the calibrated linear part refined with its effects"
-    };
-    let mut report = ctx.report(&best, calibration, (chosen, true), &errs);
-    let mut out = best.d;
-    out.timings.insert("calibrate".into(), seconds);
-    if declared_used {
-        report
-            .corrections
-            .iter_mut()
-            .for_each(|c| c.calibrated = c.declared);
-    }
-    out.calibration = Some(report);
-    Ok(out)
+    Ok(ctx.choose(trusted, from_calibrated, from_declared, calibration))
 }
 
 /// What a diagnosis refined with its linear part gives.
@@ -252,13 +204,91 @@ struct RefinedPath {
 /// The inputs of the calibrated diagnosis its steps share.
 struct Context<'a> {
     declared: &'a Model,
+    rec: &'a Record,
     validation: Option<&'a Record>,
     sensors: Option<&'a [usize]>,
     settings: &'a DiagnoseSettings,
     cal: &'a CalibratedSettings,
+    progress: &'a dyn Fn(&str),
 }
 
 impl Context<'_> {
+    /// The rounds after the first ([`CalibratedSettings::rounds`]): each,
+    /// while the refinement before was kept, diagnoses with the linear part
+    /// it gave and refines; kept when it lowers the record's error.
+    fn more_rounds(&self, mut best: RefinedPath) -> Result<RefinedPath> {
+        for round in 1..self.cal.rounds {
+            if !best.kept {
+                break;
+            }
+            (self.progress)(&format!(
+                "round {}: diagnose with the refined linear part",
+                round + 1
+            ));
+            let linear = best.d.model.linear_part();
+            let d = super::diagnose(
+                &linear,
+                self.rec,
+                self.validation,
+                self.sensors,
+                self.settings,
+                self.progress,
+            )?;
+            let mut next = self.refined(d, &linear)?;
+            next.note = format!("round {}: {}", round + 1, next.note);
+            if !lower(next.d.after.relative_error, best.d.after.relative_error) {
+                break;
+            }
+            best = next;
+        }
+        Ok(best)
+    }
+
+    /// The diagnosis with the lowest multiple-shooting error on the record:
+    /// the declared one as diagnosed, the calibrated one refined, or the
+    /// declared one refined; with the calibration report.
+    fn choose(
+        &self,
+        trusted: Diagnosis,
+        from_calibrated: RefinedPath,
+        from_declared: RefinedPath,
+        calibration: Calibration,
+    ) -> Diagnosis {
+        let errs = [
+            trusted.after.relative_error,
+            from_calibrated.d.after.relative_error,
+            from_declared.d.after.relative_error,
+        ];
+        let (best, declared_used) = if lower(errs[1], errs[0]) && !lower(errs[2], errs[1]) {
+            (from_calibrated, false)
+        } else if from_declared.kept && lower(errs[2], errs[0]) {
+            (from_declared, true)
+        } else {
+            let mut t = trusted;
+            t.timings.insert("calibrate".into(), calibration.seconds);
+            let chosen = ("the declared model as diagnosed", false);
+            t.calibration = Some(self.report(&from_calibrated, calibration, chosen, &errs));
+            return t;
+        };
+        let seconds = calibration.seconds;
+        let chosen = if declared_used {
+            "the declared linear part refined with its effects"
+        } else {
+            "the calibrated linear part refined with its effects"
+        };
+        let mut report = self.report(&best, calibration, (chosen, true), &errs);
+        if declared_used {
+            report
+                .corrections
+                .iter_mut()
+                .for_each(|c| c.calibrated = c.declared);
+        }
+        let mut out = best.d;
+        out.timings.insert("calibrate".into(), seconds);
+        out.calibration = Some(report);
+        out
+    }
+
     /// Refine `d` (diagnosed on the linear model `linear`): every linear
     /// parameter and the effects' together; `before` holds the declared
     /// model's errors.
