@@ -596,5 +596,6 @@ fn with_elements(declared: &Model, linear: Model) -> Model {
     m.masses = linear.masses;
     m.springs = linear.springs;
     m.damping = linear.damping;
+    m.matrices = linear.matrices;
     m
 }

@@ -24,11 +24,19 @@ pub enum LinearParam {
     RayleighAlpha,
     /// Rayleigh stiffness-proportional coefficient β, s.
     RayleighBeta,
+    /// The one modal damping ratio of every flexible mode, dimensionless.
+    DampingRatio,
+    /// Multiplier of the whole stiffness of a model from matrices (as a
+    /// Young's modulus scales it), dimensionless.
+    StiffnessScale,
+    /// Multiplier of the whole mass of a model from matrices (as a density
+    /// scales it), dimensionless.
+    MassScale,
 }
 
 impl LinearParam {
     /// A name for reports: `k5` (the spring's label), `m3`, `zeta2`,
-    /// `alpha`, `beta` (indices from 1).
+    /// `alpha`, `beta` (indices from 1), `stiffness_scale`, `mass_scale`.
     pub fn label(&self, model: &Model) -> String {
         match *self {
             LinearParam::Spring(i) => model.springs[i].label(i),
@@ -36,6 +44,9 @@ impl LinearParam {
             LinearParam::ModalRatio(r) => format!("zeta{}", r + 1),
             LinearParam::RayleighAlpha => "alpha".into(),
             LinearParam::RayleighBeta => "beta".into(),
+            LinearParam::DampingRatio => "zeta".into(),
+            LinearParam::StiffnessScale => "stiffness_scale".into(),
+            LinearParam::MassScale => "mass_scale".into(),
         }
     }
 
@@ -44,9 +55,10 @@ impl LinearParam {
         match self {
             LinearParam::Spring(_) => "N/m",
             LinearParam::Mass(_) => "kg",
-            LinearParam::ModalRatio(_) => "",
+            LinearParam::ModalRatio(_) | LinearParam::DampingRatio => "",
             LinearParam::RayleighAlpha => "1/s",
             LinearParam::RayleighBeta => "s",
+            LinearParam::StiffnessScale | LinearParam::MassScale => "",
         }
     }
 
@@ -59,6 +71,9 @@ impl LinearParam {
             LinearParam::ModalRatio(r) => Target::ModalRatio(r),
             LinearParam::RayleighAlpha => Target::RayleighAlpha,
             LinearParam::RayleighBeta => Target::RayleighBeta,
+            LinearParam::DampingRatio => Target::DampingRatio,
+            LinearParam::StiffnessScale => Target::StiffnessScale,
+            LinearParam::MassScale => Target::MassScale,
         }
     }
 
@@ -82,9 +97,14 @@ pub fn flexible_modes(model: &Model) -> Result<usize> {
 
 /// The model with modal damping written as one ratio per flexible mode
 /// (`ratio = z` becomes `ratios = [z; modes]`), so that each can be
-/// corrected on its own; other damping kinds are returned as they are.
+/// corrected on its own; other damping kinds, and a model from matrices
+/// calibrated by scales ([`Freedom`]: its one declared ratio is corrected
+/// as one number), are returned as they are.
 pub fn per_mode(model: &Model) -> Result<Model> {
     let mut m = model.clone();
+    if model.calibrated_by_scales() {
+        return Ok(m);
+    }
     if let Damping::Modal { ratio, ratios } = &model.damping {
         let nf = flexible_modes(model)?;
         let all = (0..nf)
@@ -103,7 +123,14 @@ pub fn per_mode(model: &Model) -> Result<Model> {
 }
 
 /// What a calibration may correct (also the `[free]` table of a model
-/// file, where a missing key takes its default).
+/// file, where a missing key takes its default). On a model from matrices (unless its
+/// stiffness is all in point-to-point springs: a lumped model written as
+/// matrices) the springs are the couplings a reduction left between the
+/// kept points, not numbers of the structure: `springs` opens the scale of
+/// the whole stiffness instead, `masses` the scale of the whole mass, and
+/// `damping` the declared damping's own numbers (one modal ratio for every
+/// mode when one is declared; a ratio per mode can absorb a local effect
+/// on the mode it drives).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Freedom {
@@ -131,14 +158,20 @@ impl Default for Freedom {
 /// The parameters `freedom` opens on `model` (after [`per_mode`]).
 pub fn select(model: &Model, freedom: &Freedom) -> Vec<LinearParam> {
     let mut out = vec![];
-    if freedom.springs {
+    let scales = model.calibrated_by_scales();
+    if freedom.springs && scales {
+        out.push(LinearParam::StiffnessScale);
+    } else if freedom.springs {
         out.extend((0..model.springs.len()).map(LinearParam::Spring));
     }
-    if freedom.masses {
+    if freedom.masses && scales {
+        out.push(LinearParam::MassScale);
+    } else if freedom.masses {
         out.extend((0..model.ndof()).map(LinearParam::Mass));
     }
     if freedom.damping {
         match &model.damping {
+            Damping::Modal { ratio: Some(_), .. } => out.push(LinearParam::DampingRatio),
             Damping::Modal { ratios, .. } => {
                 out.extend((0..ratios.len()).map(LinearParam::ModalRatio));
             }

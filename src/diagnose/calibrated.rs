@@ -60,6 +60,12 @@ pub struct CalibratedSettings {
     pub open_loop: bool,
     /// Most accepted steps of the open-loop refinement (default 40).
     pub open_loop_iterations: usize,
+    /// Rounds of diagnosis and refinement from the calibrated linear part
+    /// (default 2): each round after the first, when the refinement before
+    /// was kept, diagnoses again with the linear part that refinement gave
+    /// (its location and trace no longer see the calibration's bias) and is
+    /// kept when it lowers the record's error.
+    pub rounds: usize,
 }
 
 impl Default for CalibratedSettings {
@@ -71,6 +77,7 @@ impl Default for CalibratedSettings {
             refine_iterations: 40,
             open_loop: false,
             open_loop_iterations: 40,
+            rounds: 2,
         }
     }
 }
@@ -178,7 +185,7 @@ pub fn diagnose_calibrated(
         .map(|r| calibrate::data_of(r, declared.ndof(), sensors, 0))
         .collect::<Result<Vec<_>>>()?;
     let calibration = calibrate::calibrate(declared, &data, &cal.calibration)?;
-    let mut d = super::diagnose(
+    let d = super::diagnose(
         &calibration.model,
         rec,
         validation,
@@ -186,73 +193,227 @@ pub fn diagnose_calibrated(
         settings,
         progress,
     )?;
+    let ctx = Context {
+        declared,
+        rec,
+        validation,
+        sensors,
+        settings,
+        cal,
+        progress,
+    };
     progress("refine the linear part with the effects");
-    let vprep = validation
-        .map(|v| {
-            prepare_located(
-                &calibration.model,
-                v,
-                sensors,
-                settings,
-                d.prepared.located.as_ref(),
-            )
+    let first = ctx.refined(d, &calibration.model)?;
+    let from_calibrated = ctx.more_rounds(first)?;
+    let Some(trusted) = trusted else {
+        // linear values marked free: the calibrated diagnosis is the only one
+        let choice = format!(
+            "the model marks its linear parameters free: calibrated only ({} on the record)",
+            pct(from_calibrated.d.after.relative_error)
+        );
+        let report = ctx.report(&from_calibrated, calibration, (&choice, true));
+        return ctx.finish(from_calibrated.d, report);
+    };
+    // the declared linear part refined with the effects it found: the
+    // calibration on a record with an effect is biased by it, and a start
+    // from the declared values may land nearer
+    progress("refine the declared linear part with its effects");
+    let from_declared = ctx.refined(trusted.clone(), declared)?;
+    ctx.choose(trusted, from_calibrated, from_declared, calibration)
+}
+
+/// What a diagnosis refined with its linear part gives.
+struct RefinedPath {
+    /// The diagnosis after the refinement, errors `before` of the declared
+    /// model.
+    d: Diagnosis,
+    /// Errors of the linear model the diagnosis ran on.
+    start_errors: ErrorSet,
+    /// Its errors on the validation record (None without one).
+    start_validation_errors: Option<ErrorSet>,
+    /// The refinement's note.
+    note: String,
+    /// The refined parameters and their standard errors (empty when not
+    /// kept).
+    std: Vec<Estimated>,
+    /// The refinement lowered the error and was kept.
+    kept: bool,
+}
+
+/// The inputs of the calibrated diagnosis its steps share.
+struct Context<'a> {
+    declared: &'a Model,
+    rec: &'a Record,
+    validation: Option<&'a Record>,
+    sensors: Option<&'a [usize]>,
+    settings: &'a DiagnoseSettings,
+    cal: &'a CalibratedSettings,
+    progress: &'a dyn Fn(&str),
+}
+
+impl Context<'_> {
+    /// The rounds after the first ([`CalibratedSettings::rounds`]): each,
+    /// while the refinement before was kept, diagnoses with the linear part
+    /// it gave and refines; kept when it lowers the record's error.
+    fn more_rounds(&self, mut best: RefinedPath) -> Result<RefinedPath> {
+        for round in 1..self.cal.rounds {
+            if !best.kept {
+                break;
+            }
+            (self.progress)(&format!(
+                "round {}: diagnose with the refined linear part",
+                round + 1
+            ));
+            let linear = best.d.model.linear_part();
+            let d = super::diagnose(
+                &linear,
+                self.rec,
+                self.validation,
+                self.sensors,
+                self.settings,
+                self.progress,
+            )?;
+            let mut next = self.refined(d, &linear)?;
+            next.note = format!("round {}: {}", round + 1, next.note);
+            if !lower(next.d.after.relative_error, best.d.after.relative_error) {
+                break;
+            }
+            best = next;
+        }
+        Ok(best)
+    }
+
+    /// The diagnosis with the lowest multiple-shooting error on the record:
+    /// the declared one as diagnosed, the calibrated one refined, or the
+    /// declared one refined; with the calibration report.
+    fn choose(
+        &self,
+        trusted: Diagnosis,
+        from_calibrated: RefinedPath,
+        from_declared: RefinedPath,
+        calibration: Calibration,
+    ) -> Result<Diagnosis> {
+        let errs = [
+            trusted.after.relative_error,
+            from_calibrated.d.after.relative_error,
+            from_declared.d.after.relative_error,
+        ];
+        let (best, declared_used) = if lower(errs[1], errs[0]) && !lower(errs[2], errs[1]) {
+            (from_calibrated, false)
+        } else if from_declared.kept && lower(errs[2], errs[0]) {
+            (from_declared, true)
+        } else {
+            let chosen = choice(&errs, "the declared model as diagnosed");
+            let report = self.report(&from_calibrated, calibration, (&chosen, false));
+            return self.finish(trusted, report);
+        };
+        let chosen = choice(
+            &errs,
+            if declared_used {
+                "the declared linear part refined with its effects"
+            } else {
+                "the calibrated linear part refined with its effects"
+            },
+        );
+        let mut report = self.report(&best, calibration, (&chosen, true));
+        if declared_used {
+            report
+                .corrections
+                .iter_mut()
+                .for_each(|c| c.calibrated = c.declared);
+        }
+        self.finish(best.d, report)
+    }
+
+    /// `d` reported with the calibration's `report`, its errors checked
+    /// finite.
+    fn finish(&self, mut d: Diagnosis, report: CalibrationReport) -> Result<Diagnosis> {
+        super::finite_result(&d.model, &d.after, d.validation.as_ref())?;
+        d.timings
+            .insert("calibrate".into(), report.calibration.seconds);
+        d.calibration = Some(report);
+        Ok(d)
+    }
+
+    /// Refine `d` (diagnosed on the linear model `linear`): every linear
+    /// parameter and the effects' together; `before` holds the declared
+    /// model's errors.
+    fn refined(&self, mut d: Diagnosis, linear: &Model) -> Result<RefinedPath> {
+        let vprep = self
+            .validation
+            .map(|v| {
+                prepare_located(
+                    linear,
+                    v,
+                    self.sensors,
+                    self.settings,
+                    d.prepared.located.as_ref(),
+                )
+            })
+            .transpose()?;
+        let vcmp = vprep.as_ref().map(|p| &p.comparison);
+        let sim0 = SimSettings {
+            substeps: d.substeps.0,
+            ..Default::default()
+        };
+        let declared_errors = d.prepared.comparison.errors(self.declared, sim0).0;
+        let declared_validation = vcmp.map(|c| c.errors(self.declared, sim0).0);
+        let (mut note, mut std) = refine_once(&mut d, self.cal, self.settings, vcmp)?;
+        if self.cal.open_loop {
+            (self.progress)("refine every parameter by the open-loop error");
+            let it = self.cal.open_loop_iterations;
+            let (n, est) =
+                super::open_loop::refine(&mut d, &self.cal.calibration, self.settings, it, vcmp)?;
+            note = format!("{note}; {n}");
+            std = est.unwrap_or(std);
+        }
+        update_effects(&mut d, &std);
+        let start_errors = std::mem::replace(&mut d.before, declared_errors);
+        let mut start_validation_errors = None;
+        if let (Some(v), Some(b)) = (d.validation.as_mut(), declared_validation) {
+            start_validation_errors = Some(std::mem::replace(&mut v.before, b));
+        }
+        d.verdict = super::verdict(&d.effects);
+        Ok(RefinedPath {
+            d,
+            start_errors,
+            start_validation_errors,
+            note,
+            kept: !std.is_empty(),
+            std,
         })
-        .transpose()?;
-    let vcmp = vprep.as_ref().map(|p| &p.comparison);
-    let sim0 = SimSettings {
-        substeps: d.substeps.0,
-        ..Default::default()
-    };
-    let declared_errors = d.prepared.comparison.errors(declared, sim0).0;
-    let declared_validation = vcmp.map(|c| c.errors(declared, sim0).0);
-    let (mut note, mut std) = refine_once(&mut d, cal, settings, vcmp)?;
-    if cal.open_loop {
-        progress("refine every parameter by the open-loop error");
-        let it = cal.open_loop_iterations;
-        let (n, est) = super::open_loop::refine(&mut d, &cal.calibration, settings, it, vcmp)?;
-        note = format!("{note}; {n}");
-        std = est.unwrap_or(std);
     }
-    update_effects(&mut d, &std);
-    let corrections = corrections(&calibration, &d.model, &std, &cal.calibration);
-    let calibrated_errors = std::mem::replace(&mut d.before, declared_errors);
-    let mut calibrated_validation_errors = None;
-    if let (Some(v), Some(b)) = (d.validation.as_mut(), declared_validation) {
-        calibrated_validation_errors = Some(std::mem::replace(&mut v.before, b));
+
+    /// The calibration report of `p`; `chosen` says which diagnosis is
+    /// reported, in words with the errors (`used`: one refined with its
+    /// linear part).
+    fn report(
+        &self,
+        p: &RefinedPath,
+        calibration: Calibration,
+        (chosen, used): (&str, bool),
+    ) -> CalibrationReport {
+        CalibrationReport {
+            corrections: corrections(&calibration, &p.d.model, &p.std, &self.cal.calibration),
+            calibration,
+            calibrated_errors: p.start_errors.clone(),
+            calibrated_validation_errors: p.start_validation_errors.clone(),
+            refinement: p.note.clone(),
+            used,
+            choice: chosen.to_string(),
+        }
     }
-    d.verdict = super::verdict(&d.effects);
-    let calibrated_err = d.after.relative_error;
-    let trusted_err = trusted.as_ref().and_then(|t| t.after.relative_error);
-    let use_calibrated = trusted.is_none() || lower(calibrated_err, trusted_err);
-    let report = CalibrationReport {
-        calibration,
-        corrections,
-        calibrated_errors,
-        calibrated_validation_errors,
-        refinement: note,
-        used: use_calibrated,
-        choice: match trusted {
-            Some(_) => format!(
-                "multiple-shooting error on the record after the diagnosis: {} with the calibrated linear part, {} with the declared one; the {} is reported",
-                pct(calibrated_err),
-                pct(trusted_err),
-                if use_calibrated { "calibrated" } else { "declared" }
-            ),
-            None => format!(
-                "the model marks its linear parameters free: calibrated only ({} on the record)",
-                pct(calibrated_err)
-            ),
-        },
-    };
-    let mut out = match trusted {
-        Some(t) if !use_calibrated => t,
-        _ => d,
-    };
-    super::finite_result(&out.model, &out.after, out.validation.as_ref())?;
-    out.timings
-        .insert("calibrate".into(), report.calibration.seconds);
-    out.calibration = Some(report);
-    Ok(out)
+}
+
+/// The choice in words: the record's errors of the declared, calibrated
+/// and declared-refined diagnoses and which one (`chosen`) is reported.
+fn choice(errs: &[Option<f64>; 3], chosen: &str) -> String {
+    format!(
+        "multiple-shooting error on the record after the diagnosis: {} with the declared linear part, {} with the calibrated one refined with its effects, {} with the declared one refined with its effects; {chosen} is reported",
+        pct(errs[0]),
+        pct(errs[1]),
+        pct(errs[2])
+    )
 }
 
 /// One joint refinement of `d`'s model; the note and, when kept, the
@@ -304,7 +465,8 @@ pub(super) fn refinement_parameters(
     for p in params::select(model, &cal.freedom) {
         let (lo, hi) = match p {
             LinearParam::Spring(_) => (-0.9, 10.0),
-            LinearParam::Mass(_) => (-0.5, 1.0),
+            LinearParam::Mass(_) | LinearParam::MassScale => (-0.5, 1.0),
+            LinearParam::StiffnessScale => (-0.5, 1.0),
             _ => (-0.99, 20.0),
         };
         if p.get(model)? > 0.0 {
@@ -315,8 +477,7 @@ pub(super) fn refinement_parameters(
     // damping change is already a linear parameter
     for e in added {
         for p in effects::parameters(model, e)? {
-            let linear = matches!(p.target, Target::SpringStiffness(_) | Target::DampingRatio);
-            if !linear && !out.iter().any(|q| q.target == p.target) {
+            if !is_linear(model, p.target) && !out.iter().any(|q| q.target == p.target) {
                 out.push(p);
             }
         }
@@ -407,18 +568,31 @@ fn refine(d: &Diagnosis, cs: &CalibratedSettings, settings: &DiagnoseSettings) -
     })))
 }
 
+/// True when an effect's target is a number the calibration corrects: a
+/// spring of a lumped model (or of one written as matrices), or the modal
+/// damping (moved by its ratios). A stiffness change between two points of
+/// a model from matrices calibrated by scales is a localized effect.
+fn is_linear(model: &Model, target: Target) -> bool {
+    match target {
+        Target::SpringStiffness(_) => !model.calibrated_by_scales(),
+        Target::DampingRatio => true,
+        _ => false,
+    }
+}
+
 /// The effects' reported values from the final model and their standard
 /// errors from the refinement; a stiffness or damping change is a linear
-/// correction here, reported with the corrections, not as an effect.
+/// correction here ([`is_linear`]), reported with the corrections, not as
+/// an effect.
 fn update_effects(d: &mut Diagnosis, std: &[Estimated]) {
     let keep: Vec<bool> = d
         .added
         .iter()
         .map(|e| {
-            !matches!(
+            !(matches!(
                 e.candidate.kind,
                 EffectKind::Stiffness | EffectKind::Damping
-            )
+            ) && e.targets.iter().all(|t| is_linear(&d.model, *t)))
         })
         .collect();
     for (rep, e) in d.effects.iter_mut().zip(&d.added) {

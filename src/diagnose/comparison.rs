@@ -204,6 +204,7 @@ mod tests {
             observations: vec![Observation {
                 quantity: Quantity::Disp,
                 dof: 1,
+                point: None,
                 weight: 1.0,
                 data,
             }],

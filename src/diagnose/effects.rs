@@ -131,7 +131,7 @@ pub fn add(model: &mut Model, r: &RankedEffect) -> AddedEffect {
     };
     AddedEffect {
         candidate: c.clone(),
-        label: r.label.clone(),
+        label: model.label_at_points(&r.label, &c.dofs),
         targets,
         names: names.into_iter().map(String::from).collect(),
         traced,

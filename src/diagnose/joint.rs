@@ -574,6 +574,7 @@ mod tests {
                     dof: d + 1,
                     weight: 1.0 / norm,
                     data,
+                    point: None,
                 }
             })
             .collect();

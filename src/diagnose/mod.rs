@@ -307,11 +307,13 @@ mod tests {
             relative_error: Some(f64::NAN),
             simulation_error: Some(0.1),
             per_channel: vec![],
+            rms_per_channel: Default::default(),
             status: ErrorStatus {
                 multiple_shooting: ms,
                 open_loop: ol,
             },
             starts: None,
+            open_loop_prediction: None,
         }
     }
 

@@ -236,6 +236,7 @@ fn prepare_from(
             dof: c.dof,
             weight: 1.0 / c.data.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-300),
             data: c.data.clone(),
+            point: c.point.clone(),
         })
         .collect();
     Ok(Prepared {

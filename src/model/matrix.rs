@@ -190,6 +190,43 @@ pub struct LinearMatrices {
     pub report: Option<ReductionReport>,
     /// DOF in the matrices (from 1) of each kept point.
     pub kept_dofs: Vec<usize>,
+    /// The first `derived_springs` of `Model::springs` are couplings of the
+    /// matrices (the elements of the file come after them).
+    pub derived_springs: usize,
+    /// Multiplier of the matrices' stiffness (`k_rest` and the derived
+    /// springs, which are stored unscaled; 1 as read): the calibration's
+    /// `stiffness_scale`.
+    pub stiffness_scale: f64,
+    /// Multiplier of the matrices' mass (1 as read): `mass_scale`.
+    pub mass_scale: f64,
+    /// Calibrated by the scales (a finite element model: true) rather than
+    /// by its springs (a modal model: false); see
+    /// [`Model::calibrated_by_scales`].
+    pub by_scales: bool,
+}
+
+impl LinearMatrices {
+    /// Reduced matrices as read (scales 1, no reduction report, calibrated
+    /// by springs until `by_scales` is set).
+    pub fn new(
+        m_offdiag: DMatrix<f64>,
+        k_rest: DMatrix<f64>,
+        c: Option<DMatrix<f64>>,
+        kept_dofs: Vec<usize>,
+        derived_springs: usize,
+    ) -> LinearMatrices {
+        LinearMatrices {
+            m_offdiag,
+            k_rest,
+            c,
+            report: None,
+            kept_dofs,
+            derived_springs,
+            stiffness_scale: 1.0,
+            mass_scale: 1.0,
+            by_scales: false,
+        }
+    }
 }
 
 fn model_err(src: &Path, m: String) -> TacitError {
@@ -564,6 +601,7 @@ impl MatrixModel {
         let mut model: Model = toml::Value::Table(table)
             .try_into()
             .map_err(|e: toml::de::Error| TacitError::model(&src, e.to_string()))?;
+        let derived = springs.len();
         model.springs.splice(0..0, springs);
         model.interface_pairs = self
             .interfaces
@@ -573,11 +611,8 @@ impl MatrixModel {
             .collect();
         model.points = kept;
         model.matrices = Some(Arc::new(LinearMatrices {
-            m_offdiag: m_off,
-            k_rest,
-            c: cb.c,
-            report: None,
-            kept_dofs: vec![],
+            by_scales: true,
+            ..LinearMatrices::new(m_off, k_rest, cb.c, vec![], derived)
         }));
         model.validate(&src)?;
         Ok(model)

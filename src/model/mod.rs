@@ -183,6 +183,20 @@ impl Model {
             .unwrap_or_else(|| d.to_string())
     }
 
+    /// An effect's label with the points of its DOFs (0-based) when the
+    /// model names them: `contact @5 (n100:uy)`, `stiffness 2–3
+    /// (n40:uy–n60:uy)`; the label as it is otherwise.
+    pub fn label_at_points(&self, label: &str, dofs: &[usize]) -> String {
+        let names: Option<Vec<&str>> = dofs
+            .iter()
+            .map(|&d| self.points.get(d).map(String::as_str))
+            .collect();
+        match names {
+            Some(n) if !n.is_empty() => format!("{label} ({})", n.join("–")),
+            _ => label.to_string(),
+        }
+    }
+
     /// Read a model file for the given records: a lumped model as
     /// [`Model::from_file`]; a model from matrices ([`matrix`]) reduced
     /// onto its element and interface points and the records' labelled
@@ -494,25 +508,99 @@ impl Model {
     }
 
     /// Mass matrix: the masses on the diagonal, plus the off-diagonal mass
-    /// of a model from matrices.
+    /// of a model from matrices (times its mass scale).
     pub fn mass_matrix(&self) -> DMatrix<f64> {
         let d = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(self.masses.clone()));
         match &self.matrices {
-            Some(lin) => d + &lin.m_offdiag,
+            Some(lin) => d + &lin.m_offdiag * lin.mass_scale,
             None => d,
         }
     }
 
+    /// True for a model from Matrix Market matrices whose stiffness is not
+    /// all in point-to-point springs: its springs are the couplings of a
+    /// reduction, and the calibration corrects the scales of the whole
+    /// stiffness and mass instead ([`crate::calibrate::Freedom`]). False for
+    /// a lumped model, a lumped model written as matrices (all its
+    /// stiffness in springs, within 1e-9 of the stiffest) and a modal model
+    /// (`[modal]`, calibrated by its springs and modal ratios).
+    pub fn calibrated_by_scales(&self) -> bool {
+        let Some(lin) = self.matrices.as_ref().filter(|l| l.by_scales) else {
+            return false;
+        };
+        let top = self.springs.iter().fold(0.0f64, |a, s| a.max(s.stiffness));
+        let rest = lin.k_rest.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        !(lin.derived_springs > 0 && rest <= 1e-9 * top)
+    }
+
+    /// The stiffness or mass scale of a model from matrices
+    /// ([`matrix::LinearMatrices`]); None for a lumped model.
+    pub fn matrix_scale(&self, stiffness: bool) -> Option<f64> {
+        self.matrices.as_ref().map(|l| {
+            if stiffness {
+                l.stiffness_scale
+            } else {
+                l.mass_scale
+            }
+        })
+    }
+
+    /// Set the stiffness scale (it multiplies the matrices' stiffness and
+    /// the derived springs as stored, see [`Model::stiffness_matrix`]) or
+    /// the mass scale (the diagonal masses move with it) of a model from
+    /// matrices; nothing on a lumped model.
+    pub fn set_matrix_scale(&mut self, stiffness: bool, value: f64) {
+        let Some(lin) = self.matrices.as_mut() else {
+            return;
+        };
+        let lin = Arc::make_mut(lin);
+        if stiffness {
+            lin.stiffness_scale = value;
+        } else {
+            let ratio = value / lin.mass_scale;
+            lin.mass_scale = value;
+            self.masses.iter_mut().for_each(|m| *m *= ratio);
+        }
+    }
+
+    /// The factor spring `i` enters the stiffness with: the stiffness
+    /// scale for a spring derived from the matrices, else 1.
+    pub fn spring_factor(&self, i: usize) -> f64 {
+        match &self.matrices {
+            Some(lin) if i < lin.derived_springs => lin.stiffness_scale,
+            _ => 1.0,
+        }
+    }
+
+    /// `∂K/∂(stiffness scale)` or `∂M/∂(mass scale)` of a model from
+    /// matrices: the matrices' part of K as stored (without the springs of
+    /// the file's elements), or the whole M over the scale.
+    pub fn matrix_scale_derivative(&self, stiffness: bool) -> Option<DMatrix<f64>> {
+        let lin = self.matrices.as_ref()?;
+        Some(if stiffness {
+            let mut k = lin.k_rest.clone();
+            for s in self.springs.iter().take(lin.derived_springs) {
+                add_spring(&mut k, s.ends(), s.stiffness);
+            }
+            k
+        } else {
+            self.mass_matrix() / lin.mass_scale
+        })
+    }
+
     /// Linear stiffness matrix: the springs, plus the rest of the
-    /// stiffness of a model from matrices.
+    /// stiffness of a model from matrices; the stiffness scale of a model
+    /// from matrices multiplies that rest and the springs derived from the
+    /// matrices (a stiffness change of a derived spring is stored in it, so
+    /// it scales too), not the springs of the file's elements.
     pub fn stiffness_matrix(&self) -> DMatrix<f64> {
         let n = self.ndof();
         let mut k = match &self.matrices {
-            Some(lin) => lin.k_rest.clone(),
+            Some(lin) => &lin.k_rest * lin.stiffness_scale,
             None => DMatrix::zeros(n, n),
         };
-        for s in &self.springs {
-            add_spring(&mut k, s.ends(), s.stiffness);
+        for (i, s) in self.springs.iter().enumerate() {
+            add_spring(&mut k, s.ends(), s.stiffness * self.spring_factor(i));
         }
         k
     }

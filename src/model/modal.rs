@@ -249,6 +249,7 @@ fn assemble(section: &ModalSection, mut table: toml::Table, src: &str) -> Result
     }
     let mut m_off = m;
     m_off.fill_diagonal(0.0);
+    let derived = springs.len();
     model.springs.splice(0..0, springs);
     model.damping = Damping::Modal {
         ratio: None,
@@ -263,13 +264,9 @@ fn assemble(section: &ModalSection, mut table: toml::Table, src: &str) -> Result
     } else {
         section.dofs.clone()
     };
-    model.matrices = Some(Arc::new(LinearMatrices {
-        m_offdiag: m_off,
-        k_rest,
-        c: None,
-        report: None,
-        kept_dofs,
-    }));
+    model.matrices = Some(Arc::new(LinearMatrices::new(
+        m_off, k_rest, None, kept_dofs, derived,
+    )));
     model.validate(src)?;
     Ok(model)
 }

@@ -119,7 +119,7 @@ impl Channel {
 
 /// A channel's name: `<quantity>_<dof>`, or `<quantity>:<label>` at a
 /// labelled point.
-fn channel_name(quantity: Quantity, dof: usize, point: Option<&str>) -> String {
+pub fn channel_name(quantity: Quantity, dof: usize, point: Option<&str>) -> String {
     match point {
         Some(p) => format!("{}:{p}", quantity.prefix()),
         None => format!("{}_{dof}", quantity.prefix()),

@@ -56,6 +56,13 @@ pub enum Target {
     ClearanceStiffness(usize),
     /// Force level of `model.relative_frictions[i]`, N.
     RelativeFrictionLevel(usize),
+    /// Multiplier of the stiffness of a model from matrices (the whole
+    /// stiffness read from the matrices, as a Young's modulus scales it;
+    /// 1 as read), dimensionless.
+    StiffnessScale,
+    /// Multiplier of the mass of a model from matrices (as a density
+    /// scales it; 1 as read), dimensionless.
+    MassScale,
 }
 
 /// The mean of per-mode damping ratios: the value of
@@ -140,6 +147,14 @@ impl Target {
                     .ok_or_else(|| missing("cubic", i, model.cubics.len()))?
                     .k3
             }
+            Target::StiffnessScale | Target::MassScale => model
+                .matrix_scale(*self == Target::StiffnessScale)
+                .ok_or_else(|| {
+                    TacitError::Setting(format!(
+                        "parameter {}: the model is not given by matrices",
+                        self.default_name(model)
+                    ))
+                })?,
             _ => return self.get_added(model),
         })
     }
@@ -215,6 +230,8 @@ impl Target {
             Target::ClearanceGap(i) => model.clearances[i].gap = value,
             Target::ClearanceStiffness(i) => model.clearances[i].stiffness = value,
             Target::RelativeFrictionLevel(i) => model.relative_frictions[i].level = value,
+            Target::StiffnessScale => model.set_matrix_scale(true, value),
+            Target::MassScale => model.set_matrix_scale(false, value),
         }
     }
 
@@ -226,6 +243,8 @@ impl Target {
         match self {
             Target::SpringStiffness(_)
             | Target::Mass(_)
+            | Target::StiffnessScale
+            | Target::MassScale
             | Target::ContactStiffness(_)
             | Target::ClearanceStiffness(_) => Some(0.0),
             Target::DampingRatio
@@ -248,6 +267,8 @@ impl Target {
             self,
             Target::SpringStiffness(_)
                 | Target::Mass(_)
+                | Target::StiffnessScale
+                | Target::MassScale
                 | Target::ContactStiffness(_)
                 | Target::ClearanceStiffness(_)
         )
@@ -255,7 +276,8 @@ impl Target {
 
     /// Default short name: `k3` (or the spring's label), `m2`, `zeta`,
     /// `gap1`, `kc1`, `friction1`, `cubic1`, `quadratic1`, `qdamper1`,
-    /// `cdamper1`, `cgap1`, `kcl1`, `rfriction1` (numbers from 1).
+    /// `cdamper1`, `cgap1`, `kcl1`, `rfriction1` (numbers from 1),
+    /// `stiffness_scale`, `mass_scale`.
     pub fn default_name(&self, model: &Model) -> String {
         match *self {
             Target::SpringStiffness(i) => model
@@ -278,6 +300,8 @@ impl Target {
             Target::ClearanceGap(i) => format!("cgap{}", i + 1),
             Target::ClearanceStiffness(i) => format!("kcl{}", i + 1),
             Target::RelativeFrictionLevel(i) => format!("rfriction{}", i + 1),
+            Target::StiffnessScale => "stiffness_scale".into(),
+            Target::MassScale => "mass_scale".into(),
         }
     }
 }

@@ -26,12 +26,16 @@ pub struct Observation {
     pub weight: f64,
     /// Measured samples (one per record sample).
     pub data: Vec<f64>,
+    /// The point label of the record's channel, when it names one (a
+    /// model from matrices: `n12:uy`).
+    pub point: Option<String>,
 }
 
 impl Observation {
-    /// Channel name, e.g. `disp_4`.
+    /// Channel name as the record names it, e.g. `disp_4`, or
+    /// `accel:n12:uy` at a labelled point.
     pub fn name(&self) -> String {
-        format!("{}_{}", self.quantity.prefix(), self.dof)
+        crate::record::channel_name(self.quantity, self.dof, self.point.as_deref())
     }
 
     /// Standard deviation of this channel's weighted residual rows under
@@ -129,6 +133,7 @@ impl Problem {
                     dof: ch.dof,
                     weight: inverse_norm(&ch.data),
                     data: ch.data.clone(),
+                    point: ch.point.clone(),
                 });
             }
             if let Some(d) = dofs {

@@ -162,7 +162,8 @@ pub fn target_seed(
     Ok(match target {
         Target::SpringStiffness(i) => {
             let mut dk = DMatrix::zeros(n, n);
-            crate::model::add_spring(&mut dk, model.springs[i].ends(), s);
+            let f = model.spring_factor(i);
+            crate::model::add_spring(&mut dk, model.springs[i].ends(), s * f);
             ParamSeed {
                 dc: damping_derivative(model, target, s, &dk)?,
                 dk: Some(dk),
@@ -176,6 +177,27 @@ pub fn target_seed(
                 dc: damping_derivative(model, target, s, &dm)?,
                 dm: Some(dm),
                 ..Default::default()
+            }
+        }
+        Target::StiffnessScale | Target::MassScale => {
+            let stiffness = target == Target::StiffnessScale;
+            let d = model
+                .matrix_scale_derivative(stiffness)
+                .ok_or("the model is not given by matrices")?
+                * s;
+            let dc = damping_derivative(model, target, s, &d)?;
+            if stiffness {
+                ParamSeed {
+                    dc,
+                    dk: Some(d),
+                    ..Default::default()
+                }
+            } else {
+                ParamSeed {
+                    dc,
+                    dm: Some(d),
+                    ..Default::default()
+                }
             }
         }
         Target::DampingRatio | Target::ModalRatio(_) => {
@@ -281,7 +303,7 @@ fn damping_derivative(
     match model.damping {
         Damping::None => Ok(None),
         Damping::Rayleigh { alpha, beta } => {
-            let c = if matches!(target, Target::Mass(_)) {
+            let c = if matches!(target, Target::Mass(_) | Target::MassScale) {
                 alpha
             } else {
                 beta
