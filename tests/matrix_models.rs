@@ -105,7 +105,7 @@ fn beam_stop_at_the_tip_is_found_by_label() {
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     // the main text names the point of the effect and of each channel
     assert!(md.contains("**contact @5 (n100:uy)**"), "{md}");
-    assert!(md.contains("- accel:n100:uy:"), "{md}");
+    assert!(md.contains("| accel:n100:uy |"), "{md}");
     assert!(md.contains("contact @5 (n100:uy) at `n100:uy`"), "{md}");
     let param = |name: &str| e["parameters"][name].as_f64().unwrap();
     let (gap, k) = (param("gap"), param("stiffness"));
@@ -165,7 +165,8 @@ fn imperfect_beam_stop_is_found_with_the_linear_part_calibrated() {
     assert!(o.status.success(), "{}", text(&o));
     let rep = report(&out);
     let effects = rep["effects"].as_array().unwrap();
-    assert_eq!(effects.len(), 1, "{}", text(&o));
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert_eq!(effects.len(), 1, "{}\n{md}", text(&o));
     let e = &effects[0];
     assert_eq!(e["kind"], "contact", "{e}");
     assert_eq!(e["dofs"], serde_json::json!([5]), "{e}");

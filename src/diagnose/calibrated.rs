@@ -367,7 +367,7 @@ impl Context<'_> {
             note = format!("{note}; {n}");
             std = est.unwrap_or(std);
         }
-        update_effects(&mut d, &std);
+        update_effects(&mut d, &std, &self.cal.calibration);
         let start_errors = std::mem::replace(&mut d.before, declared_errors);
         let mut start_validation_errors = None;
         if let (Some(v), Some(b)) = (d.validation.as_mut(), declared_validation) {
@@ -584,8 +584,8 @@ fn is_linear(model: &Model, target: Target) -> bool {
 /// errors from the refinement; a stiffness or damping change is a linear
 /// correction here ([`is_linear`]), reported with the corrections, not as
 /// an effect.
-fn update_effects(d: &mut Diagnosis, std: &[Estimated]) {
-    let keep: Vec<bool> = d
+fn update_effects(d: &mut Diagnosis, std: &[Estimated], s: &CalibrationSettings) {
+    let mut keep: Vec<bool> = d
         .added
         .iter()
         .map(|e| {
@@ -601,6 +601,19 @@ fn update_effects(d: &mut Diagnosis, std: &[Estimated]) {
             if let Some((_, s)) = std.iter().find(|(p, _)| p.target == *t) {
                 rep.std_errors.insert(name, *s);
             }
+        }
+    }
+    // a local stiffness or damping change the refinement took back to
+    // nothing (within the calibration's significance rule) is not an effect
+    for ((k, rep), e) in keep.iter_mut().zip(&d.effects).zip(&d.added) {
+        if matches!(
+            e.candidate.kind,
+            EffectKind::Stiffness | EffectKind::Damping
+        ) {
+            *k &= rep.parameters.iter().any(|(name, v)| {
+                let se = rep.std_errors.get(name).copied().flatten();
+                v.abs() > s.min_change && se.is_none_or(|e| v.abs() > s.significance * e)
+            });
         }
     }
     let pairs = std::mem::take(&mut d.effects)
