@@ -551,18 +551,12 @@ fn refine(d: &Diagnosis, cs: &CalibratedSettings, settings: &DiagnoseSettings) -
     }
     // standard errors at the refined point, the residual level measured
     let level = after.relative_error.unwrap_or(settings.noise.level);
-    let mut at = problem.clone();
-    at.model = refined.clone();
-    at.segments = jf.segments;
-    at.parameters = refinement_parameters(&refined, &d.added, cal)?;
-    let std = joint::std_errors(&at, &vec![0.0; at.parameters.len()], level)
-        .map(|v| v.into_iter().map(|s| s.is_finite().then_some(s)).collect())
-        .unwrap_or_else(|| vec![None; at.parameters.len()]);
+    let (params, std) = std_errors_at(&problem, &refined, jf.segments, &d.added, cal, level)?;
     Ok(Refined::Kept(Box::new(Kept {
         model: refined,
         after,
         pred,
-        params: at.parameters,
+        params,
         std,
         note: format!("{note}; kept"),
     })))
@@ -662,9 +656,30 @@ fn corrections(
         .collect()
 }
 
+/// The refinement's parameters re-opened at `refined` (with the fitted
+/// `segments`) and their standard errors at residual level `level` (None
+/// where the Jacobian cannot give one).
+pub(super) fn std_errors_at(
+    problem: &crate::update::Problem,
+    refined: &Model,
+    segments: Vec<crate::update::Segment>,
+    added: &[effects::AddedEffect],
+    cal: &CalibrationSettings,
+    level: f64,
+) -> Result<(Vec<Parameter>, Vec<Option<f64>>)> {
+    let mut at = problem.clone();
+    at.model = refined.clone();
+    at.segments = segments;
+    at.parameters = refinement_parameters(refined, added, cal)?;
+    let std = joint::std_errors(&at, &vec![0.0; at.parameters.len()], level)
+        .map(|v| v.into_iter().map(|s| s.is_finite().then_some(s)).collect())
+        .unwrap_or_else(|| vec![None; at.parameters.len()]);
+    Ok((at.parameters, std))
+}
+
 /// True when error `a` is lower than `b` (a failed error is never lower;
 /// any error is lower than a failed one).
-fn lower(a: Option<f64>, b: Option<f64>) -> bool {
+pub(super) fn lower(a: Option<f64>, b: Option<f64>) -> bool {
     match (a, b) {
         (Some(a), Some(b)) => a < b,
         (Some(_), None) => true,

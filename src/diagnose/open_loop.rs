@@ -12,7 +12,7 @@
 //! the record's open-loop error is then simulated from the fitted start
 //! state (the validation record's from its reconstructed one).
 
-use super::calibrated::{refinement_parameters, Estimated};
+use super::calibrated::{lower, refinement_parameters, std_errors_at, Estimated};
 use super::report::pct;
 use super::{joint, Comparison, DiagnoseSettings, Diagnosis};
 use crate::calibrate::{params, CalibrationSettings};
@@ -66,22 +66,11 @@ pub(super) fn refine(
         pct(d.after.simulation_error),
         pct(after.simulation_error)
     );
-    let lower = match (after.simulation_error, d.after.simulation_error) {
-        (Some(a), Some(b)) => a < b,
-        (Some(_), None) => true,
-        _ => false,
-    };
-    if !lower {
+    if !lower(after.simulation_error, d.after.simulation_error) {
         return Ok((format!("{note}; not kept"), None));
     }
     let level = after.simulation_error.unwrap_or(settings.noise.level);
-    let mut at = problem.clone();
-    at.model = refined.clone();
-    at.segments = jf.segments;
-    at.parameters = refinement_parameters(&refined, &d.added, cal)?;
-    let std = joint::std_errors(&at, &vec![0.0; at.parameters.len()], level)
-        .map(|v| v.into_iter().map(|s| s.is_finite().then_some(s)).collect())
-        .unwrap_or_else(|| vec![None; at.parameters.len()]);
+    let (params, std) = std_errors_at(&problem, &refined, jf.segments, &d.added, cal, level)?;
     d.model = refined;
     d.after = after;
     d.prepared.comparison = fitted_start;
@@ -89,6 +78,6 @@ pub(super) fn refine(
     if let (Some(c), Some(v)) = (vcmp, d.validation.as_mut()) {
         v.after = c.errors(&d.model, sim).0;
     }
-    let est = at.parameters.into_iter().zip(std).collect();
+    let est = params.into_iter().zip(std).collect();
     Ok((format!("{note}; kept"), Some(est)))
 }
