@@ -44,6 +44,8 @@
 //! writes the result: report.json (with the settings), report.md, the
 //! fitted model and the figures.
 
+pub use crate::identify::{lifted, locate};
+
 mod alternative;
 pub mod calibrated;
 pub mod comparison;
@@ -53,8 +55,6 @@ pub mod errors;
 mod figures;
 mod fit;
 pub mod joint;
-pub mod lifted;
-pub mod locate;
 pub mod noise;
 mod open_loop;
 mod outcome;

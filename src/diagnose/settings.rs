@@ -12,6 +12,7 @@
 use super::lifted::LiftedSettings;
 use crate::error::{Result, TacitError};
 use crate::horizon::{self, settings::HorizonSettings};
+pub use crate::identify::locate::LocateSettings;
 use crate::trace::TraceSettings;
 use crate::update::optimize::{FitSettings, JacobianMethod};
 use serde::{Deserialize, Serialize};
@@ -186,41 +187,6 @@ impl Default for SubstepSettings {
             min: 40,
             omega_h: 0.15,
             max: 80,
-        }
-    }
-}
-
-/// The force-location search ([`super::locate`]).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct LocateSettings {
-    /// Dominance ratio: a direction is taken when its weighted residual is
-    /// at most this times the residual without it and that of the
-    /// runner-up (default 0.8; 0 ≤ ratio < 1, 0 disables the search: an
-    /// unknown force at every DOF). Reason: a ratio holds whatever the
-    /// noise level; 0.8 separated every single-place effect of the test
-    /// matrix from distributed friction.
-    pub ratio: f64,
-    /// Most directions selected (default 3; the search also takes at most
-    /// one per two channels). Reason: each direction needs about two
-    /// channels' worth of data beyond the states.
-    pub max: usize,
-    /// Weighted residual RMS (1 = the assumed noise) at which the search
-    /// stops adding directions (default 1.5; > 0). Reason: below it a
-    /// further direction only fits noise.
-    pub noise_stop: f64,
-    /// Directions after the best tried together with it when it does not
-    /// dominate alone (default 4; ≥ 0). Reason: two effects at two places.
-    pub pair_trials: usize,
-}
-
-impl Default for LocateSettings {
-    fn default() -> Self {
-        LocateSettings {
-            ratio: 0.8,
-            max: 3,
-            noise_stop: 1.5,
-            pair_trials: 4,
         }
     }
 }

@@ -10,12 +10,12 @@
 //! variances.
 
 use super::covariance::Covariance;
-use super::dense::{gemv_acc, mul, view, view_mut};
 use super::problem::{Init, Lq};
 use super::{
     CovarianceScale, Diagnostics, HorizonData, HorizonResult, HorizonSettings, HorizonStatus,
     SelectedWeights, Solver, Timings,
 };
+use crate::riccati::dense::{gemv_acc, mul, view, view_mut};
 use faer::MatRef;
 use nalgebra::{DMatrix, DVector};
 

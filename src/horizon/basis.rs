@@ -26,6 +26,7 @@
 //! Without hidden directions `W = I` and the reduced system is the whole.
 
 use super::problem::Lq;
+use crate::riccati::Stage;
 use nalgebra::DMatrix;
 
 /// The closed (observable) part of the problem, `[z_V; w]`: the same form
@@ -62,6 +63,23 @@ impl Reduced {
             q[(self.nx + i, self.nx + i)] += self.lambda;
         }
         q
+    }
+
+    /// The Riccati stage ([`crate::riccati::Stage`]): `A = F` (its first
+    /// nx rows; the last m are zero), `B = G` (the identity in its last m
+    /// rows: the state holds the previous force), `Q = ĈᵀĈ + (λ + μ)JᵀJ`,
+    /// `S = −μJ`, `R = μI`.
+    pub fn stage(&self) -> Stage {
+        let (nx, m, ns) = (self.nx, self.m, self.ns);
+        debug_assert!(self.f.rows(nx, m).iter().all(|v| *v == 0.0));
+        let mut q = self.stage_weight();
+        let mut s = DMatrix::zeros(m, ns);
+        for i in 0..m {
+            q[(nx + i, nx + i)] += self.mu;
+            s[(i, nx + i)] = -self.mu;
+        }
+        let r = DMatrix::identity(m, m) * self.mu;
+        Stage::new(&self.f.rows(0, nx).into_owned(), &self.g, q, s, r)
     }
 
     /// `c_k` (ns) added into `out`.

@@ -20,7 +20,7 @@
 //!
 //! **Steady region.** The steady closed loop has the fixed point
 //! `Σ_∞ = Φ Σ_∞ Φᵀ + XᵀX`, solved by Smith's doubling
-//! ([`super::riccati::stein`]). Before the end transient every transition
+//! ([`crate::riccati::stein`]). Before the end transient every transition
 //! uses the steady gain, so `Σ_k = Σ_∞ + Φ^k Δ_0 Φ^{kᵀ}`, `Δ_0 = Σ_0 − Σ_∞
 //! = V Λ Vᵀ`: one product `Y_{k+1} = Φ Y_k` (`Y_0 = V`) per sample gives every
 //! variance, `diag Σ_k = diag Σ_∞ + Σ_j λ_j Y_{k,·j}²`, exactly. Once the
@@ -32,10 +32,11 @@
 //! `tol` over [`WINDOW`] steps.
 
 use super::basis::Sys;
-use super::dense::{mul, solve_lower, symmetrize, view, view_mut};
 use super::problem::Lq;
-use super::riccati::{stein, WINDOW};
 use super::smoother::Backward;
+use super::smoother::WINDOW;
+use crate::riccati::dense::{mul, solve_lower, symmetrize, view, view_mut};
+use crate::riccati::stein;
 use nalgebra::DMatrix;
 
 /// Smoother covariance summaries (scaled units, model scale).

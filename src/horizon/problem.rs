@@ -175,10 +175,16 @@ impl Lq {
         }
         let mut target = data.measured.clone();
         let (dyv, gv) = (
-            super::dense::view(&dy),
-            super::dense::view(data.known_force),
+            crate::riccati::dense::view(&dy),
+            crate::riccati::dense::view(data.known_force),
         );
-        super::dense::mul(super::dense::view_mut(&mut target), true, dyv, gv, -1.0);
+        crate::riccati::dense::mul(
+            crate::riccati::dense::view_mut(&mut target),
+            true,
+            dyv,
+            gv,
+            -1.0,
+        );
         for col in target.as_mut_slice().chunks_exact_mut(p) {
             col.iter_mut().zip(wsqrt.iter()).for_each(|(v, w)| *v *= w);
         }

@@ -18,7 +18,7 @@
 //! for lanl8dof with 8 forces).
 //!
 //! `P_k` does not depend on the data. It is iterated from the end of the
-//! record ([`super::riccati`]) until its measured distance to the fixed
+//! record ([`crate::riccati::Riccati`]) until its measured distance to the fixed
 //! point is below `riccati_tol`; those transient gains are stored and the
 //! last one is held for the rest of the sweep. There a sample costs one
 //! product `Φᵀ p'` (Φ = F − G L, 22 × 22); every term that does not depend
@@ -36,12 +36,19 @@
 
 use super::assemble::Sink;
 use super::basis::{Reduced, Sys};
-use super::dense::{gemv_acc, mul, solve_lower_t, solve_lower_t_vec, symmetrize, view, view_mut};
 use super::problem::{Init, Lq};
-use super::riccati::{fixed_point, rel_change, Riccati, WINDOW};
 use super::settings::HorizonSettings;
+use crate::riccati::dense::{
+    gemv_acc, mul, solve_lower_t, solve_lower_t_vec, symmetrize, view, view_mut,
+};
+use crate::riccati::step::rel_change;
+use crate::riccati::{fixed_point, Riccati};
 use nalgebra::{DMatrix, DVector};
 
+/// Steps over which the change of the recursion must stay below the
+/// tolerance when the distance to the fixed point cannot decide (see
+/// [`backward`]).
+pub(crate) const WINDOW: usize = 64;
 /// Samples per block of the steady backward pass.
 pub(crate) const BLOCK: usize = 256;
 /// The fixed point is solved for when the change of `P` over one step
@@ -162,7 +169,7 @@ impl Vectors {
 }
 
 /// The state of the exact recursion from the end of the record and of its
-/// fixed-point test (see [`super::riccati`]).
+/// fixed-point test (see [`backward`]).
 struct Transient {
     /// `P` of the last exact step.
     p: DMatrix<f64>,
@@ -193,7 +200,7 @@ impl Transient {
     /// After an exact step: may the gain be held from here? The measured
     /// distance when the fixed point is known (down to its own accuracy),
     /// else a change that stayed below `tol` for [`WINDOW`] steps.
-    fn settles(&mut self, r: &Reduced, ric: &mut Riccati, tol: f64) -> bool {
+    fn settles(&mut self, ric: &mut Riccati, tol: f64) -> bool {
         self.calm = if self.last_change <= tol {
             self.calm + 1
         } else {
@@ -204,7 +211,7 @@ impl Transient {
             .is_some_and(|t| self.last_change <= *t);
         if self.pinf.is_none() && due {
             self.attempts += 1;
-            self.pinf = fixed_point(r, ric, &self.p);
+            self.pinf = fixed_point(ric, &self.p);
         }
         match &self.pinf {
             Some((pinf, acc)) => {
@@ -218,6 +225,25 @@ impl Transient {
 }
 
 /// The backward pass.
+///
+/// **When the gain is held.** Once the change of `P` over a step first
+/// falls below each of [`NEWTON_AT`], the fixed point `P_∞` is solved for
+/// ([`crate::riccati::fixed_point`]). Knowing it, the sweep measures the
+/// distance `‖P_k − P_∞‖_max / ‖P_∞‖_max` of every exact iterate and holds
+/// the gain once it is below `riccati_tol` (or below twice `P_∞`'s
+/// accuracy, estimated by the last Newton correction, when that is
+/// larger; or when the change stayed below `riccati_tol` for 4 ×
+/// [`WINDOW`] steps, should that estimate be too low) — a measured
+/// distance, where a small change between two steps is not one (the
+/// recursion converges with oscillations: its change dips by 10² and grows
+/// again, and stopping in a dip held the gain 50 times too early in the
+/// lanl8dof benchmark). The matrix held is the last exact iterate (within
+/// rounding of those it stands for), not `P_∞` (whose own rounding it
+/// would add). When `P_∞` cannot be solved for (a closed-loop pole within
+/// ~1e-8 of the unit circle, along directions the data barely see: small
+/// λ against the noise, more forces than sensors) the gain is held once
+/// the change stayed below `riccati_tol` for [`WINDOW`] steps (longer than
+/// the dips), and the distance is reported as NaN.
 pub(crate) fn backward(
     lq: &Lq,
     sys: &Sys,
@@ -225,7 +251,7 @@ pub(crate) fn backward(
 ) -> Result<Backward, NotPositiveDefinite> {
     let (tol, hold) = (settings.riccati_tol, settings.hold_steady_gain);
     let (r, m, len) = (&sys.r, lq.m, lq.len);
-    let mut ric = Riccati::new(r);
+    let mut ric = Riccati::new(r.stage());
     let mut pv = DVector::zeros(r.ns);
     pv.gemv_tr(1.0, &r.ch, &lq.target.column(len - 1), 0.0);
     let mut lff = DMatrix::zeros(m, len);
@@ -235,7 +261,7 @@ pub(crate) fn backward(
     let (mut j, mut settled) = (len - 1, false);
     while j > 0 {
         let k = j - 1;
-        if !ric.step(r, &tr.p) {
+        if !ric.step(&tr.p, None) {
             return Err(NotPositiveDefinite { k });
         }
         vec.step(lq, r, &ric, &tr.p, &pv, k, &mut lff);
@@ -248,7 +274,7 @@ pub(crate) fn backward(
         });
         j -= 1;
         if hold {
-            settled = tr.settles(r, &mut ric, tol);
+            settled = tr.settles(&mut ric, tol);
             if settled || transient.len() >= settings.max_transient {
                 break;
             }
@@ -262,7 +288,7 @@ pub(crate) fn backward(
     let steady = match &held {
         Some(pss) => {
             // the steady gain: one step at the held matrix
-            if !ric.step(r, pss) {
+            if !ric.step(pss, None) {
                 return Err(NotPositiveDefinite { k: j - 1 });
             }
             Gain {
@@ -324,7 +350,7 @@ fn steady_backward(
     let mut k_gain = ric.xg.clone();
     solve_lower_t(&ric.c, view_mut(&mut k_gain));
     let mut phi = DMatrix::zeros(ns, ns);
-    ric.closed_loop(r, &mut phi);
+    ric.closed_loop(&mut phi);
     let phit = phi.transpose();
     // −[Φᵀ; K] P B_c0 and −[Φᵀ; K] P B_c1
     let mut stack = DMatrix::zeros(ns + m, ns);

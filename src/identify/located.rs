@@ -3,11 +3,11 @@
 //!
 //! The same reconstruction `tacit diagnose` starts from: first *where* the
 //! missing force acts is decided from the measurements alone
-//! ([`crate::diagnose::locate`]: a greedy search over spring-joined pairs
+//! ([`super::locate`]: a greedy search over spring-joined pairs
 //! and single DOFs, each candidate scored by how well a force restricted to
 //! it fits the data), then the states and the force are reconstructed
 //! along the located directions by the sub-sample ("lifted") smoother
-//! ([`crate::diagnose::lifted`]: the unknown force piecewise constant on
+//! ([`super::lifted`]: the unknown force piecewise constant on
 //! `R` sub-intervals of every sample, a sparsity prior over DOFs and time).
 //! When no direction dominates (a force spread over many DOFs, or none)
 //! the force is reconstructed at every DOF.
@@ -26,12 +26,11 @@
 //! The open-loop replay runs the lifted map with the whole sub-sample
 //! force, so each impact keeps its impulse.
 
+use super::lifted::{self, LiftedSettings};
+use super::locate::{self, LocateSettings, Located};
 use super::output::{ForceEstimate, Timings};
 use super::settings::Reduce;
 use super::system::{Problem, System};
-use crate::diagnose::lifted::{self, LiftedSettings};
-use crate::diagnose::locate::{self, Located};
-use crate::diagnose::settings::LocateSettings;
 use crate::error::{Result, TacitError};
 use crate::model::Model;
 use nalgebra::DMatrix;

@@ -13,7 +13,8 @@
 //! - the located, lifted smoother ([`located`], `tacit identify`'s
 //!   default): where the force acts is found first, then the force is
 //!   reconstructed along those directions with a sub-sample resolution
-//!   (the reconstruction `tacit diagnose` starts from).
+//!   (the reconstruction `tacit diagnose` starts from): the search
+//!   [`locate`] and the sub-sample smoother [`lifted`].
 //!
 //! Both run on the exact sampled linear model ([`crate::linear`]), reduced
 //! onto the sensors or not ([`Reduce`]); every window problem is linear in
@@ -30,6 +31,8 @@
 
 pub mod finite;
 pub mod identifiability;
+pub mod lifted;
+pub mod locate;
 pub mod located;
 pub mod mhe;
 pub mod output;

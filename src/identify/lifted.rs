@@ -44,10 +44,10 @@
 //!    p = (H_x − H_u L)ᵀ r_k + (A − G L)ᵀ e,\quad
 //!    l_k = Q_{uu}^{-1}(H_uᵀ r_k + Gᵀ e), $$
 //!
-//! and `u_k = −L x_k + l_k`. With `Z = [H_u; G]`, `S = diag(I, P')`,
-//! `M = Z Λ⁻¹ Zᵀ` (`Λ` the diagonal force weights), the push-through
-//! identity `Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹` reduces every solve to size
-//! `p + 2n` whatever `R` is. `P` does not depend on the data: once it stops
+//! and `u_k = −L x_k + l_k`. The matrix step is the shared one of
+//! [`crate::riccati`] (`Q = H_xᵀH_x`, `S = H_uᵀH_x`, `R = H_uᵀH_u`, the
+//! force prior `λ/R` on the diagonal, Cholesky of `Q_uu`, size `nR`).
+//! `P` does not depend on the data: once it stops
 //! changing the steady gains are used, so a sample costs a few
 //! matrix–vector products. States the outputs never see (the unobservable
 //! subspace `N` of `(A, C_y)`: a free-free model's rigid-body displacement
@@ -61,7 +61,7 @@
 use crate::error::{Result, TacitError};
 use crate::linear::SampledModel;
 use crate::record::Quantity;
-use crate::riccati::{rel_change, symmetrize, RelativeTo};
+use crate::riccati::{rel_change, symmetrize, RelativeTo, Riccati, Stage};
 use nalgebra::{DMatrix, DVector};
 use std::time::Instant;
 
@@ -257,15 +257,9 @@ struct Scaled {
     g: DMatrix<f64>,
     hx: DMatrix<f64>,
     hu: DMatrix<f64>,
-    /// `[H_u; G]` ((p + nx) × nu).
-    z: DMatrix<f64>,
-    /// `[H_x; A]` ((p + nx) × nx).
-    y: DMatrix<f64>,
-    /// `Zᵀ`.
-    zt: DMatrix<f64>,
-    /// The Riccati step solves `Q_uu` itself (nu × nu) when it is smaller
-    /// than the `p + nx` system of the push-through form.
-    direct: bool,
+    /// The Riccati stage: `Q = H_xᵀH_x`, `S = H_uᵀH_x`, `R = H_uᵀH_u`
+    /// (the force prior is the step's diagonal).
+    stage: Stage,
     /// `r_k` (p × N).
     target: DMatrix<f64>,
     /// `c_k` (nx × (N−1)).
@@ -391,12 +385,13 @@ impl Scaled {
             c.row_mut(i).scale_mut(1.0 / dx[i]);
         }
         let null = crate::linear::unobservable(&a, &hx);
-        let mut z = DMatrix::zeros(p + nx, nu);
-        z.rows_mut(0, p).copy_from(&hu);
-        z.rows_mut(p, nx).copy_from(&g);
-        let mut y = DMatrix::zeros(p + nx, nx);
-        y.rows_mut(0, p).copy_from(&hx);
-        y.rows_mut(p, nx).copy_from(&a);
+        let stage = Stage::new(
+            &a,
+            &g,
+            hx.transpose() * &hx,
+            hu.transpose() * &hx,
+            hu.transpose() * &hu,
+        );
         let (su, sv) = s.x0_std;
         let p0 = DVector::from_fn(nx, |i, _| {
             let sd = if i < n { su } else { sv };
@@ -410,10 +405,7 @@ impl Scaled {
             g,
             hx,
             hu,
-            zt: z.transpose(),
-            direct: nu < p + nx,
-            z,
-            y,
+            stage,
             target,
             c,
             lambda: DVector::from_element(nu, s.lambda / r as f64 * df * df),
@@ -445,76 +437,6 @@ fn project_vector(null: &DMatrix<f64>, p: &mut DVector<f64>) {
     }
 }
 
-/// Gains of one sample.
-struct Gain {
-    /// L (nu × nx).
-    l: DMatrix<f64>,
-    /// `Q_uu⁻¹ H_uᵀ` (nu × p).
-    kr: DMatrix<f64>,
-    /// `Q_uu⁻¹ Gᵀ` (nu × nx).
-    ke: DMatrix<f64>,
-    /// `(H_x − H_u L)ᵀ` (nx × p).
-    mt: DMatrix<f64>,
-    /// `(A − G L)ᵀ` (nx × nx).
-    phit: DMatrix<f64>,
-}
-
-/// One Riccati step from `P' = pn`: the gains and `P`. `None` when `Q_uu`
-/// is not positive definite.
-fn riccati_step(sp: &Scaled, pn: &DMatrix<f64>, k: usize) -> Option<(Gain, DMatrix<f64>)> {
-    // Q_uu = Λ + Zᵀ S Z with Z = [H_u; G], S = diag(I, P'), Y = [H_x; A];
-    // K = Q_uu⁻¹ Zᵀ
-    let (p, nu) = (sp.hx.nrows(), sp.nu);
-    let q = sp.z.nrows();
-    let lam = |i: usize| sp.lambda[i] * sp.lam_k.as_ref().map_or(1.0, |m| m[(i % m.nrows(), k)]);
-    let kmat = if sp.direct {
-        // Zᵀ S = [H_uᵀ, Gᵀ P']
-        let mut zts = sp.zt.clone();
-        let gp = sp.zt.columns(p, q - p) * pn;
-        zts.columns_mut(p, q - p).copy_from(&gp);
-        let mut quu = &zts * &sp.z;
-        symmetrize(&mut quu);
-        for i in 0..nu {
-            quu[(i, i)] += lam(i);
-        }
-        quu.cholesky()?.solve(&sp.zt)
-    } else {
-        // push-through: Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹, M = Z Λ⁻¹ Zᵀ, so
-        // the solve is of size p + 2n instead of nR
-        let mut zl = sp.z.clone();
-        for i in 0..nu {
-            zl.column_mut(i).scale_mut(1.0 / lam(i));
-        }
-        let m = &zl * &sp.zt;
-        let mut ism = m.clone();
-        let low = pn * m.rows(p, q - p);
-        ism.rows_mut(p, q - p).copy_from(&low);
-        for i in 0..q {
-            ism[(i, i)] += 1.0;
-        }
-        // K = ((I + S M)^{-T} Λ⁻¹ Z)ᵀ
-        ism.transpose().lu().solve(&zl)?.transpose()
-    };
-    let mut sy = sp.y.clone();
-    let pa = pn * &sp.a;
-    sy.rows_mut(p, q - p).copy_from(&pa);
-    let l = &kmat * &sy;
-    let zlm = &sp.z * &l;
-    let mut pk = sp.y.transpose() * &sy - sy.transpose() * &zlm;
-    symmetrize(&mut pk);
-    let closed = &sp.y - &zlm;
-    Some((
-        Gain {
-            l,
-            kr: kmat.columns(0, p).into_owned(),
-            ke: kmat.columns(p, q - p).into_owned(),
-            mt: closed.rows(0, p).transpose(),
-            phit: closed.rows(p, q - p).transpose(),
-        },
-        pk,
-    ))
-}
-
 /// The backward pass.
 struct Backward {
     /// Samples `k ≥ j0` use `transient[k − j0]`, `k < j0` the steady gain.
@@ -531,40 +453,76 @@ struct Backward {
 
 const RICCATI_TOL: f64 = 1e-13;
 
+fn not_definite(k: usize) -> TacitError {
+    TacitError::Numerical(format!(
+        "lifted reconstruction: Q_uu of the Riccati step is not positive definite at sample {k}"
+    ))
+}
+
+impl Scaled {
+    /// The force prior of sample `k` (the diagonal of `Q_uu`'s `Λ`).
+    fn prior_at(&self, k: usize, out: &mut [f64]) {
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = self.lambda[i] * self.lam_k.as_ref().map_or(1.0, |m| m[(i % m.nrows(), k)]);
+        }
+    }
+}
+
+/// The vector part of a transient step from the last Riccati step of
+/// `ric`: with `v = H_uᵀ r_k + Gᵀ e`, `l_k = Q_uu⁻¹ v` and
+/// `p_k = H_xᵀ r_k + Aᵀ e − Lᵀ v`.
+fn vector_step(
+    sp: &Scaled,
+    ric: &Riccati,
+    k: usize,
+    e: &DVector<f64>,
+) -> (DVector<f64>, DVector<f64>) {
+    let rk = sp.target.column(k);
+    let mut v = sp.hu.tr_mul(&rk);
+    v.gemv_tr(1.0, &sp.g, e, 1.0);
+    let mut l = v.clone();
+    ric.c.solve_lower_triangular_mut(&mut l);
+    ric.c.tr_solve_lower_triangular_mut(&mut l);
+    let mut pv = sp.hx.tr_mul(&rk);
+    pv.gemv_tr(1.0, &sp.a, e, 1.0);
+    pv.gemv_tr(-1.0, &ric.l, &v, 1.0);
+    (l, pv)
+}
+
 fn backward(sp: &Scaled) -> Result<Backward> {
     let (nx, nu, len) = (sp.nx, sp.nu, sp.len);
+    let mut ric = Riccati::new(sp.stage.clone());
     let mut p = DMatrix::zeros(nx, nx);
     let mut pv = DVector::zeros(nx);
     let mut lff = DMatrix::zeros(nu, len);
     let mut transient: Vec<DMatrix<f64>> = Vec::new();
+    let mut diag = vec![0.0; nu];
     let mut calm = 0usize;
     let mut k = len;
-    let trouble = |k: usize| {
-        TacitError::Numerical(format!(
-            "lifted reconstruction: the Riccati system I + S M is singular at sample {k}"
-        ))
-    };
     // transient: full Riccati steps until P stops changing
     while k > 0 {
         k -= 1;
-        let (gain, mut pk) = riccati_step(sp, &p, k).ok_or_else(|| trouble(k))?;
-        project_matrix(&sp.null, &mut pk);
+        sp.prior_at(k, &mut diag);
+        if !ric.step(&p, Some(&diag)) {
+            return Err(not_definite(k));
+        }
+        project_matrix(&sp.null, &mut ric.p);
         let e = if k + 1 < len {
             &pv - &p * sp.c.column(k)
         } else {
             DVector::zeros(nx)
         };
-        let rk = sp.target.column(k);
-        lff.set_column(k, &(&gain.kr * rk + &gain.ke * &e));
-        pv = &gain.mt * rk + &gain.phit * &e;
+        let (lk, pk) = vector_step(sp, &ric, k, &e);
+        lff.set_column(k, &lk);
+        pv = pk;
         project_vector(&sp.null, &mut pv);
-        calm = if rel_change(&pk, &p, RelativeTo::Larger) <= RICCATI_TOL {
+        calm = if rel_change(&ric.p, &p, RelativeTo::Larger) <= RICCATI_TOL {
             calm + 1
         } else {
             0
         };
-        p = pk;
-        transient.push(gain.l);
+        std::mem::swap(&mut p, &mut ric.p);
+        transient.push(ric.l.clone());
         if calm >= 3 && sp.lam_k.is_none() {
             break;
         }
@@ -573,25 +531,12 @@ fn backward(sp: &Scaled) -> Result<Backward> {
     let mut steady = None;
     if j0 > 0 {
         // steady state: P_k = P for every k < j0
-        let (gain, _) = riccati_step(sp, &p, 0).ok_or_else(|| trouble(j0 - 1))?;
-        let mut e = DVector::zeros(nx);
-        let mut pc = DVector::zeros(nx);
-        let mut lk = DVector::zeros(nu);
-        let mut pnew = DVector::zeros(nx);
-        for k in (0..j0).rev() {
-            pc.gemv(1.0, &p, &sp.c.column(k), 0.0);
-            e.copy_from(&pv);
-            e -= &pc;
-            let rk = sp.target.column(k);
-            lk.gemv(1.0, &gain.kr, &rk, 0.0);
-            lk.gemv(1.0, &gain.ke, &e, 1.0);
-            lff.set_column(k, &lk);
-            pnew.gemv(1.0, &gain.mt, &rk, 0.0);
-            pnew.gemv(1.0, &gain.phit, &e, 1.0);
-            std::mem::swap(&mut pv, &mut pnew);
-            project_vector(&sp.null, &mut pv);
+        sp.prior_at(0, &mut diag);
+        if !ric.step(&p, Some(&diag)) {
+            return Err(not_definite(j0 - 1));
         }
-        steady = Some(gain.l);
+        steady_backward(sp, &ric, &p, j0, &mut pv, &mut lff);
+        steady = Some(ric.l.clone());
     }
     transient.reverse();
     Ok(Backward {
@@ -602,6 +547,45 @@ fn backward(sp: &Scaled) -> Result<Backward> {
         p0: p,
         pv0: pv,
     })
+}
+
+/// The steady part of the backward pass, samples `j0 − 1 … 0`, with the
+/// gains of the step `ric` holds at `P`: `l_k = K_r r_k + K_e e`,
+/// `p_k = (H_x − H_u L)ᵀ r_k + (A − G L)ᵀ e`, `e = p' − P c_k`.
+fn steady_backward(
+    sp: &Scaled,
+    ric: &Riccati,
+    p: &DMatrix<f64>,
+    j0: usize,
+    pv: &mut DVector<f64>,
+    lff: &mut DMatrix<f64>,
+) {
+    let (nx, nu) = (sp.nx, sp.nu);
+    let mut kr = sp.hu.transpose();
+    ric.c.solve_lower_triangular_mut(&mut kr);
+    ric.c.tr_solve_lower_triangular_mut(&mut kr);
+    let ke = ric.input_gain();
+    let mt = (&sp.hx - &sp.hu * &ric.l).transpose();
+    let mut phi = DMatrix::zeros(nx, nx);
+    ric.closed_loop(&mut phi);
+    let phit = phi.transpose();
+    let mut e = DVector::zeros(nx);
+    let mut pc = DVector::zeros(nx);
+    let mut lk = DVector::zeros(nu);
+    let mut pnew = DVector::zeros(nx);
+    for k in (0..j0).rev() {
+        pc.gemv(1.0, p, &sp.c.column(k), 0.0);
+        e.copy_from(pv);
+        e -= &pc;
+        let rk = sp.target.column(k);
+        lk.gemv(1.0, &kr, &rk, 0.0);
+        lk.gemv(1.0, &ke, &e, 1.0);
+        lff.set_column(k, &lk);
+        pnew.gemv(1.0, &mt, &rk, 0.0);
+        pnew.gemv(1.0, &phit, &e, 1.0);
+        std::mem::swap(pv, &mut pnew);
+        project_vector(&sp.null, pv);
+    }
 }
 
 /// The forward pass: scaled states (nx × N) and controls (nu × N).
@@ -849,12 +833,8 @@ mod tests {
         let res = reconstruct(&sm, &known, &measured, &channels, &s).unwrap();
         assert!(res.status.starts_with("solved"), "{}", res.status);
         let varying = DMatrix::from_fn(n, len, |i, k| 0.3 + ((i * 7 + k * 3) % 5) as f64);
-        for (weights, direct) in [None, Some(varying)]
-            .into_iter()
-            .flat_map(|w| [(w.clone(), false), (w, true)])
-        {
-            // the sweep, with optional time-varying weights, both forms
-            // of the Riccati step
+        for weights in [None, Some(varying)] {
+            // the sweep, with optional time-varying weights
             let mut sp = Scaled::new(
                 &sm,
                 &lm,
@@ -866,7 +846,6 @@ mod tests {
             )
             .unwrap();
             sp.lam_k = weights.clone();
-            sp.direct = direct;
             let bw = backward(&sp).unwrap();
             let (mut xs, mut us) = forward(&sp, &bw).unwrap();
             for i in 0..2 * n {

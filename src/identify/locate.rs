@@ -24,14 +24,48 @@
 //! fitted the noise of channel 2: 0.65 → 0.16).
 
 use super::lifted::{self, LiftedSettings};
-use super::settings::LocateSettings;
 use crate::error::Result;
 use crate::linear::SampledModel;
 use crate::model::Model;
 use crate::record::Quantity;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+
+/// The force-location search ([`locate`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LocateSettings {
+    /// Dominance ratio: a direction is taken when its weighted residual is
+    /// at most this times the residual without it and that of the
+    /// runner-up (default 0.8; 0 ≤ ratio < 1, 0 disables the search: an
+    /// unknown force at every DOF). Reason: a ratio holds whatever the
+    /// noise level; 0.8 separated every single-place effect of the test
+    /// matrix from distributed friction.
+    pub ratio: f64,
+    /// Most directions selected (default 3; the search also takes at most
+    /// one per two channels). Reason: each direction needs about two
+    /// channels' worth of data beyond the states.
+    pub max: usize,
+    /// Weighted residual RMS (1 = the assumed noise) at which the search
+    /// stops adding directions (default 1.5; > 0). Reason: below it a
+    /// further direction only fits noise.
+    pub noise_stop: f64,
+    /// Directions after the best tried together with it when it does not
+    /// dominate alone (default 4; ≥ 0). Reason: two effects at two places.
+    pub pair_trials: usize,
+}
+
+impl Default for LocateSettings {
+    fn default() -> Self {
+        LocateSettings {
+            ratio: 0.8,
+            max: 3,
+            noise_stop: 1.5,
+            pair_trials: 4,
+        }
+    }
+}
 
 /// A direction of the unknown force: a spring-joined pair (`[i, j]`, force
 /// `+f` at `i`, `−f` at `j`) or one DOF to ground (`[i]`); DOFs from 1.

@@ -116,7 +116,7 @@ pub(crate) fn solve_lower_t_vec(c: &DMatrix<f64>, x: &mut [f64]) {
     }
 }
 
-pub(crate) use crate::riccati::symmetrize;
+pub(crate) use super::symmetrize;
 
 #[cfg(test)]
 mod tests {

@@ -1,10 +1,17 @@
 //! The Riccati core shared by the two smoothers, the full-horizon one
 //! ([`crate::horizon`], on the reduced system) and the lifted one
-//! ([`crate::diagnose::lifted`], on the sub-sampled model): exact
+//! ([`crate::identify::lifted`], on the sub-sampled model): one step of
+//! the backward recursion of a linear–quadratic stage and its fixed point
+//! ([`step`]), the small dense kernels they run on ([`dense`]), exact
 //! symmetrization of the iterates `P_k` (rounding leaves the two
 //! triangles of `P − YᵀY` apart, and the recursion would amplify the
 //! skew part), and the relative change between iterates by which each
 //! sweep decides when to hold its gain.
+
+pub(crate) mod dense;
+pub(crate) mod step;
+
+pub(crate) use step::{fixed_point, stein, Riccati, Stage};
 
 use nalgebra::DMatrix;
 
