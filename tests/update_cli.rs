@@ -110,3 +110,77 @@ fn bad_input_fails_and_writes_nothing() {
         assert!(!out.exists(), "{args:?} left {}", out.display());
     }
 }
+
+/// A model that cannot be simulated on the record is an error with its
+/// facts, a non-zero exit and no output: (a) a softening cubic whose
+/// Newton iterations fail at the start values; (b) a spring of 1e20 N/m
+/// without damping, whose simulation completes but diverges (energy above
+/// what the force can put in), which the updating used to fit and write
+/// with exit 0.
+#[test]
+fn a_model_that_cannot_be_simulated_is_an_error_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = record_file(dir.path());
+    let soft = dir.path().join("soft.toml");
+    std::fs::write(
+        &soft,
+        table4::MODEL_TOML.replace("k3 = 3.0e8", "k3 = -3.0e12"),
+    )
+    .unwrap();
+    assert!(std::fs::read_to_string(&soft).unwrap().contains("-3.0e12"));
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let lanl = std::fs::read_to_string(root.join("data/lanl8dof.toml")).unwrap();
+    let k5 = lanl.find("name = \"k5\"").unwrap();
+    let at = k5 + lanl[k5..].find("stiffness = 56700.0").unwrap();
+    let stiff = format!(
+        "{}stiffness = 1e20{}",
+        &lanl[..at],
+        &lanl[at + "stiffness = 56700.0".len()..]
+    )
+    .replace("kind = \"modal\"\nratio = 0.01", "kind = \"none\"");
+    let stiff_path = dir.path().join("stiff.toml");
+    std::fs::write(&stiff_path, stiff).unwrap();
+    let bumper = root.join("data/lanl8dof-bumper.h5");
+    let cases: [(&std::path::Path, &std::path::Path, &[&str], &[&str]); 2] = [
+        (
+            &soft,
+            &rec,
+            &["--free", "k1..k4", "--data", "disp,vel"],
+            &[
+                "the model at the start values (k1 = 2.6e5",
+                "Newton iterations did not converge at t = ",
+                "nothing was fitted",
+            ],
+        ),
+        (
+            &stiff_path,
+            &bumper,
+            &["--free", "k1", "--data", "accel"],
+            &[
+                "the fitted model (k1 = ",
+                "segment 0 diverges from its sample 65",
+                "DOF 5 at ",
+                "the highest natural frequency is about 3.476e9 Hz",
+            ],
+        ),
+    ];
+    for (i, (model, record, args, needles)) in cases.iter().enumerate() {
+        let out = dir.path().join(format!("out{i}"));
+        let o = tacit()
+            .args(["update", "--model"])
+            .arg(model)
+            .arg("--record")
+            .arg(record)
+            .args(*args)
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "case {i}: {err}");
+        for n in *needles {
+            assert!(err.contains(n), "case {i}: no {n:?} in {err}");
+        }
+        assert!(!out.exists(), "case {i} left {}", out.display());
+    }
+}

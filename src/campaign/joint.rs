@@ -226,6 +226,7 @@ pub fn fit(
         }
         let problem = concatenate(&model, &work, bounded(&model, &tg)?, sim)?;
         let fitted = update::fit(&problem, &FitSettings::default())?;
+        update::usable(&problem, &fitted, &format!("joint fit of {label}"))?;
         iterations += fitted.iterations;
         model = fitted.model.clone();
         res = Some(fitted);
@@ -249,17 +250,27 @@ pub fn fit(
         .collect();
     let records = records
         .iter()
-        .map(|r| RecordErrors {
-            name: r.name.clone(),
-            own: r.comparison.errors(&r.own, sim).0.relative_error,
-            joint: r.comparison.errors(&res.model, sim).0.relative_error,
+        .map(|r| {
+            let joint = r.comparison.errors(&res.model, sim).0.relative_error;
+            match joint {
+                Some(e) if e.is_finite() => Ok(RecordErrors {
+                    name: r.name.clone(),
+                    own: r.comparison.errors(&r.own, sim).0.relative_error,
+                    joint,
+                }),
+                _ => Err(TacitError::Numerical(format!(
+                    "joint fit of {label}: the model with the shared parameters cannot be simulated on record {} ({}): no shared model is given",
+                    r.name,
+                    joint.map_or("its simulation failed".into(), |e| format!("its error is {e}"))
+                ))),
+            }
         })
-        .collect();
+        .collect::<Result<Vec<_>>>()?;
     Ok(JointFit {
         effect: label.into(),
         parameters,
         records,
-        termination: format!("{:?}", res.termination),
+        termination: res.termination.words(),
         iterations,
         elapsed_s: t0.elapsed().as_secs_f64(),
         model: res.model,

@@ -143,9 +143,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     settings.validate()?;
     let result = update::fit(&problem, &settings)?;
-    finite(&result)?;
-    let before = update::predict(&problem, &problem.x_start()).ok();
-    let after = update::predict(&problem, &result.x).ok();
+    let what = format!("the updating of {}", a.record.display());
+    update::usable(&problem, &result, &what)?;
+    let predicted = |x: &[f64], which: &str| {
+        update::predict(&problem, x).map_err(|f| {
+            anyhow::anyhow!("{what}: the {which} model cannot be simulated over the record ({f}); nothing was written")
+        })
+    };
+    let before = predicted(&problem.x_start(), "start")?;
+    let after = predicted(&result.x, "fitted")?;
     let dir = staging.dir().to_path_buf();
     let files = || -> anyhow::Result<Vec<String>> {
         tacit::io::write_json(&dir.join("summary.json"), &result)?;
@@ -156,12 +162,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             ("update_before", &before, "before updating"),
             ("update_after", &after, "after updating"),
         ] {
-            if let Some(pred) = pred {
-                let fig =
-                    update::figures::responses(&problem, &t, pred, &format!("Responses {title}"));
-                plot::save(&fig, &dir.join(stem))?;
-                written.push(format!("{stem}.png/.svg"));
-            }
+            let fig = update::figures::responses(&problem, &t, pred, &format!("Responses {title}"));
+            plot::save(&fig, &dir.join(stem))?;
+            written.push(format!("{stem}.png/.svg"));
         }
         Ok(written)
     };
@@ -169,27 +172,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     staging.commit()?;
     print_summary(&result)?;
     outln!("wrote {} in {}", written.join(", "), a.output.display());
-    Ok(())
-}
-
-/// An error with the facts when the fit's cost, parameters or errors are
-/// not finite (never a NaN in a summary).
-fn finite(r: &update::FitResult) -> anyhow::Result<()> {
-    let errors = |e: &Option<update::ErrorReport>| e.as_ref().map_or(0.0, |e| e.overall);
-    let bad = !r.cost().is_finite()
-        || r.values().iter().any(|v| !v.is_finite())
-        || !errors(&r.errors_before).is_finite()
-        || !errors(&r.errors_after).is_finite();
-    if bad {
-        anyhow::bail!(
-            "the updating gave non-finite results (cost {:e}, parameters {:?}, errors {:e} -> {:e}; {}): the record or the model is out of double precision's range",
-            r.cost(),
-            r.values(),
-            errors(&r.errors_before),
-            errors(&r.errors_after),
-            termination_words(&r.termination)
-        );
-    }
     Ok(())
 }
 
@@ -287,7 +269,7 @@ fn print_summary(r: &FitResult) -> anyhow::Result<()> {
     }
     outln!(
         "termination: {}; {} iterations, {} simulations, {:.2} s",
-        termination_words(&r.termination),
+        r.termination.words(),
         r.iterations,
         r.simulations,
         r.elapsed_s
@@ -361,7 +343,7 @@ fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
     }
     s.push_str(&format!(
         "\nTermination: {}. Iterations {}, cost evaluations {}, simulations {}, failed trials {}, {:.2} s.\n\n",
-        termination_words(&r.termination),
+        r.termination.words(),
         r.iterations, r.evaluations, r.simulations, r.failed_trials, r.elapsed_s
     ));
     s.push_str(&format!("Jacobian: {}.\n\n", jacobian_line(r)));
@@ -397,20 +379,6 @@ fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
     }
     s.push_str("\nFigures: update_before.png, update_after.png (test solid, model dashed).\n");
     s
-}
-
-/// How the optimizer stopped, in words.
-fn termination_words(t: &update::Termination) -> String {
-    use update::Termination as T;
-    match t {
-        T::Converged { criterion } => format!("converged ({criterion} test)"),
-        T::IterationLimit => "stopped at the iteration limit (--max-iterations)".into(),
-        T::EvaluationLimit => "stopped at the limit of cost evaluations".into(),
-        T::Stalled { reason } => format!("stalled: {reason}"),
-        T::StartFailed { failure } => {
-            format!("the model could not be simulated at the start: {failure}")
-        }
-    }
 }
 
 /// The Jacobian method, in words.

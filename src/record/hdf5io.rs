@@ -23,7 +23,7 @@ use super::csvio::{
 use super::{Channel, Quantity, Record, Truth};
 use crate::error::{Result, TacitError};
 use hdf5::plist::group_create::LinkCreationOrder;
-use hdf5::types::{FixedAscii, FixedUnicode, TypeDescriptor, VarLenAscii, VarLenUnicode};
+use hdf5::types::{TypeDescriptor, VarLenAscii, VarLenUnicode};
 use hdf5::{Dataset, Group, H5Type, IndexType, IterationOrder, Location};
 use ndarray::Array2;
 use std::path::Path;
@@ -503,11 +503,48 @@ fn get_str(loc: &Location, name: &str) -> Msg<Option<String>> {
     let s = match desc {
         TypeDescriptor::VarLenUnicode => read_one::<VarLenUnicode>(&attr, name)?.to_string(),
         TypeDescriptor::VarLenAscii => read_one::<VarLenAscii>(&attr, name)?.to_string(),
-        TypeDescriptor::FixedAscii(_) => read_one::<FixedAscii<1024>>(&attr, name)?.to_string(),
-        TypeDescriptor::FixedUnicode(_) => read_one::<FixedUnicode<1024>>(&attr, name)?.to_string(),
+        TypeDescriptor::FixedAscii(n) | TypeDescriptor::FixedUnicode(n) => {
+            read_fixed_str(&attr, name, n)?
+        }
         other => return Err(format!("attribute {name} is not a string ({other})")),
     };
     Ok(Some(s.trim_end_matches(['\0', ' ']).to_string()))
+}
+
+/// A fixed-length string attribute of `len` bytes, read in its own type
+/// (a conversion to a shorter fixed type would cut it short without a
+/// word): UTF-8, or an error naming the attribute.
+fn read_fixed_str(attr: &hdf5::Attribute, name: &str, len: usize) -> Msg<String> {
+    if attr.size() != 1 {
+        return Err(format!(
+            "attribute {name} holds {} values, expected 1",
+            attr.size()
+        ));
+    }
+    let dtype = attr
+        .dtype()
+        .map_err(h5(format!("attribute {name}: cannot read its type")))?;
+    let mut buf = vec![0u8; len.max(dtype.size())];
+    let status = hdf5::sync::sync(|| {
+        // SAFETY: the attribute holds one value of `dtype`, whose size the
+        // buffer covers; the ids stay open for the call; the lock is held.
+        unsafe {
+            hdf5_sys::h5a::H5Aread(
+                attr.id(),
+                dtype.id(),
+                buf.as_mut_ptr().cast::<std::ffi::c_void>(),
+            )
+        }
+    });
+    if status < 0 {
+        return Err(format!("cannot read attribute {name}"));
+    }
+    String::from_utf8(buf).map_err(|e| {
+        format!(
+            "attribute {name}: a string of {len} bytes that is not UTF-8 (byte {})",
+            e.utf8_error().valid_up_to()
+        )
+    })
 }
 
 /// A numeric attribute as f64.
@@ -521,6 +558,7 @@ fn get_f64(loc: &Location, name: &str) -> Msg<Option<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hdf5::types::FixedAscii;
 
     fn record_with_truth() -> Record {
         let n = 64;
@@ -642,6 +680,50 @@ mod tests {
         assert_eq!(rec.outputs[1].data, vec![2.0; 10]);
         assert_eq!(rec.outputs[1].unit, "m/s^2");
         assert_eq!(rec.outputs[0].unit, "mm");
+    }
+
+    /// Strings of unusual length: a fixed-length `model_toml` of 3 000
+    /// bytes (h5py writes numpy bytes as fixed-length strings; it was cut
+    /// to 1 024 by the conversion), a variable-length one of 200 000
+    /// characters, and an empty one, are read whole; a `unit` of 100 000
+    /// characters is an error naming the channel, with the unit cut short.
+    #[test]
+    fn strings_of_unusual_length_are_read_whole_or_refused_by_name() {
+        use hdf5::types::VarLenAscii;
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.h5");
+        write(&record_with_truth(), &p).unwrap();
+        let line = "# a comment line of a long model file, 49 bytes.\n";
+        let fixed: String = line.repeat(3000 / line.len());
+        let long: String = "x".repeat(200_000);
+        for (k, text) in [fixed.as_str(), long.as_str(), ""].iter().enumerate() {
+            {
+                let f = hdf5::File::open_rw(&p).unwrap();
+                let g = f.group("truth").unwrap();
+                g.delete_attr("model_toml").unwrap();
+                if k == 0 {
+                    let v = FixedAscii::<4096>::from_ascii(text.as_bytes()).unwrap();
+                    put_scalar(&g, "model_toml", &v).unwrap();
+                } else {
+                    put_str(&g, "model_toml", text).unwrap();
+                }
+            }
+            let rec = read(&p).unwrap();
+            let got = &rec.truth.as_ref().unwrap().model_toml;
+            assert_eq!(got.len(), text.len(), "case {k}");
+            assert_eq!(got, text, "case {k}");
+        }
+        {
+            let f = hdf5::File::open_rw(&p).unwrap();
+            let ds = f.group("outputs").unwrap().dataset("accel_2").unwrap();
+            ds.delete_attr("unit").unwrap();
+            let v = VarLenAscii::from_ascii(&"g".repeat(100_000)).unwrap();
+            put_scalar(&ds, "unit", &v).unwrap();
+        }
+        let e = crate::record::read(&p).unwrap_err().to_string();
+        assert!(e.contains("channel accel_2: unit \"gggg"), "{e}");
+        assert!(e.contains("…\" (100000 characters) is not a unit of accel"), "{e}");
+        assert!(e.len() < 400, "{} bytes: {}", e.len(), &e[..400]);
     }
 
     /// The fuzzer's out-of-memory input: two bytes of the shipped

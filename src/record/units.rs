@@ -101,9 +101,9 @@ fn convert_channel(c: &mut Channel) -> std::result::Result<Option<Conversion>, S
     }
     let factor = si_factor(c.quantity, &c.unit).ok_or_else(|| {
         format!(
-            "channel {}: unit \"{}\" is not a unit of {} (known: {})",
+            "channel {}: unit {} is not a unit of {} (known: {})",
             c.name(),
-            c.unit,
+            shown(&c.unit),
             c.quantity.prefix(),
             known(c.quantity)
         )
@@ -120,6 +120,18 @@ fn convert_channel(c: &mut Channel) -> std::result::Result<Option<Conversion>, S
         from,
         factor,
     }))
+}
+
+/// A unit as written, quoted; one longer than 40 characters is cut
+/// there with its length given (a message stays one readable line).
+fn shown(unit: &str) -> String {
+    let n = unit.chars().count();
+    if n <= 40 {
+        format!("\"{unit}\"")
+    } else {
+        let head: String = unit.chars().take(40).collect();
+        format!("\"{head}…\" ({n} characters)")
+    }
 }
 
 fn known(q: Quantity) -> &'static str {

@@ -107,6 +107,39 @@ pub fn simulate(
     (runs.into_iter().collect(), count)
 }
 
+/// The first segment whose simulation at `x` diverges (its energy above
+/// what the force can put in, [`Integrator::divergence`]), in words with
+/// the step's facts; None when every segment stays bounded (or a
+/// simulation fails, which [`simulate`] reports).
+pub fn divergence(problem: &Problem, x: &[f64]) -> Option<String> {
+    let model = problem.model_at(x);
+    let compiled = compile(problem, &model).ok()?;
+    problem.segments.iter().enumerate().find_map(|(i, seg)| {
+        let force = problem.force.columns(seg.start, seg.len);
+        let (fa, ua, va) = match (&compiled.tt, &compiled.proj) {
+            (None, _) => (force.into_owned(), seg.u0.clone(), seg.v0.clone()),
+            (Some(tt), proj) => {
+                let proj = proj.as_ref().unwrap_or(tt);
+                let ua = proj * DVector::from_column_slice(&seg.u0);
+                let va = proj * DVector::from_column_slice(&seg.v0);
+                (tt * force, ua.as_slice().to_vec(), va.as_slice().to_vec())
+            }
+        };
+        let sim = compiled.integ.run(fa.as_view(), &ua, &va);
+        let d = compiled.integ.divergence(fa.as_view(), &sim)?;
+        let at = match compiled.tt {
+            None => format!("DOF {} at {:.3e} m/s^2", d.dof, d.accel),
+            Some(_) => format!("reduced coordinate {} at {:.3e}", d.dof, d.accel),
+        };
+        Some(format!(
+            "segment {i} diverges from its sample {} on: its energy is {:.3e} times what the force can put in ({at}); {}",
+            d.sample,
+            d.growth.powi(2),
+            compiled.integ.describe_step()
+        ))
+    })
+}
+
 /// Relative difference between the reduced and the full-order responses
 /// at `x` over all channels and segments (`None` for a full-order problem
 /// or when either simulation fails).

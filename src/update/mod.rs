@@ -247,6 +247,54 @@ pub fn fit(problem: &Problem, settings: &FitSettings) -> Result<FitResult> {
     })
 }
 
+/// An error with the facts when the fit's result cannot stand for the
+/// record: the model could not be simulated at its start values, the
+/// fitted model cannot be simulated over the record's segments, or the
+/// cost, a parameter or an error is not finite, or the fitted model's
+/// simulation diverges (its energy above what the force can put in).
+/// `what` names the fit in the message (`the updating of REC`).
+pub fn usable(problem: &Problem, r: &FitResult, what: &str) -> Result<()> {
+    let names = || -> String {
+        r.parameters
+            .iter()
+            .map(|p| format!("{} = {:e}", p.name, p.value))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if let Termination::StartFailed { failure } = &r.termination {
+        return Err(crate::TacitError::Numerical(format!(
+            "{what}: the model at the start values ({}) cannot be simulated on the record ({failure}); nothing was fitted",
+            names()
+        )));
+    }
+    let Some(after) = &r.errors_after else {
+        return Err(crate::TacitError::Numerical(format!(
+            "{what}: the fitted model ({}) cannot be simulated over the record's segments ({}); its errors and responses would be meaningless, so no result is given",
+            names(),
+            r.termination.words()
+        )));
+    };
+    if let Some(d) = forward::divergence(problem, &r.x) {
+        return Err(crate::TacitError::Numerical(format!(
+            "{what}: the fitted model ({}) cannot be simulated on the record: {d}",
+            names()
+        )));
+    }
+    let before = r.errors_before.as_ref().map_or(f64::NAN, |e| e.overall);
+    let bad_param = r.parameters.iter().find(|p| !p.value.is_finite());
+    if !r.cost().is_finite() || bad_param.is_some() || !after.overall.is_finite() {
+        return Err(crate::TacitError::Numerical(format!(
+            "{what}: the fit gave non-finite results (cost {:e}; {}; relative error {:e} -> {:e}; {}): the record or the model is out of double precision's range",
+            r.cost(),
+            names(),
+            before,
+            after.overall,
+            r.termination.words()
+        )));
+    }
+    Ok(())
+}
+
 /// Fit from several starts (scaled changes, one vector per start, e.g.
 /// `[-0.3, 0.3]` for −30 % / +30 % on relative parameters) and return every
 /// result with the index of the lowest final cost among the runs that did

@@ -208,6 +208,19 @@ impl Termination {
     pub fn converged(&self) -> bool {
         matches!(self, Termination::Converged { .. })
     }
+
+    /// How the search ended, in words (no type names).
+    pub fn words(&self) -> String {
+        match self {
+            Termination::Converged { criterion } => format!("converged ({criterion} test)"),
+            Termination::IterationLimit => "stopped at the iteration limit".into(),
+            Termination::EvaluationLimit => "stopped at the limit of cost evaluations".into(),
+            Termination::Stalled { reason } => format!("stalled: {reason}"),
+            Termination::StartFailed { failure } => {
+                format!("the model could not be simulated at the start: {failure}")
+            }
+        }
+    }
 }
 
 /// Raw outcome of one optimization.
