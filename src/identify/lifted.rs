@@ -45,9 +45,11 @@
 //!    l_k = Q_{uu}^{-1}(H_uᵀ r_k + Gᵀ e), $$
 //!
 //! and `u_k = −L x_k + l_k`. The matrix step is the shared one of
-//! [`crate::riccati`] (`Q = H_xᵀH_x`, `S = H_uᵀH_x`, `R = H_uᵀH_u`, the
-//! force prior `λ/R` on the diagonal, Cholesky of `Q_uu`, size `nR`).
-//! `P` does not depend on the data: once it stops
+//! [`crate::riccati`] in its output form: with `Z = [H_u; G]`,
+//! `S = diag(I, P')`, `M = Z Λ⁻¹ Zᵀ` (`Λ` the diagonal force weights), the
+//! push-through identity `Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹` reduces every
+//! solve to size `p + 2n` whatever `R` is (`Q_uu` is factored directly
+//! when it is the smaller). `P` does not depend on the data: once it stops
 //! changing the steady gains are used, so a sample costs a few
 //! matrix–vector products. States the outputs never see (the unobservable
 //! subspace `N` of `(A, C_y)`: a free-free model's rigid-body displacement
@@ -257,8 +259,8 @@ struct Scaled {
     g: DMatrix<f64>,
     hx: DMatrix<f64>,
     hu: DMatrix<f64>,
-    /// The Riccati stage: `Q = H_xᵀH_x`, `S = H_uᵀH_x`, `R = H_uᵀH_u`
-    /// (the force prior is the step's diagonal).
+    /// The Riccati stage in output form (`H_x`, `H_u`; the force prior is
+    /// the step's diagonal).
     stage: Stage,
     /// `r_k` (p × N).
     target: DMatrix<f64>,
@@ -385,13 +387,7 @@ impl Scaled {
             c.row_mut(i).scale_mut(1.0 / dx[i]);
         }
         let null = crate::linear::unobservable(&a, &hx);
-        let stage = Stage::new(
-            &a,
-            &g,
-            hx.transpose() * &hx,
-            hu.transpose() * &hx,
-            hu.transpose() * &hu,
-        );
+        let stage = Stage::with_outputs(&a, &g, &hx, &hu);
         let (su, sv) = s.x0_std;
         let p0 = DVector::from_fn(nx, |i, _| {
             let sd = if i < n { su } else { sv };
@@ -468,29 +464,34 @@ impl Scaled {
     }
 }
 
-/// The vector part of a transient step from the last Riccati step of
-/// `ric`: with `v = H_uᵀ r_k + Gᵀ e`, `l_k = Q_uu⁻¹ v` and
-/// `p_k = H_xᵀ r_k + Aᵀ e − Lᵀ v`.
-fn vector_step(
-    sp: &Scaled,
-    ric: &Riccati,
-    k: usize,
-    e: &DVector<f64>,
-) -> (DVector<f64>, DVector<f64>) {
-    let rk = sp.target.column(k);
-    let mut v = sp.hu.tr_mul(&rk);
-    v.gemv_tr(1.0, &sp.g, e, 1.0);
-    let mut l = v.clone();
-    ric.c.solve_lower_triangular_mut(&mut l);
-    ric.c.tr_solve_lower_triangular_mut(&mut l);
-    let mut pv = sp.hx.tr_mul(&rk);
-    pv.gemv_tr(1.0, &sp.a, e, 1.0);
-    pv.gemv_tr(-1.0, &ric.l, &v, 1.0);
-    (l, pv)
+/// Gains of one step of the output-form Riccati step `ric` (`K = Q_uu⁻¹
+/// Zᵀ`, `Y − Z L`): `l_k = K_r r_k + K_e e`, `p_k = M r_k + Φᵀ e`.
+struct Gain {
+    /// `Q_uu⁻¹ H_uᵀ` (nu × p).
+    kr: DMatrix<f64>,
+    /// `Q_uu⁻¹ Gᵀ` (nu × nx).
+    ke: DMatrix<f64>,
+    /// `(H_x − H_u L)ᵀ` (nx × p).
+    mt: DMatrix<f64>,
+    /// `(A − G L)ᵀ` (nx × nx).
+    phit: DMatrix<f64>,
+}
+
+impl Gain {
+    fn of(ric: &Riccati, p: usize) -> Gain {
+        let q = ric.k.ncols();
+        Gain {
+            kr: ric.k.columns(0, p).into_owned(),
+            ke: ric.k.columns(p, q - p).into_owned(),
+            mt: ric.closed.rows(0, p).transpose(),
+            phit: ric.closed.rows(p, q - p).transpose(),
+        }
+    }
 }
 
 fn backward(sp: &Scaled) -> Result<Backward> {
     let (nx, nu, len) = (sp.nx, sp.nu, sp.len);
+    let p_out = sp.hx.nrows();
     let mut ric = Riccati::new(sp.stage.clone());
     let mut p = DMatrix::zeros(nx, nx);
     let mut pv = DVector::zeros(nx);
@@ -506,15 +507,16 @@ fn backward(sp: &Scaled) -> Result<Backward> {
         if !ric.step(&p, Some(&diag)) {
             return Err(not_definite(k));
         }
+        let gain = Gain::of(&ric, p_out);
         project_matrix(&sp.null, &mut ric.p);
         let e = if k + 1 < len {
             &pv - &p * sp.c.column(k)
         } else {
             DVector::zeros(nx)
         };
-        let (lk, pk) = vector_step(sp, &ric, k, &e);
-        lff.set_column(k, &lk);
-        pv = pk;
+        let rk = sp.target.column(k);
+        lff.set_column(k, &(&gain.kr * rk + &gain.ke * &e));
+        pv = &gain.mt * rk + &gain.phit * &e;
         project_vector(&sp.null, &mut pv);
         calm = if rel_change(&ric.p, &p, RelativeTo::Larger) <= RICCATI_TOL {
             calm + 1
@@ -535,7 +537,8 @@ fn backward(sp: &Scaled) -> Result<Backward> {
         if !ric.step(&p, Some(&diag)) {
             return Err(not_definite(j0 - 1));
         }
-        steady_backward(sp, &ric, &p, j0, &mut pv, &mut lff);
+        let gain = Gain::of(&ric, p_out);
+        steady_backward(sp, &gain, &p, j0, &mut pv, &mut lff);
         steady = Some(ric.l.clone());
     }
     transient.reverse();
@@ -550,25 +553,17 @@ fn backward(sp: &Scaled) -> Result<Backward> {
 }
 
 /// The steady part of the backward pass, samples `j0 − 1 … 0`, with the
-/// gains of the step `ric` holds at `P`: `l_k = K_r r_k + K_e e`,
-/// `p_k = (H_x − H_u L)ᵀ r_k + (A − G L)ᵀ e`, `e = p' − P c_k`.
+/// gains at `P`: `l_k = K_r r_k + K_e e`, `p_k = M r_k + Φᵀ e`,
+/// `e = p' − P c_k`.
 fn steady_backward(
     sp: &Scaled,
-    ric: &Riccati,
+    gain: &Gain,
     p: &DMatrix<f64>,
     j0: usize,
     pv: &mut DVector<f64>,
     lff: &mut DMatrix<f64>,
 ) {
     let (nx, nu) = (sp.nx, sp.nu);
-    let mut kr = sp.hu.transpose();
-    ric.c.solve_lower_triangular_mut(&mut kr);
-    ric.c.tr_solve_lower_triangular_mut(&mut kr);
-    let ke = ric.input_gain();
-    let mt = (&sp.hx - &sp.hu * &ric.l).transpose();
-    let mut phi = DMatrix::zeros(nx, nx);
-    ric.closed_loop(&mut phi);
-    let phit = phi.transpose();
     let mut e = DVector::zeros(nx);
     let mut pc = DVector::zeros(nx);
     let mut lk = DVector::zeros(nu);
@@ -578,11 +573,11 @@ fn steady_backward(
         e.copy_from(pv);
         e -= &pc;
         let rk = sp.target.column(k);
-        lk.gemv(1.0, &kr, &rk, 0.0);
-        lk.gemv(1.0, &ke, &e, 1.0);
+        lk.gemv(1.0, &gain.kr, &rk, 0.0);
+        lk.gemv(1.0, &gain.ke, &e, 1.0);
         lff.set_column(k, &lk);
-        pnew.gemv(1.0, &mt, &rk, 0.0);
-        pnew.gemv(1.0, &phit, &e, 1.0);
+        pnew.gemv(1.0, &gain.mt, &rk, 0.0);
+        pnew.gemv(1.0, &gain.phit, &e, 1.0);
         std::mem::swap(pv, &mut pnew);
         project_vector(&sp.null, pv);
     }
@@ -833,8 +828,12 @@ mod tests {
         let res = reconstruct(&sm, &known, &measured, &channels, &s).unwrap();
         assert!(res.status.starts_with("solved"), "{}", res.status);
         let varying = DMatrix::from_fn(n, len, |i, k| 0.3 + ((i * 7 + k * 3) % 5) as f64);
-        for weights in [None, Some(varying)] {
-            // the sweep, with optional time-varying weights
+        for (weights, direct) in [None, Some(varying)]
+            .into_iter()
+            .flat_map(|w| [(w.clone(), false), (w, true)])
+        {
+            // the sweep, with optional time-varying weights, both forms
+            // of the Riccati step
             let mut sp = Scaled::new(
                 &sm,
                 &lm,
@@ -846,6 +845,7 @@ mod tests {
             )
             .unwrap();
             sp.lam_k = weights.clone();
+            sp.stage.direct = direct;
             let bw = backward(&sp).unwrap();
             let (mut xs, mut us) = forward(&sp, &bw).unwrap();
             for i in 0..2 * n {
