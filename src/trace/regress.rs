@@ -178,14 +178,21 @@ pub fn segment_response(
 /// (`forces` n × ((N−1)S+1), right-hand side), from rest at every segment
 /// start: `x_{k+1} = A x_k + Σ_j N_j f_{kS+j}`, `y_k = C_y x_k + D_y f_{kS}`.
 /// A force given along one direction `dir` with scalar node history `phi`
-/// uses the projected node inputs `N_j dir` (much cheaper).
-fn node_response(ctx: &Context<'_, '_>, force: NodeForce<'_>) -> DMatrix<f64> {
+/// uses the projected node inputs `N_j dir` (much cheaper). Fills the
+/// columns `k0..k1` of `y` (p × N), whole segments (`k0` a segment start);
+/// the history starts at node `k0 S`.
+fn node_response(
+    ctx: &Context<'_, '_>,
+    force: NodeForce<'_>,
+    y: &mut DMatrix<f64>,
+    k0: usize,
+    k1: usize,
+) {
     let sm = ctx.input.sampled;
     let (cy, dy) = (ctx.input.cy, ctx.input.dy);
     let s = ctx.nodes.len() - 1;
-    let ns = ctx.input.measured.ncols();
+    let ns = k1;
     let nx = 2 * sm.n;
-    let mut y = DMatrix::zeros(cy.nrows(), ns);
     let mut x = DVector::zeros(nx);
     let mut xn = DVector::zeros(nx);
     // the node inputs side by side, [N_0 … N_S] (projected on the
@@ -216,12 +223,13 @@ fn node_response(ctx: &Context<'_, '_>, force: NodeForce<'_>) -> DMatrix<f64> {
         NodeForce::Full(_) => dy.clone(),
     };
     let at = |k: usize, len: usize| {
+        let k = k - k0;
         nalgebra::DVectorView::from_slice(&data[k * s * width..(k * s + len) * width], len * width)
     };
     // a contact's force is zero while it is open: products with a zero
     // state or a zero input are skipped (y stays zero there)
     let mut rest = true;
-    for k in 0..ns {
+    for k in k0..ns {
         if k % ctx.seg == 0 {
             x.fill(0.0);
             rest = true;
@@ -249,7 +257,6 @@ fn node_response(ctx: &Context<'_, '_>, force: NodeForce<'_>) -> DMatrix<f64> {
             }
         }
     }
-    y
 }
 
 /// A force history at the sub-step nodes.
@@ -406,12 +413,7 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
             }
         }
     };
-    let hires = crate::linear::hermite_upsample(input.states, sm.fs, sm.substeps);
     let hidden = hidden_trajectories(sm, input.cy, ns);
-    let hidden_hires: Vec<DMatrix<f64>> = hidden
-        .iter()
-        .map(|e| crate::linear::hermite_upsample(e, sm.fs, sm.substeps))
-        .collect();
     let mut sel = Selection {
         q: vec![],
         blocks: vec![],
@@ -433,8 +435,7 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
             seg,
             settings,
             nodes: &nodes,
-            hires: &hires,
-            hidden: &hidden_hires,
+            hidden: &hidden,
         };
         // candidates are independent: in parallel, collected in library
         // order (the same ranking whatever the thread count)
@@ -483,10 +484,17 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
             );
             break;
         }
-        project_out(&mut r, &best.qs);
-        sel.npar += best.effect.candidate.nparams() + best.cols.len() - 1;
-        sel.q.extend(best.qs);
-        sel.blocks.push(best.cols);
+        // its columns again (the scores keep none: one record-long column
+        // per candidate would hold the whole library's at once); the same
+        // inputs give the same columns
+        let Some(ev) = evaluate(&best.effect.candidate, &ctx, &sel, &r, &mut 0, None) else {
+            stop = format!("{} could not be evaluated again", best.effect.label);
+            break;
+        };
+        project_out(&mut r, &ev.qs);
+        sel.npar += best.effect.candidate.nparams() + ev.cols.len() - 1;
+        sel.q.extend(ev.qs);
+        sel.blocks.push(ev.cols);
         sel.rss = r.norm_squared();
         history.push(sel.rss);
         selected.push(best.effect);
@@ -615,17 +623,12 @@ struct Context<'a, 'b> {
     settings: &'a TraceSettings,
     /// Node input matrices of one sample.
     nodes: &'a [DMatrix<f64>],
-    /// States upsampled to the sub-step nodes.
-    hires: &'a DMatrix<f64>,
-    /// Hidden trajectories upsampled to the sub-step nodes.
+    /// Hidden trajectories at the samples.
     hidden: &'a [DMatrix<f64>],
 }
 
 struct Scored {
     effect: RankedEffect,
-    /// Strength column, then the hidden-state columns.
-    cols: Vec<DVector<f64>>,
-    qs: Vec<DVector<f64>>,
 }
 
 /// One evaluation of a candidate.
@@ -645,31 +648,80 @@ struct Eval {
 }
 
 /// Weighted stacked response column of a candidate at unit strength on the
-/// node states `hires` (internal force on the left-hand side → minus on
-/// the right).
+/// states `states` (at the samples; the candidate's law is evaluated at the
+/// sub-step nodes, on the cubic Hermite interpolation of the states,
+/// [`crate::linear::hermite_upsample`]; internal force on the left-hand
+/// side → minus on the right). The node states are formed where they are
+/// used — the candidate's own rows for a force along one direction, one
+/// segment at a time for a force at every DOF — so that the trace holds
+/// no record-long matrix at the node rate.
 /// With `node_deltas` (the contact's relative displacement at every node,
 /// computed once for a gap scan) the shape is formed from them.
 fn column(
     cand: &Candidate,
     ctx: &Context<'_, '_>,
-    hires: &DMatrix<f64>,
+    states: &DMatrix<f64>,
     node_deltas: Option<&[f64]>,
 ) -> DVector<f64> {
     let sm = ctx.input.sampled;
-    let y = match cand.direction(sm.n) {
+    let ns = ctx.input.measured.ncols();
+    let mut y = DMatrix::zeros(ctx.input.cy.nrows(), ns);
+    match cand.direction(sm.n) {
         Some(dir) => {
             let phi: Vec<f64> = match (cand.kind, node_deltas) {
                 (k, Some(d)) if k.has_gap() => d.iter().map(|&x| -cand.gap_law(x)).collect(),
-                _ => cand.shape(hires, sm.n).iter().map(|x| -x).collect(),
+                _ => {
+                    let (own, hires) = own_nodes(cand, states, sm);
+                    own.shape(&hires, own.dofs.len())
+                        .iter()
+                        .map(|x| -x)
+                        .collect()
+                }
             };
-            node_response(ctx, NodeForce::Along(&dir, &phi))
+            node_response(ctx, NodeForce::Along(&dir, &phi), &mut y, 0, ns);
         }
         None => {
-            let f = -cand.force(hires, &sm.c);
-            node_response(ctx, NodeForce::Full(&f))
+            let mut k0 = 0;
+            while k0 < ns {
+                let k1 = (k0 + ctx.seg).min(ns);
+                let hires = crate::linear::hermite_upsample(
+                    &states.columns(k0, k1 - k0).into_owned(),
+                    sm.fs,
+                    sm.substeps,
+                );
+                let f = -cand.force(&hires, &sm.c);
+                node_response(ctx, NodeForce::Full(&f), &mut y, k0, k1);
+                k0 = k1;
+            }
         }
-    };
+    }
     stack(&y, ctx.w)
+}
+
+/// The candidate with its DOFs renumbered from 0 and the node states of
+/// those DOFs alone (`[u_i, u_j, v_i, v_j]` upsampled): its shape and
+/// relative displacement at the nodes, as on the whole node states.
+fn own_nodes(
+    cand: &Candidate,
+    states: &DMatrix<f64>,
+    sm: &SampledModel,
+) -> (Candidate, DMatrix<f64>) {
+    let (n, d) = (sm.n, cand.dofs.len());
+    let rows: Vec<usize> = cand
+        .dofs
+        .iter()
+        .copied()
+        .chain(cand.dofs.iter().map(|&i| n + i))
+        .collect();
+    let sub = states.select_rows(rows.iter());
+    let own = Candidate {
+        dofs: (0..d).collect(),
+        ..cand.clone()
+    };
+    (
+        own,
+        crate::linear::hermite_upsample(&sub, sm.fs, sm.substeps),
+    )
 }
 
 fn evaluate(
@@ -681,7 +733,7 @@ fn evaluate(
     node_deltas: Option<&[f64]>,
 ) -> Option<Eval> {
     *sims += 1;
-    let col = column(cand, ctx, ctx.hires, node_deltas);
+    let col = column(cand, ctx, ctx.input.states, node_deltas);
     let mut cols = vec![col];
     let mut used = vec![];
     if cand.kind.linear_in_state() {
@@ -741,9 +793,9 @@ fn scan_gap(
     let gaps: Vec<f64> = (0..ng)
         .map(|i| lo + (hi - lo) * i as f64 / (ng - 1) as f64)
         .collect();
-    let node_deltas: Vec<f64> = (0..ctx.hires.ncols())
-        .map(|k| cand.delta(ctx.hires, k))
-        .collect();
+    let (own, hires) = own_nodes(cand, states, ctx.input.sampled);
+    let node_deltas: Vec<f64> = (0..hires.ncols()).map(|k| own.delta(&hires, k)).collect();
+    drop(hires);
     let at = |g: f64, sims: &mut usize| {
         let c = Candidate {
             gap: Some(g),
@@ -849,8 +901,6 @@ fn score(
             bic_change: bic,
             hidden: ev.hidden,
         },
-        cols: ev.cols,
-        qs: ev.qs,
     })
 }
 
