@@ -722,7 +722,10 @@ mod tests {
         }
         let e = crate::record::read(&p).unwrap_err().to_string();
         assert!(e.contains("channel accel_2: unit \"gggg"), "{e}");
-        assert!(e.contains("…\" (100000 characters) is not a unit of accel"), "{e}");
+        assert!(
+            e.contains("…\" (100000 characters) is not a unit of accel"),
+            "{e}"
+        );
         assert!(e.len() < 400, "{} bytes: {}", e.len(), &e[..400]);
     }
 
