@@ -322,8 +322,10 @@ pub fn fit_diagnosed(
         for ((_, t), vals) in tg.iter().zip(&mut per_record) {
             vals.push(t.get(&d.fitted)?);
         }
+        let mut rec = d.record.clone();
+        model.resolve_channels(&mut rec).map_err(named)?;
         let prep =
-            crate::diagnose::prepare::prepare_located(model, d.record, d.sensors, settings, None)
+            crate::diagnose::prepare::prepare_located(model, &rec, d.sensors, settings, None)
                 .map_err(named)?;
         jr.push(JointRecord {
             name: d.name.clone(),
