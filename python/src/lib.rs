@@ -9,6 +9,7 @@
 use pyo3::prelude::*;
 
 mod convert;
+mod group;
 mod model;
 mod record;
 mod run;
@@ -36,6 +37,7 @@ fn _tacit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run::modal, m)?)?;
     m.add_function(wrap_pyfunction!(run::identify, m)?)?;
     m.add_function(wrap_pyfunction!(run::diagnose, m)?)?;
+    m.add_function(wrap_pyfunction!(group::group_estimates, m)?)?;
     Ok(())
 }
 

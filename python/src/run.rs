@@ -161,7 +161,8 @@ pub fn identify<'py>(
     if !locate {
         s.locate.ratio = 0.0;
     }
-    let (m, rec) = (&model.inner, &record.inner);
+    let rec = resolved(model, &record.inner)?;
+    let (m, rec) = (&model.inner, &rec);
     let est = py
         .detach(|| {
             let prob = Problem::new(&m.linear_part(), rec, &sensors)?;
@@ -177,6 +178,14 @@ pub fn identify<'py>(
         convert::matrix(py, &est.force),
         convert::vector(py, &est.time),
     ))
+}
+
+/// A copy of `rec` with its channels resolved against `model` (a
+/// universal file's node and direction: the node on a lumped model).
+fn resolved(model: &Model, rec: &tacit::record::Record) -> PyResult<tacit::record::Record> {
+    let mut r = rec.clone();
+    model.inner.resolve_channels(&mut r).map_err(err)?;
+    Ok(r)
 }
 
 /// Refuse an output directory that holds something unless `force`.
@@ -217,10 +226,16 @@ pub fn diagnose(
         None => DiagnoseSettings::default(),
     };
     settings.validate().map_err(err)?;
-    let linear: Vec<tacit::record::Record> =
-        linear_records.iter().map(|r| r.inner.clone()).collect();
-    let val = validation.as_ref().map(|v| v.inner.clone());
-    let (m, rec) = (&model.inner, &record.inner);
+    let linear: Vec<tacit::record::Record> = linear_records
+        .iter()
+        .map(|r| resolved(model, &r.inner))
+        .collect::<PyResult<_>>()?;
+    let val = validation
+        .as_ref()
+        .map(|v| resolved(model, &v.inner))
+        .transpose()?;
+    let rec = resolved(model, &record.inner)?;
+    let (m, rec) = (&model.inner, &rec);
     let cal = calibrated::CalibratedSettings {
         off: trust_linear,
         ..Default::default()

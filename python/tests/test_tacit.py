@@ -45,6 +45,13 @@ def test_model_from_dict_round_trip(lanl):
     k = half.stiffness_matrix()
     assert k[4, 5] == pytest.approx(-0.5 * 56700.0)
     assert tacit.Model.from_toml(half.to_toml()).to_dict() == half.to_dict()
+    # NumPy arrays and scalars as values
+    d["masses"] = np.full(8, 0.5)
+    d["spring"][0]["stiffness"] = np.float64(1.0e5)
+    arr = tacit.Model.from_dict(d)
+    assert arr.mass_matrix()[7, 7] == 0.5 and arr.stiffness_matrix()[0, 0] == 1.0e5
+    with pytest.raises(tacit.TacitError, match="model dict: object is not a number"):
+        tacit.Model.from_dict({"masses": [object()]})
 
 
 def test_record_from_arrays_round_trips_through_hdf5_and_csv(tmp_path):
@@ -151,3 +158,41 @@ def test_diagnose_runs_the_record_checks_against_the_model(lanl, tmp_path):
     dead = [(q, dof, 0.0 * data if dof == 6 else data) for (q, dof, data) in outputs]
     with pytest.raises(tacit.TacitError, match="<memory>: cannot be used as it is: channel accel_6 is dead"):
         tacit.diagnose(lanl, tacit.Record(rec.fs, inputs, dead), tmp_path / "dead")
+
+
+def test_group_estimates_share_one_contact_across_force_levels(lanl, contact, tmp_path):
+    """The bumper simulated at 10, 20 and 40 N RMS, each record diagnosed,
+    then one gap and one stiffness fitted to the three records at once
+    (the campaign's joint fit)."""
+    truth = contact.to_dict()["contact"][0]
+    records, diagnoses = [], []
+    for rms in (10.0, 20.0, 40.0):
+        rec = tacit.simulate(contact, rms=rms, sensors=[1, 5, 6], noise=0.01,
+                             seed=11, substeps=40)
+        records.append(rec)
+        diagnoses.append(tacit.diagnose(lanl, rec, tmp_path / f"d{rms:.0f}",
+                                        sensors=[1, 5, 6], trust_linear=True))
+    g = tacit.group_estimates(lanl, records, diagnoses, names=["low", "mid", "high"],
+                              sensors=[1, 5, 6])
+    assert g.effect == "contact 5→6"
+    gap, k = g.parameters["gap"], g.parameters["stiffness"]
+    assert (gap["unit"], k["unit"]) == ("m", "N/m")
+    assert gap["value"] == pytest.approx(truth["gap"], rel=0.01)
+    assert k["value"] == pytest.approx(truth["stiffness"], rel=0.05)
+    assert 0.0 < gap["std"] < 0.01 * gap["value"]
+    # the per-record values are those of each record's own diagnosis
+    own = [d.parameters()["contact 5→6 gap"] for d in diagnoses]
+    np.testing.assert_allclose(gap["per_record"], own, rtol=1e-12)
+    assert g.values()["contact 5→6 stiffness"] == k["value"]
+    # one parameter set explains every level about as well as its own fit
+    assert [r["name"] for r in g.records] == ["low", "mid", "high"]
+    for r in g.records:
+        assert r["joint"] < 0.03 and r["joint"] < 1.5 * r["own"], r
+    assert g.model.to_dict()["contact"][0]["gap"] == pytest.approx(gap["value"])
+    # errors as exceptions naming what is wrong
+    with pytest.raises(tacit.TacitError, match="no diagnosis found 'friction @1'"):
+        tacit.group_estimates(lanl, records, diagnoses, effect="friction @1")
+    with pytest.raises(tacit.TacitError, match="at least two are needed"):
+        tacit.group_estimates(lanl, records[:1], diagnoses[:1], sensors=[1, 5, 6])
+    with pytest.raises(tacit.TacitError, match="one diagnosis per record"):
+        tacit.group_estimates(lanl, records, diagnoses[:2])

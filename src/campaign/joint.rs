@@ -277,6 +277,69 @@ pub fn fit(
     })
 }
 
+/// One diagnosed record for [`fit_diagnosed`].
+#[derive(Debug, Clone)]
+pub struct Diagnosed<'a> {
+    /// Record name (in the result and the messages).
+    pub name: String,
+    /// The record.
+    pub record: &'a crate::record::Record,
+    /// Its sensors (DOFs from 1; None: every response channel).
+    pub sensors: Option<&'a [usize]>,
+    /// The model its own diagnosis fitted (the declared model and the
+    /// effects found).
+    pub fitted: Model,
+    /// Integration sub-steps per sample of that fit.
+    pub substeps: usize,
+}
+
+/// The joint fit of the effect `label` (`kind` at `dofs`, from 1) over
+/// records that were each diagnosed against `model` with `settings`:
+/// each record's multiple-shooting data prepared as the diagnosis
+/// prepares them, the per-record values read from its fitted model, the
+/// shared values started from their median on the first record's fitted
+/// model (its linear part), simulated with the largest sub-step count of
+/// the records. At least two records.
+pub fn fit_diagnosed(
+    model: &Model,
+    (label, kind, dofs): (&str, &str, &[usize]),
+    records: &[Diagnosed<'_>],
+    settings: &crate::diagnose::DiagnoseSettings,
+) -> Result<JointFit> {
+    if records.len() < 2 {
+        return Err(TacitError::Setting(format!(
+            "joint fit of {label}: {} record(s) carry it; at least two are needed",
+            records.len()
+        )));
+    }
+    let mut jr = vec![];
+    let mut per_record: Vec<Vec<f64>> = vec![];
+    for d in records {
+        let named =
+            |e: TacitError| TacitError::Setting(format!("joint fit: record {}: {e}", d.name));
+        let tg = targets(&d.fitted, kind, dofs).map_err(named)?;
+        per_record.resize(tg.len(), vec![]);
+        for ((_, t), vals) in tg.iter().zip(&mut per_record) {
+            vals.push(t.get(&d.fitted)?);
+        }
+        let mut rec = d.record.clone();
+        model.resolve_channels(&mut rec).map_err(named)?;
+        let prep =
+            crate::diagnose::prepare::prepare_located(model, &rec, d.sensors, settings, None)
+                .map_err(named)?;
+        jr.push(JointRecord {
+            name: d.name.clone(),
+            comparison: prep.comparison,
+            own: d.fitted.clone(),
+        });
+    }
+    let sim = SimSettings {
+        substeps: records.iter().map(|d| d.substeps).max().unwrap_or(10),
+        ..Default::default()
+    };
+    fit(&jr[0].own, label, kind, dofs, &per_record, &jr, sim)
+}
+
 /// Passes of start-state refinement and parameter fit.
 const PASSES: usize = 2;
 

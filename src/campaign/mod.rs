@@ -217,8 +217,13 @@ pub fn run_record(
     settings: &DiagnoseSettings,
     dir: &Path,
 ) -> Result<()> {
-    let rec = crate::record::read(&e.path)?;
-    let val = e.validate.as_deref().map(crate::record::read).transpose()?;
+    let read = |p: &Path| -> Result<Record> {
+        let mut r = crate::record::read(p)?;
+        model.resolve_channels(&mut r)?;
+        Ok(r)
+    };
+    let rec = read(&e.path)?;
+    let val = e.validate.as_deref().map(read).transpose()?;
     let sensors = m.sensors_of(e);
     let mut warnings = vec![];
     for r in std::iter::once(&rec).chain(val.as_ref()) {

@@ -239,43 +239,31 @@ fn joint_fit(
     }
     let run = || -> tacit::Result<joint::JointFit> {
         let settings = m.diagnose_settings()?;
-        let mut jr = vec![];
-        for r in &with {
-            let e = m
-                .records
-                .iter()
-                .find(|e| e.name == r.name)
-                .expect("row of an entry");
-            let rec = tacit::record::read(&e.path)?;
-            let prep = tacit::diagnose::prepare::prepare_located(
-                model,
-                &rec,
-                m.sensors_of(e),
-                &settings,
-                None,
-            )?;
-            jr.push(joint::JointRecord {
-                name: r.name.clone(),
-                comparison: prep.comparison,
-                own: Model::from_file(&records.join(&r.name).join("model-fitted.toml"))?,
-            });
-        }
-        let names = joint::targets(&jr[0].own, &kind, &dofs)?;
-        let per_record: Vec<Vec<f64>> = names
+        let recs = with
             .iter()
-            .map(|(n, _)| {
-                let key = format!("{label} {n}");
-                with.iter()
-                    .filter_map(|r| r.parameters.iter().find(|p| p.key == key).map(|p| p.value))
-                    .collect()
+            .map(|r| {
+                let e = m
+                    .records
+                    .iter()
+                    .find(|e| e.name == r.name)
+                    .expect("row of an entry");
+                Ok((e, tacit::record::read(&e.path)?))
             })
-            .collect();
-        let sim = tacit::integrate::SimSettings {
-            substeps: with.iter().map(|r| r.substeps).max().unwrap_or(10),
-            ..Default::default()
-        };
-        let start = jr[0].own.clone();
-        joint::fit(&start, &label, &kind, &dofs, &per_record, &jr, sim)
+            .collect::<tacit::Result<Vec<_>>>()?;
+        let diagnosed = with
+            .iter()
+            .zip(&recs)
+            .map(|(r, (e, rec))| {
+                Ok(joint::Diagnosed {
+                    name: r.name.clone(),
+                    record: rec,
+                    sensors: m.sensors_of(e),
+                    fitted: Model::from_file(&records.join(&r.name).join("model-fitted.toml"))?,
+                    substeps: r.substeps,
+                })
+            })
+            .collect::<tacit::Result<Vec<_>>>()?;
+        joint::fit_diagnosed(model, (&label, &kind, &dofs), &diagnosed, &settings)
     };
     Some(run().map_err(|e| e.to_string()))
 }

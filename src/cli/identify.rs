@@ -267,7 +267,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let model = Model::from_file(&a.model)?;
     let n = model.ndof();
     check_dofs(&a.sensors.0, n, "--sensors")?;
-    let rec = super::read_record(&a.record)?;
+    let rec = super::read_record_for(&a.record, &model)?;
     rec.validate(Some(n))?;
     validate_windows(&a, rec.len())?;
     super::records::check(&rec, &model, Some(&a.sensors.0))?;

@@ -182,6 +182,18 @@ pub fn load_record(
     )?)
 }
 
+/// [`read_record`] with its channels resolved against `model` (a
+/// universal file's node and direction: the node on a lumped model, the
+/// point `n<node>:<dir>` on a model with point labels).
+pub fn read_record_for(
+    path: &std::path::Path,
+    model: &tacit::model::Model,
+) -> anyhow::Result<tacit::record::Record> {
+    let mut rec = read_record(path)?;
+    model.resolve_channels(&mut rec)?;
+    Ok(rec)
+}
+
 /// Read an HDF5 or CSV record; unit conversions are reported on stderr.
 pub fn read_record(path: &std::path::Path) -> anyhow::Result<tacit::record::Record> {
     let (rec, conversions) = tacit::record::read_with_conversions(path)?;

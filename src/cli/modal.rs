@@ -345,7 +345,7 @@ fn test_modes(a: &Args, model: &Model) -> anyhow::Result<(TestModes, Option<serd
     }
     let mut recs = Vec::with_capacity(a.record.len());
     for p in &a.record {
-        let mut r = super::read_record(p)?;
+        let mut r = super::read_record_for(p, model)?;
         r.validate(Some(model.ndof()))?;
         r.source = p.clone();
         recs.push(r);

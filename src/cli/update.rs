@@ -113,7 +113,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     validate(&a)?;
     let staging = super::output::Staging::begin(&a.output, a.force)?;
     let model = Model::from_file(&a.model)?;
-    let rec = super::read_record(&a.record)?;
+    let rec = super::read_record_for(&a.record, &model)?;
     rec.validate(Some(model.ndof()))?;
     if let Some(f) = tacit::record::checks::magnitudes(&rec) {
         anyhow::bail!(

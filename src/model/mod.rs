@@ -246,6 +246,8 @@ impl Model {
 
     /// Give each labelled channel of `rec` (`accel:n12:uy`) the DOF of its
     /// point; an error names the channel when the model has no such point.
+    /// A channel that carries a DOF beside its point (a universal file's
+    /// node and direction) keeps the DOF on a model without point labels.
     /// A channel named by DOF (`accel_5`) on a model from matrices means DOF 5
     /// of the matrices: it gets the reduced DOF of that point (call once).
     pub fn resolve_channels(&self, rec: &mut crate::record::Record) -> Result<()> {
@@ -257,6 +259,12 @@ impl Model {
                 }
                 continue;
             };
+            if self.points.is_empty() && c.dof != 0 {
+                // a universal file's node and direction on a model without
+                // point labels: the node is the DOF
+                c.point = None;
+                continue;
+            }
             let d = self.points.iter().position(|l| l == p).ok_or_else(|| {
                 TacitError::record(
                     rec.source.clone(),

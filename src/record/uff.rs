@@ -24,9 +24,13 @@
 //!   (double) for even spacing.
 //!
 //! Each dataset becomes one channel: a force (types 9, 13) is an input,
-//! the rest outputs. The node number is the DOF (numbered from 1, as in a
-//! lumped model); a negative direction negates the data (the model's DOFs
-//! point along +X, +Y or +Z). The unit is the ordinate's axis units label
+//! the rest outputs. A channel carries both its node and its direction:
+//! on a lumped model the node number is the DOF (numbered from 1) and the
+//! channel is named `accel_<node>`; on a model from matrices it is the
+//! point `n<node>:<dir>` (`n12:uy`; directions 1–6 are `ux`, `uy`, `uz`,
+//! `rx`, `ry`, `rz`), resolved against the model's `[points]`
+//! ([`crate::model::Model::resolve_channels`]). A negative direction
+//! negates the data (the model's DOFs point along +X, +Y or +Z). The unit is the ordinate's axis units label
 //! (`g`, `m/s^2`, `mm`, `kN`, …, converted to SI after reading,
 //! [`super::units`]); without a label the data are taken as SI. Every
 //! channel must have the time base of the first: even spacing, the same
@@ -262,11 +266,14 @@ fn record(sets: Vec<Dataset>, path: &Path) -> Result<Record> {
             ));
         }
         let sign = if s.dir < 0 { -1.0 } else { 1.0 };
-        let mut c = Channel::new(
-            s.quantity,
-            s.node as usize,
-            s.data.iter().map(|v| sign * v).collect(),
-        );
+        let mut c = Channel {
+            point: Some(point_label(s.node, s.dir)),
+            ..Channel::new(
+                s.quantity,
+                s.node as usize,
+                s.data.iter().map(|v| sign * v).collect(),
+            )
+        };
         if !s.unit.is_empty() && !s.unit.eq_ignore_ascii_case("none") {
             c.unit = s.unit.clone();
         }
@@ -277,6 +284,16 @@ fn record(sets: Vec<Dataset>, path: &Path) -> Result<Record> {
         }
     }
     Ok(rec)
+}
+
+/// The point label of a node and direction: `n<node>:<ux|uy|uz|rx|ry|rz>`
+/// (the sign of the direction is taken into the data).
+pub fn point_label(node: i64, dir: i64) -> String {
+    const DIRS: [&str; 6] = ["ux", "uy", "uz", "rx", "ry", "rz"];
+    format!(
+        "n{node}:{}",
+        DIRS[(dir.unsigned_abs() as usize).clamp(1, 6) - 1]
+    )
 }
 
 /// `1 / step`, rounded to a whole rate when within 1e-5 of one.
@@ -351,6 +368,9 @@ mod tests {
         super::super::units::to_si(&mut rec).unwrap();
         let o = &rec.outputs[0];
         assert_eq!((o.quantity, o.dof), (Quantity::Accel, 5));
+        assert_eq!(o.point.as_deref(), Some("n5:ux"));
+        assert_eq!(point_label(12, -2), "n12:uy");
+        assert_eq!(point_label(3, 6), "n3:rz");
         for (x, y) in o.data.iter().zip(a) {
             assert!((x + y * 9.80665).abs() < 1e-12, "{x} {y}");
         }

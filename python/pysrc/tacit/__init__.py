@@ -34,9 +34,11 @@ __all__ = [
     "Record",
     "TacitError",
     "Diagnosis",
+    "GroupEstimates",
     "Identification",
     "Modes",
     "diagnose",
+    "group_estimates",
     "identify",
     "modal",
     "simulate",
@@ -55,12 +57,24 @@ def load_model(path: PathLike) -> Model:
     return Model.load(os.fspath(path))
 
 
+def _plain(o: Any) -> Any:
+    """NumPy arrays and scalars as lists and numbers (for JSON)."""
+    if isinstance(o, (np.ndarray, np.generic)):
+        return o.tolist()
+    raise TypeError(f"{type(o).__name__} is not a number, list or NumPy array")
+
+
 def _model_from_dict(d: Dict[str, Any]) -> Model:
     """A model from a dict with the keys of the model file: ``masses`` (kg),
     ``spring`` (list of ``{"dofs": [i, j], "stiffness": N/m}``), ``damping``
-    (e.g. ``{"modal": {"ratio": 0.01}}``), ``contact``, ``friction``, ...
+    (e.g. ``{"kind": "modal", "ratio": 0.01}``), ``contact``, ``friction``,
+    ... Values may be NumPy arrays or scalars (``masses=np.full(8, 0.42)``).
     """
-    return Model.from_json(json.dumps(d))
+    try:
+        text = json.dumps(d, default=_plain)
+    except TypeError as e:
+        raise TacitError(f"model dict: {e}") from None
+    return Model.from_json(text)
 
 
 def _model_to_dict(self: Model) -> Dict[str, Any]:
@@ -252,4 +266,116 @@ def diagnose(
         output=out,
         model=fitted,
         effects=rep.get("effects", []),
+    )
+
+
+@dataclass
+class GroupEstimates:
+    """One set of parameters of one effect fitted to several records of the
+    same structure at once (``tacit campaign``'s joint fit), reported
+    against each record's own fit."""
+
+    #: The effect whose parameters are shared, e.g. ``"contact 5→6"``.
+    effect: str
+    #: Per parameter (``gap``, ``stiffness``, ``level``, ``k3``, ...): a dict
+    #: with ``value`` (SI: gap in m, stiffness in N/m, level in N, k3 in
+    #: N/m^3), ``unit``, ``std`` (noise-only standard deviation, same
+    #: unit, or None), ``per_record`` (the values of each record's own fit,
+    #: in the order of ``records``) and ``at_bound``.
+    parameters: Dict[str, Dict[str, Any]]
+    #: Per record: ``name``, ``own`` (multiple-shooting relative error of
+    #: its own fitted model, a fraction) and ``joint`` (the same with the
+    #: shared parameters).
+    records: List[Dict[str, Any]]
+    #: How the search ended, in words.
+    termination: str
+    #: Iterations of the search.
+    iterations: int
+    #: Wall time of the joint fit, s.
+    elapsed_s: float
+    #: The first record's fitted model carrying the shared parameters.
+    model: Model
+
+    def values(self) -> Dict[str, float]:
+        """The shared values, ``{"<effect> <parameter>": value}`` in SI
+        units (as :meth:`Diagnosis.parameters` names them)."""
+        return {f"{self.effect} {k}": p["value"] for k, p in self.parameters.items()}
+
+
+def _shared_effect(diagnoses: Sequence[Diagnosis], effect: Optional[str]) -> Dict[str, Any]:
+    """The effect dict (label, kind, dofs) to share: ``effect``, or the label
+    found in most diagnoses (the first found on a tie)."""
+    counts: Dict[str, int] = {}
+    first: Dict[str, Dict[str, Any]] = {}
+    for d in diagnoses:
+        for e in d.effects:
+            counts[e["label"]] = counts.get(e["label"], 0) + 1
+            first.setdefault(e["label"], e)
+    if effect is None:
+        if not counts:
+            raise TacitError("group_estimates: no diagnosis found an effect to share")
+        effect = max(counts, key=lambda k: counts[k])
+    if effect not in first:
+        found = ", ".join(sorted(counts)) or "none"
+        raise TacitError(f"group_estimates: no diagnosis found {effect!r} (found: {found})")
+    return first[effect]
+
+
+def group_estimates(
+    model: Union[Model, PathLike],
+    records: Sequence[Union[Record, PathLike]],
+    diagnoses: Sequence[Diagnosis],
+    *,
+    effect: Optional[str] = None,
+    names: Optional[Sequence[str]] = None,
+    sensors: Optional[Sequence[int]] = None,
+    settings: Optional[PathLike] = None,
+) -> GroupEstimates:
+    """Fit one set of parameters of one effect to several records of the
+    same structure at once (the same bumper seen at several force levels),
+    as ``tacit campaign`` does after diagnosing every record.
+
+    ``diagnoses[i]`` is the :func:`diagnose` of ``records[i]`` against
+    ``model`` (with the same ``sensors`` and ``settings``). ``effect`` is
+    the label to share (e.g. ``"contact 5→6"``; default: the one found in
+    most diagnoses); the records whose diagnosis did not find it are left
+    out, and at least two must remain. ``names`` name the records in the
+    result (default ``record1``, ``record2``, ...).
+
+    The records are laid end to end into one multiple-shooting problem with
+    each record's segments and start states, and the shared parameters are
+    fitted by Levenberg–Marquardt from the median of the per-record values
+    (docs/cli.md, campaigns). Raises :class:`TacitError` when the fit or the
+    model with the shared parameters cannot be simulated on a record.
+    """
+    if len(records) != len(diagnoses):
+        raise TacitError(
+            f"group_estimates: {len(records)} records and {len(diagnoses)} diagnoses: give one diagnosis per record"
+        )
+    names = [f"record{i + 1}" for i in range(len(records))] if names is None else list(names)
+    if len(names) != len(records):
+        raise TacitError(f"group_estimates: {len(names)} names for {len(records)} records")
+    shared = _shared_effect(diagnoses, effect)
+    keep = [i for i, d in enumerate(diagnoses) if any(e["label"] == shared["label"] for e in d.effects)]
+    js, joint = _tacit.group_estimates(
+        _as_model(model),
+        [_as_record(records[i]) for i in keep],
+        [diagnoses[i].model for i in keep],
+        [names[i] for i in keep],
+        shared["label"],
+        shared["kind"],
+        list(shared["dofs"]),
+        [int(diagnoses[i].report.get("substeps", [10, 10])[1]) for i in keep],
+        sensors=None if sensors is None else list(sensors),
+        settings=None if settings is None else os.fspath(settings),
+    )
+    r = json.loads(js)
+    return GroupEstimates(
+        effect=r["effect"],
+        parameters={p["name"]: {k: v for k, v in p.items() if k != "name"} for p in r["parameters"]},
+        records=r["records"],
+        termination=r["termination"],
+        iterations=r["iterations"],
+        elapsed_s=r["elapsed_s"],
+        model=joint,
     )
