@@ -347,7 +347,7 @@ fn verdict(c: &Case, d: &tacit::diagnose::Diagnosis, noise: f64) -> String {
         for (n, v) in &t.params {
             let x = e.parameters.get(*n).copied().unwrap_or(f64::NAN);
             let dev = x / v - 1.0;
-            if !(dev.abs() <= 0.1) {
+            if dev.is_nan() || dev.abs() > 0.1 {
                 fails.push(format!("{} {n} {:+.1} %", t.kind, 100.0 * dev));
             }
         }

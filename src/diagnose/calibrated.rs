@@ -21,8 +21,13 @@
 //!    fitted together with the segment start states ([`super::joint`]) —
 //!    the final refinement by simulation error of PNLSS (Paduart et al.,
 //!    Automatica 46, 2010) and of Floren, Noël & Swevers (2025). The bias of
-//!    step 1 goes back into the effect. The refined model is kept when it
-//!    lowers the record's multiple-shooting error.
+//!    step 1 goes back into the effect. The segments start from the states
+//!    refined for the model ([`super::starts`]; from the reconstruction a
+//!    segment may start on the wrong side of an impact, a basin the joint
+//!    fit does not leave), and the refinement continues on segments of
+//!    [`CalibratedSettings::long_segments`] consecutive ones over the whole
+//!    record, where the damping of the lowest modes shows. Each stage is
+//!    kept when it lowers the record's multiple-shooting error.
 //!
 //! The report lists the linear corrections (declared → final, with
 //! standard errors from the refinement, significance and identifiability)
