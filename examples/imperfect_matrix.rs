@@ -16,7 +16,7 @@ use rand::Rng;
 use tacit::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
 use tacit::diagnose::DiagnoseSettings;
 use tacit::integrate::SimSettings;
-use tacit::model::{Contact, Cubic, Damping, Friction, Model, Spring};
+use tacit::model::{Clearance, Contact, Cubic, Damping, Friction, Model, RelativeFriction, Spring};
 use tacit::record::Record;
 use tacit::simulate::{simulate_record, RecordSpec};
 
@@ -47,187 +47,258 @@ fn modal(z: f64) -> Damping {
     }
 }
 
+/// One localized effect of the truth: kind (as the report names it), DOFs
+/// from 1 and parameters.
+struct Truth {
+    kind: &'static str,
+    dofs: Vec<usize>,
+    params: Vec<(&'static str, f64)>,
+}
+
+impl Truth {
+    fn new(kind: &'static str, dofs: &[usize], params: &[(&'static str, f64)]) -> Truth {
+        Truth {
+            kind,
+            dofs: dofs.to_vec(),
+            params: params.to_vec(),
+        }
+    }
+
+    /// Put the effect into `m`.
+    fn apply(&self, m: &mut Model) {
+        let p = |k: &str| self.params.iter().find(|(n, _)| *n == k).unwrap().1;
+        let dofs = self.dofs.clone();
+        match self.kind {
+            "contact" => m.contacts.push(Contact {
+                dofs,
+                gap: p("gap"),
+                stiffness: p("stiffness"),
+            }),
+            "cubic" => m.cubics.push(Cubic { dofs, k3: p("k3") }),
+            "clearance" => m.clearances.push(Clearance {
+                dofs,
+                gap: p("gap"),
+                stiffness: p("stiffness"),
+            }),
+            "relative_friction" => m.relative_frictions.push(RelativeFriction {
+                dofs,
+                level: p("level"),
+                velocity: 1e-3,
+            }),
+            "ground_spring" => m.springs.push(Spring {
+                dofs,
+                stiffness: p("stiffness"),
+                name: None,
+            }),
+            k => panic!("no truth of kind {k}"),
+        }
+    }
+
+    fn describe(&self) -> String {
+        let dofs = match self.dofs.as_slice() {
+            [i] if self.kind == "contact" => format!("{i}→ground"),
+            [i, j] if self.kind == "contact" => format!("{i}→{j}"),
+            [i, j] => format!("{i}–{j}"),
+            [i] => format!("at {i}"),
+            _ => unreachable!(),
+        };
+        let p: Vec<String> = self
+            .params
+            .iter()
+            .map(|(n, v)| match *n {
+                "gap" => format!("gap {} mm", v * 1e3),
+                "stiffness" => format!("{v:.3e} N/m"),
+                "k3" => format!("k3 {v:.1e} N/m³"),
+                "level" => format!("{v} N"),
+                _ => format!("{n} {v}"),
+            })
+            .collect();
+        format!("{} {dofs} {}", self.kind, p.join(", "))
+    }
+}
+
 struct Case {
-    name: &'static str,
+    name: String,
     truth: Model,
     linear: Model,
-    effects: String,
+    effects: Vec<Truth>,
     sensors: Vec<usize>,
     noise: f64,
     running: bool,
 }
 
-fn contact(i: usize, j: usize, gap: f64, k: f64) -> Contact {
-    Contact {
-        dofs: vec![i, j],
-        gap,
-        stiffness: k,
+fn contact(dofs: &[usize], gap: f64, k: f64) -> Truth {
+    Truth::new("contact", dofs, &[("gap", gap), ("stiffness", k)])
+}
+
+fn rayleigh(alpha: f64, beta: f64) -> Damping {
+    Damping::Rayleigh { alpha, beta }
+}
+
+/// What departs from the declared model besides the localized effects.
+struct Departure {
+    spread: f64,
+    damping: Damping,
+    friction: f64,
+}
+
+fn dep(spread: f64, damping: Damping, friction: f64) -> Departure {
+    Departure {
+        spread,
+        damping,
+        friction,
+    }
+}
+
+/// How the record is taken: sensors, noise, running start.
+struct Test<'a> {
+    sensors: &'a [usize],
+    noise: f64,
+    running: bool,
+}
+
+const ALL: &[usize] = &[1, 2, 3, 4, 5, 6, 7, 8];
+
+fn test(sensors: &[usize], noise: f64, running: bool) -> Test<'_> {
+    Test {
+        sensors,
+        noise,
+        running,
     }
 }
 
 fn cases(seed: u64) -> Vec<Case> {
-    let all: Vec<usize> = (1..=8).collect();
     let mut out = vec![];
-    let mut add =
-        |name, base: Model, f: &dyn Fn(&mut Model) -> String, sensors: &[usize], noise, running| {
-            let mut truth = base.clone();
-            let effects = f(&mut truth);
-            out.push(Case {
-                name,
-                truth,
-                linear: base,
-                effects,
-                sensors: sensors.to_vec(),
-                noise,
-                running,
-            });
-        };
-    // the data file's bumper: contact 5→6, gap 0.381 mm, 2e6 N/m
-    let bumper = |m: &mut Model| {
-        m.contacts = vec![contact(5, 6, 0.381e-3, 2e6)];
-        "contact 5→6 gap 0.381 mm, 2e6 N/m".to_string()
+    let mut add = |name: &str, d: Departure, effects: Vec<Truth>, t: Test| {
+        let base = structure(seed + out.len() as u64, d.spread, d.damping, d.friction);
+        let mut truth = base.clone();
+        effects.iter().for_each(|e| e.apply(&mut truth));
+        out.push(Case {
+            name: name.to_string(),
+            truth,
+            linear: base,
+            effects,
+            sensors: t.sensors.to_vec(),
+            noise: t.noise,
+            running: t.running,
+        });
     };
-    let s = seed;
+    // the data file's bumper: contact 5→6, gap 0.381 mm, 2e6 N/m
+    let bumper = || vec![contact(&[5, 6], 0.381e-3, 2e6)];
     add(
         "bumper 5→6, modal 3 %, springs ±4 %",
-        structure(s, 0.04, modal(0.03), 0.0),
-        &bumper,
-        &all,
-        0.01,
-        false,
+        dep(0.04, modal(0.03), 0.0),
+        bumper(),
+        test(ALL, 0.01, false),
     );
     add(
         "contact 3→2, Rayleigh, springs ±5 %, 0.3 % noise",
-        structure(
-            s + 1,
-            0.05,
-            Damping::Rayleigh {
-                alpha: 2.0,
-                beta: 6e-5,
-            },
-            0.0,
-        ),
-        &|m| {
-            m.contacts = vec![contact(3, 2, 0.3e-3, 2e6)];
-            "contact 3→2 gap 0.3 mm, 2e6 N/m".into()
-        },
-        &all,
-        0.003,
-        false,
+        dep(0.05, rayleigh(2.0, 6e-5), 0.0),
+        vec![contact(&[3, 2], 0.3e-3, 2e6)],
+        test(ALL, 0.003, false),
     );
     add(
         "bumper 7→6 + friction 0.3 N on every mass, modal 2 %",
-        structure(s + 2, 0.03, modal(0.02), 0.3),
-        &|m| {
-            m.contacts = vec![contact(7, 6, 0.4e-3, 1.5e6)];
-            "contact 7→6 gap 0.4 mm, 1.5e6 N/m".into()
-        },
-        &all,
-        0.01,
-        false,
+        dep(0.03, modal(0.02), 0.3),
+        vec![contact(&[7, 6], 0.4e-3, 1.5e6)],
+        test(ALL, 0.01, false),
     );
     add(
         "cubic 6–7, modal 4 %, springs ±3 %",
-        structure(s + 3, 0.03, modal(0.04), 0.0),
-        &|m| {
-            m.cubics = vec![Cubic {
-                dofs: vec![6, 7],
-                k3: 2e12,
-            }];
-            "cubic 6–7 k3 2e12 N/m³".into()
-        },
-        &all,
-        0.01,
-        false,
+        dep(0.03, modal(0.04), 0.0),
+        vec![Truth::new("cubic", &[6, 7], &[("k3", 2e12)])],
+        test(ALL, 0.01, false),
     );
     add(
         "bumper 5→6, 3 % noise, modal 2 %",
-        structure(s + 4, 0.03, modal(0.02), 0.0),
-        &bumper,
-        &all,
-        0.03,
-        false,
+        dep(0.03, modal(0.02), 0.0),
+        bumper(),
+        test(ALL, 0.03, false),
     );
     add(
         "bumper 5→6 from a running test, modal 2.5 %",
-        structure(s + 5, 0.03, modal(0.025), 0.0),
-        &bumper,
-        &all,
-        0.01,
-        true,
+        dep(0.03, modal(0.025), 0.0),
+        bumper(),
+        test(ALL, 0.01, true),
     );
     add(
         "contact 2→3 + ground spring at 8, modal 3 %",
-        structure(s + 6, 0.04, modal(0.03), 0.0),
-        &|m| {
-            m.contacts = vec![contact(2, 3, 0.35e-3, 2e6)];
-            m.springs.push(Spring {
-                dofs: vec![8],
-                stiffness: 1500.0,
-                name: None,
-            });
-            "contact 2→3 gap 0.35 mm, 2e6 N/m; ground spring at 8, 1500 N/m".into()
-        },
-        &all,
-        0.01,
-        false,
+        dep(0.04, modal(0.03), 0.0),
+        vec![
+            contact(&[2, 3], 0.35e-3, 2e6),
+            Truth::new("ground_spring", &[8], &[("stiffness", 1500.0)]),
+        ],
+        test(ALL, 0.01, false),
     );
     add(
         "bumper 5→6, sensors 1, 5, 6, modal 2 %",
-        structure(s + 7, 0.03, modal(0.02), 0.0),
-        &bumper,
-        &[1, 5, 6],
-        0.01,
-        false,
+        dep(0.03, modal(0.02), 0.0),
+        bumper(),
+        test(&[1, 5, 6], 0.01, false),
     );
     add(
         "cubic 1–2, Rayleigh, friction 0.1 N",
-        structure(
-            s + 8,
-            0.03,
-            Damping::Rayleigh {
-                alpha: 3.0,
-                beta: 4e-5,
-            },
-            0.1,
-        ),
-        &|m| {
-            m.cubics = vec![Cubic {
-                dofs: vec![1, 2],
-                k3: 3e12,
-            }];
-            "cubic 1–2 k3 3e12 N/m³".into()
-        },
-        &all,
-        0.01,
-        false,
+        dep(0.03, rayleigh(3.0, 4e-5), 0.1),
+        vec![Truth::new("cubic", &[1, 2], &[("k3", 3e12)])],
+        test(ALL, 0.01, false),
     );
     add(
         "linear, modal 5 %, springs ±5 %",
-        structure(s + 9, 0.05, modal(0.05), 0.0),
-        &|_| "none".into(),
-        &all,
-        0.01,
-        false,
+        dep(0.05, modal(0.05), 0.0),
+        vec![],
+        test(ALL, 0.01, false),
     );
     add(
         "linear, modal 2 %, springs ±3 %, sensors 1, 5, 6",
-        structure(s + 10, 0.03, modal(0.02), 0.0),
-        &|_| "none".into(),
-        &[1, 5, 6],
-        0.01,
-        false,
+        dep(0.03, modal(0.02), 0.0),
+        vec![],
+        test(&[1, 5, 6], 0.01, false),
     );
     add(
         "contact 4→5 0.2 mm, modal 3 %, 0.3 % noise",
-        structure(s + 11, 0.03, modal(0.03), 0.0),
-        &|m| {
-            m.contacts = vec![contact(4, 5, 0.2e-3, 3e6)];
-            "contact 4→5 gap 0.2 mm, 3e6 N/m".into()
-        },
-        &all,
-        0.003,
-        false,
+        dep(0.03, modal(0.03), 0.0),
+        vec![contact(&[4, 5], 0.2e-3, 3e6)],
+        test(ALL, 0.003, false),
+    );
+    add(
+        "stop of 8 against ground, Rayleigh, friction 0.2 N",
+        dep(0.04, rayleigh(2.5, 5e-5), 0.2),
+        vec![contact(&[8], 0.5e-3, 5e5)],
+        test(ALL, 0.01, false),
+    );
+    add(
+        "cubic 3 to ground, modal 3 %, springs ±4 %",
+        dep(0.04, modal(0.03), 0.0),
+        vec![Truth::new("cubic", &[3], &[("k3", 5e11)])],
+        test(ALL, 0.01, false),
+    );
+    add(
+        "clearance 2–3, modal 2.5 %, sensors 2, 3, 7",
+        dep(0.03, modal(0.025), 0.0),
+        vec![Truth::new(
+            "clearance",
+            &[2, 3],
+            &[("gap", 0.15e-3), ("stiffness", 1e6)],
+        )],
+        test(&[2, 3, 7], 0.01, false),
+    );
+    add(
+        "relative friction 7–8, modal 3 %, 3 % noise",
+        dep(0.05, modal(0.03), 0.0),
+        vec![Truth::new("relative_friction", &[7, 8], &[("level", 1.0)])],
+        test(ALL, 0.03, false),
+    );
+    add(
+        "contact 8→7 from a running test, Rayleigh, 0.3 % noise",
+        dep(0.03, rayleigh(1.5, 8e-5), 0.0),
+        vec![contact(&[8, 7], 0.3e-3, 1e6)],
+        test(ALL, 0.003, true),
+    );
+    add(
+        "linear, Rayleigh, springs ±4 %, running, 3 % noise",
+        dep(0.04, rayleigh(2.0, 5e-5), 0.0),
+        vec![],
+        test(ALL, 0.03, true),
     );
     out
 }
@@ -257,6 +328,60 @@ fn pct(x: Option<f64>) -> String {
     x.map_or("failed".into(), |v| format!("{:.2} %", 100.0 * v))
 }
 
+/// The checks on one diagnosis: every localized effect of the
+/// truth named at its place with its parameters within 10 %, no other
+/// effect (friction at a mass allowed where the truth has it on every
+/// mass), validation error ≤ 1.5 × the measured noise. "pass" or what
+/// fails.
+fn verdict(c: &Case, d: &tacit::diagnose::Diagnosis, noise: f64) -> String {
+    let mut fails = vec![];
+    for t in &c.effects {
+        let Some(e) = d
+            .effects
+            .iter()
+            .find(|e| e.kind.name() == t.kind && e.dofs == t.dofs)
+        else {
+            fails.push(format!("{} not named", t.describe()));
+            continue;
+        };
+        for (n, v) in &t.params {
+            let x = e.parameters.get(*n).copied().unwrap_or(f64::NAN);
+            let dev = x / v - 1.0;
+            if dev.is_nan() || dev.abs() > 0.1 {
+                fails.push(format!("{} {n} {:+.1} %", t.kind, 100.0 * dev));
+            }
+        }
+    }
+    let background = !c.truth.frictions.is_empty();
+    for e in &d.effects {
+        let expected = c
+            .effects
+            .iter()
+            .any(|t| e.kind.name() == t.kind && e.dofs == t.dofs)
+            || (background && e.kind.name() == "friction");
+        if !expected {
+            fails.push(format!("extra {} {:?}", e.kind.name(), e.dofs));
+        }
+    }
+    let v = d.validation.as_ref().and_then(|v| v.after.relative_error);
+    if !v.is_some_and(|v| v <= 1.5 * noise) {
+        fails.push(format!("validation {} > 1.5 × noise", pct(v)));
+    }
+    if fails.is_empty() {
+        "pass".into()
+    } else {
+        format!("**fail**: {}", fails.join("; "))
+    }
+}
+
+fn truth_cell(c: &Case) -> String {
+    let mut t: Vec<String> = c.effects.iter().map(Truth::describe).collect();
+    if t.is_empty() {
+        t.push("none".into());
+    }
+    t.join("; ")
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let arg = |k: &str| {
@@ -270,8 +395,9 @@ fn main() {
     // `--variants no` or `--variants yes`: only the diagnoses without or
     // with the linear record
     let variants = arg("--variants");
-    println!("| record | truth | sensors | noise | linear record | found | parameters | error before → after | validation before → after | corrections significant | time |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let settings = DiagnoseSettings::default();
+    println!("| record | truth | sensors | noise (measured) | linear record | found | parameters | error before → after | validation before → after | corrections significant | checks | time |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for c in cases(seed) {
         if only.as_ref().is_some_and(|o| !c.name.contains(o.as_str())) {
             continue;
@@ -295,7 +421,7 @@ fn main() {
                 Some(&val),
                 &lin,
                 None,
-                &DiagnoseSettings::default(),
+                &settings,
                 &CalibratedSettings::default(),
                 &|_| {},
             );
@@ -303,8 +429,9 @@ fn main() {
                 Ok(d) => d,
                 Err(e) => {
                     println!(
-                        "| {} | {} | | | {with_low} | error: {e} | | | | | |",
-                        c.name, c.effects
+                        "| {} | {} | | | {with_low} | error: {e} | | | | | **fail** | |",
+                        c.name,
+                        truth_cell(&c)
                     );
                     continue;
                 }
@@ -324,13 +451,17 @@ fn main() {
                         .collect()
                 })
                 .unwrap_or_default();
+            // the noise level measured on the record (the assumed one when
+            // not measured)
+            let noise = d.noise.as_ref().map_or(settings.noise.level, |n| n.level);
             let v = d.validation.as_ref().unwrap();
             println!(
-                "| {} | {} | {} | {:.1} % | {} | {} | {} | {} → {} | {} → {} | {} | {:.1} s |",
+                "| {} | {} | {} | {:.1} % ({:.2} %) | {} | {} | {} | {} → {} | {} → {} | {} | {} | {:.1} s |",
                 c.name,
-                c.effects,
+                truth_cell(&c),
                 sensors_cell(&c.sensors),
                 100.0 * c.noise,
+                100.0 * noise,
                 if with_low { "yes" } else { "no" },
                 d.verdict,
                 effects_cell(&d.effects),
@@ -343,6 +474,7 @@ fn main() {
                 } else {
                     sig.join(", ")
                 },
+                verdict(&c, &d, noise),
                 t.elapsed().as_secs_f64()
             );
         }

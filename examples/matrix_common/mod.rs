@@ -26,11 +26,12 @@ pub fn effects_cell(effects: &[EffectReport]) -> String {
     params.join("; ")
 }
 
-/// The sensor set: `1–8` (all eight masses) or `1, 5, 6`.
-pub fn sensors_cell(sensors: &[usize]) -> &'static str {
+/// The sensor set: `1–8` (all eight masses) or the list (`1, 5, 6`).
+pub fn sensors_cell(sensors: &[usize]) -> String {
     if sensors.len() == 8 {
-        "1–8"
+        "1–8".into()
     } else {
-        "1, 5, 6"
+        let s: Vec<String> = sensors.iter().map(|d| d.to_string()).collect();
+        s.join(", ")
     }
 }
