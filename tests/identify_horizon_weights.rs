@@ -43,7 +43,11 @@ fn default_weight_rule_gives_a_bounded_force_on_the_bumper_record() {
     let lambda = w["lambda"].as_f64().unwrap();
     assert!((1e-3..10.0).contains(&lambda), "λ = {lambda}");
     let nums = |v: &serde_json::Value| -> Vec<f64> {
-        v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
     };
     let rms = nums(&s["truth"]["rms_identified"]);
     let corr = nums(&s["truth"]["correlation"]);
@@ -52,7 +56,10 @@ fn default_weight_rule_gives_a_bounded_force_on_the_bumper_record() {
     assert!(rms.iter().all(|&r| r < 100.0), "{rms:?}");
     // meaningful: the largest forces at the contact, following its shape
     let at_contact = rms[4].min(rms[5]);
-    let elsewhere = [0, 1, 2, 3, 6, 7].iter().map(|&i| rms[i]).fold(0.0, f64::max);
+    let elsewhere = [0, 1, 2, 3, 6, 7]
+        .iter()
+        .map(|&i| rms[i])
+        .fold(0.0, f64::max);
     assert!(at_contact > 10.0 && at_contact > 1.5 * elsewhere, "{rms:?}");
     assert!(corr[4] > 0.4 && corr[5] > 0.4, "{corr:?}");
 }

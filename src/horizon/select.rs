@@ -210,11 +210,7 @@ fn lcurve(s: &mut Search<'_>) -> Result<(f64, f64)> {
 
 /// The discrepancy principle's α and residual / target; None when the
 /// target is above the residual of every α (no α reaches it).
-fn discrepancy(
-    s: &mut Search<'_>,
-    noise: &NoiseLevel,
-    tau: f64,
-) -> Result<Option<(f64, f64)>> {
+fn discrepancy(s: &mut Search<'_>, noise: &NoiseLevel, tau: f64) -> Result<Option<(f64, f64)>> {
     let np = s.data.measured.len() as f64;
     let sigma2 = match noise {
         NoiseLevel::Known => 1.0,
