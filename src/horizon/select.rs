@@ -12,7 +12,13 @@
 //! - **Discrepancy principle** (Morozov 1966): the largest α with
 //!   `‖r‖²_W ≤ τ N p σ²`, σ² = 1 when `W` is the true inverse noise
 //!   variance, or the GCV estimate `‖r‖²_W / (N p − tr H)`; refined by
-//!   bisection on log α.
+//!   bisection on log α. When even the smallest α of the grid leaves a
+//!   residual above the target (the noise level is below what the model
+//!   can fit: model error, or a wrong noise level), the principle has no
+//!   answer; the smallest α would then fit the residual floor with an
+//!   unbounded force (thousands of N on the shipped bumper record for a
+//!   true 36 N), so the L-curve corner is used instead and reported as
+//!   the rule applied.
 //!
 //! Candidates whose solve reports numerical trouble (other than a
 //! rank-deficient initial state) are skipped.
@@ -89,11 +95,18 @@ pub fn choose(
         settings,
         candidates: vec![],
     };
+    let mut applied = settings.selection.clone();
     let (t, criterion) = match &settings.selection {
         WeightSelection::Fixed => (0.0, f64::NAN),
         WeightSelection::Gcv => gcv(&mut s)?,
         WeightSelection::LCurve => lcurve(&mut s)?,
-        WeightSelection::Discrepancy { noise, tau } => discrepancy(&mut s, noise, *tau)?,
+        WeightSelection::Discrepancy { noise, tau } => match discrepancy(&mut s, noise, *tau)? {
+            Some(found) => found,
+            None => {
+                applied = WeightSelection::LCurve;
+                lcurve(&mut s)?
+            }
+        },
     };
     let a = 10f64.powf(t);
     let mut cands = std::mem::take(&mut s.candidates);
@@ -101,7 +114,7 @@ pub fn choose(
     let report = SelectedWeights {
         lambda: a * settings.lambda,
         mu: a * settings.mu,
-        selection: settings.selection.clone(),
+        selection: applied,
         criterion,
         candidates: cands.into_iter().map(|c| c.1).collect(),
     };
@@ -195,7 +208,9 @@ fn lcurve(s: &mut Search<'_>) -> Result<(f64, f64)> {
     Ok(best)
 }
 
-fn discrepancy(s: &mut Search<'_>, noise: &NoiseLevel, tau: f64) -> Result<(f64, f64)> {
+/// The discrepancy principle's α and residual / target; None when the
+/// target is above the residual of every α (no α reaches it).
+fn discrepancy(s: &mut Search<'_>, noise: &NoiseLevel, tau: f64) -> Result<Option<(f64, f64)>> {
     let np = s.data.measured.len() as f64;
     let sigma2 = match noise {
         NoiseLevel::Known => 1.0,
@@ -211,15 +226,15 @@ fn discrepancy(s: &mut Search<'_>, noise: &NoiseLevel, tau: f64) -> Result<(f64,
         let rss = s.eval(t, false)?.map_or(f64::INFINITY, |c| c.rss);
         if rss > target {
             return match prev {
-                None => Ok((t, rss / target)),
-                Some(lo) => bisect(s, lo, t, target),
+                None => Ok(None),
+                Some(lo) => bisect(s, lo, t, target).map(Some),
             };
         }
         prev = Some(t);
     }
     let t = grid.last().copied().unwrap_or(0.0);
     let rss = s.eval(t, false)?.map_or(f64::NAN, |c| c.rss);
-    Ok((t, rss / target))
+    Ok(Some((t, rss / target)))
 }
 
 fn bisect(s: &mut Search<'_>, mut lo: f64, mut hi: f64, target: f64) -> Result<(f64, f64)> {
