@@ -691,11 +691,7 @@ fn refine_local(
             }
         }
     }
-    let iterations = if exact {
-        iterations.min(1)
-    } else {
-        iterations
-    };
+    let iterations = if exact { iterations.min(1) } else { iterations };
     let mut run = Refining {
         cmp,
         model,

@@ -57,8 +57,8 @@ use super::{Integrator, OperatorCache, Outputs, SimStatus, Simulation, Work};
 use crate::error::{Result, TacitError};
 use crate::model::elements::{self, ElementParam};
 use nalgebra::{DMatrix, DMatrixView, Dyn, LU};
-use std::ops::Range;
 use serde::Serialize;
+use std::ops::Range;
 
 static POWERS: OperatorCache<Vec<f64>> = OperatorCache::new();
 
