@@ -526,6 +526,9 @@ impl crate::lsq::Problem for StartProblem<'_> {
     }
 }
 
+/// A segment's refined start and its evaluation, when it improved.
+type Improved = Option<(Segment, SegEval)>;
+
 /// How one segment's refinement went: iterations in which it took part,
 /// whether the last of them failed to lower its cost, whether it is still
 /// worth a step.
@@ -573,7 +576,7 @@ impl Refining<'_> {
         let method = lsq::Method::LineSearch { min_t: 1.0 / 16.0 };
         let idx: Vec<usize> = (0..self.segs.len()).filter(|&i| active[i]).collect();
         let this = &*self;
-        let runs: Vec<(SegmentRun, Option<(Segment, SegEval)>, usize)> = idx
+        let runs: Vec<(SegmentRun, Improved, usize)> = idx
             .par_iter()
             .map(|&i| {
                 let Some((r, c)) = this.res[i].clone() else {

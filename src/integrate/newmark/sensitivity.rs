@@ -751,10 +751,10 @@ impl Integrator {
         }
         match &self.m_diag {
             Some(m) => {
-                for i in 0..n {
+                for (i, &mi) in m.iter().enumerate().take(n) {
                     let r = rows.of(i);
                     let (r, z) = (&mut rhs[r.clone()], &dz[r]);
-                    r.iter_mut().zip(z).for_each(|(r, z)| *r = -m[i] * z);
+                    r.iter_mut().zip(z).for_each(|(r, z)| *r = -mi * z);
                 }
             }
             None => {
@@ -1043,8 +1043,9 @@ impl Rows {
     }
 
     /// [`chol_solve`] of every seed of `b`, each by the same operations in
-    /// the same order.
+    /// the same order (the row index also places the rows of `b`).
     #[inline(always)]
+    #[allow(clippy::needless_range_loop)]
     fn chol_solve<const N: usize>(&self, l: &[f64], n: usize, b: &mut [f64]) {
         let n = dim::<N>(n);
         let l = &l[..n * n];
