@@ -2,7 +2,8 @@
 //! mass, 4096 samples × 10 sub-steps (issue target: under 20 ms; a
 //! pure-NumPy Newmark takes about 3.4 s). Also the same run with forward
 //! sensitivities: 16 state seeds (every initial displacement and velocity)
-//! and 2 parameter seeds (the bumper's gap and stiffness).
+//! and 2 parameter seeds (the bumper's gap and stiffness); and a 128-sample
+//! segment at 40 sub-steps with 16 state seeds and 10 parameter seeds.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
@@ -78,6 +79,30 @@ fn bench(c: &mut Criterion) {
             },
         );
     }
+    // the testbed as the calibrated diagnosis refines it: 40 sub-steps, 16
+    // state seeds and a parameter per element (gap, stiffness, 8 levels),
+    // one 128-sample segment
+    let sub40 = SimSettings {
+        substeps: 40,
+        ..Default::default()
+    };
+    let integ40 = Integrator::new(&model, fs, sub40).unwrap();
+    let mut many = Seeds::initial_state(8);
+    many.params = params.params.clone();
+    for e in 1..integ40.elements().len() {
+        many.params.push(ParamSeed {
+            elements: vec![ElementSeed {
+                element: e,
+                param: ElementParam::Level,
+                scale: 1.0,
+            }],
+            ..Default::default()
+        });
+    }
+    let seg = f.columns(0, 128);
+    c.bench_function("lanl8dof_contact_friction_128x40_sens_26_seeds", |b| {
+        b.iter(|| black_box(integ40.run_sensitivities(black_box(seg), &[0.0; 8], &[0.0; 8], &many)))
+    });
     let linear = model.linear_part();
     let integ_l = Integrator::new(&linear, fs, SimSettings::default()).unwrap();
     c.bench_function("lanl8dof_linear_4096x10", |b| {

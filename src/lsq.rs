@@ -202,6 +202,17 @@ pub fn minimize<Q: Problem>(
             iterations: 0,
         };
     };
+    minimize_from(q, x0, e0, method, stop)
+}
+
+/// [`minimize`] from `x0` already evaluated as `e0`.
+pub fn minimize_from<Q: Problem>(
+    q: &mut Q,
+    x0: Q::Point,
+    e0: Q::Eval,
+    method: Method,
+    stop: &Stopping,
+) -> Outcome<Q::Point, Q::Eval> {
     let mut cost = q.cost(&e0);
     let (mut x, mut e) = (x0, e0);
     let mut history = vec![cost];

@@ -16,10 +16,9 @@
 //! ([`Integrator::run_sensitivities`], the exact derivative of the discrete
 //! solution: one simulation of every segment per iteration, with 2n seeds),
 //! and the iterations go on; a step that does not lower `J_s` is halved, up
-//! to four times (the halving schedule of the least-squares driver,
-//! [`crate::lsq::halving`], every segment still pending at one step
-//! fraction so that their simulations run together), else the segment
-//! keeps its state. `J⁺` is the
+//! to four times, else the segment keeps its state. Each segment is a
+//! problem of the least-squares driver ([`crate::lsq`], Gauss–Newton with
+//! its halving line search), the segments in parallel. `J⁺` is the
 //! pseudo-inverse in states scaled to a common unit (displacements × ω,
 //! [`SampledModel::state_scale`]), singular values below 1e-8 of the
 //! largest dropped: directions the outputs never see (a free-free model's
@@ -159,60 +158,46 @@ fn predict_each(
     out
 }
 
-/// Gauss–Newton steps from the forward sensitivities of the nonlinear
-/// simulation ([`Integrator::run_sensitivities`]): one simulation of every
-/// segment with the `2n` initial-state seeds. A segment whose simulation or
-/// derivatives fail gets no step.
-fn sens_steps(
+/// The Gauss–Newton step of segment `s` (weighted residual `r`) from the
+/// forward sensitivities of the nonlinear simulation
+/// ([`Integrator::run_sensitivities`]): one simulation with the `2n`
+/// initial-state seeds; None when the simulation or its derivatives fail.
+fn sens_step(
+    integ: &Integrator,
     cmp: &Comparison,
-    model: &Model,
-    sim: SimSettings,
-    segs: &[Segment],
-    res: &[Option<(DVector<f64>, f64)>],
+    s: &Segment,
+    r: &DVector<f64>,
     scale: &DVector<f64>,
-    count: &mut usize,
-) -> Vec<Option<DVector<f64>>> {
-    let n = model.ndof();
+) -> Option<DVector<f64>> {
+    let n = integ.ndof();
     let nx = 2 * n;
     let p = cmp.observations.len();
-    let Ok(integ) = Integrator::new(model, cmp.fs, sim) else {
-        return vec![None; segs.len()];
-    };
     let seeds = Seeds::initial_state(n);
-    *count += res.iter().filter(|r| r.is_some()).count();
-    // segments are independent: in parallel, collected in order (the same
-    // numbers whatever the thread count)
-    segs.par_iter()
-        .zip(res)
-        .map(|(s, r)| {
-            let (r, _) = r.as_ref()?;
-            let force = cmp.force.columns(s.start, s.len);
-            let (run, d) = integ.run_sensitivities(force, &s.u0, &s.v0, &seeds).ok()?;
-            if !run.completed() || d.singular_tangent.is_some() {
-                return None;
+    let force = cmp.force.columns(s.start, s.len);
+    let (run, d) = integ.run_sensitivities(force, &s.u0, &s.v0, &seeds).ok()?;
+    if !run.completed() || d.singular_tangent.is_some() {
+        return None;
+    }
+    let mut j = DMatrix::zeros(s.len * p, nx);
+    for q in 0..nx {
+        for (c, o) in cmp.observations.iter().enumerate() {
+            let src = match o.quantity {
+                Quantity::Disp => &d.du[q],
+                Quantity::Vel => &d.dv[q],
+                _ => &d.da[q],
+            };
+            for k in 0..s.len {
+                j[(k * p + c, q)] = o.weight * src[(o.dof - 1, k)] * scale[q];
             }
-            let mut j = DMatrix::zeros(s.len * p, nx);
-            for q in 0..nx {
-                for (c, o) in cmp.observations.iter().enumerate() {
-                    let src = match o.quantity {
-                        Quantity::Disp => &d.du[q],
-                        Quantity::Vel => &d.dv[q],
-                        _ => &d.da[q],
-                    };
-                    for k in 0..s.len {
-                        j[(k * p + c, q)] = o.weight * src[(o.dof - 1, k)] * scale[q];
-                    }
-                }
-            }
-            if j.iter().any(|v| !v.is_finite()) {
-                return None;
-            }
-            let svd = j.svd(true, true);
-            let smax = svd.singular_values.max();
-            let d = svd.solve(r, 1e-8 * smax).ok()?;
-            Some(d.component_mul(scale))
-        })
-        .collect()
+        }
+    }
+    if j.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let svd = j.svd(true, true);
+    let smax = svd.singular_values.max();
+    let d = svd.solve(r, 1e-8 * smax).ok()?;
+    Some(d.component_mul(scale))
 }
 
 /// Continuity starts: every segment that directly follows another is tried
@@ -472,70 +457,197 @@ pub fn outliers(costs: &[f64], tried: &[bool], factor: f64) -> Vec<usize> {
 /// now.
 pub type Pick = (usize, Segment, f64);
 
-/// The segments being refined, their predictions and residuals.
-struct Stepping<'a> {
+/// One segment's start state as a problem of the least-squares driver
+/// ([`crate::lsq`], Gauss–Newton with its halving line search): the point
+/// is the segment, its evaluation the weighted residual, the cost and the
+/// prediction (p × len), its linearization the Gauss–Newton step — the
+/// exact one of the linear part (`exact`: the pseudo-inverse for the
+/// segment's length) or the sensitivities' ([`sens_step`]).
+struct StartProblem<'a> {
     cmp: &'a Comparison,
     model: &'a Model,
     sim: SimSettings,
-    segs: &'a mut Vec<Segment>,
-    y: &'a mut DMatrix<f64>,
-    res: &'a mut Vec<Option<(DVector<f64>, f64)>>,
-    sims: &'a mut usize,
+    exact: Option<&'a DMatrix<f64>>,
+    integ: Option<&'a Integrator>,
+    scale: &'a DVector<f64>,
+    sims: usize,
 }
 
-impl Stepping<'_> {
-    /// Take the Gauss–Newton `steps` of segments `idx` (in that order),
-    /// halved up to four times while a step does not lower the segment's
-    /// cost; returns which segments improved (indexed by segment).
-    fn line_search(&mut self, idx: &[usize], steps: Vec<Option<DVector<f64>>>) -> Vec<bool> {
-        let n = self.model.ndof();
-        let mut step_of: Vec<Option<DVector<f64>>> = vec![None; self.segs.len()];
-        for (&i, d) in idx.iter().zip(steps) {
-            step_of[i] = d;
+/// A segment's evaluation: weighted residual, its squared norm and the
+/// prediction of the segment's samples (p × len).
+type SegEval = (DVector<f64>, f64, DMatrix<f64>);
+
+impl crate::lsq::Problem for StartProblem<'_> {
+    type Point = Segment;
+    type Eval = SegEval;
+    type Lin = DVector<f64>;
+    type Step = DVector<f64>;
+
+    fn evaluate(&mut self, s: &Segment) -> Option<SegEval> {
+        let y = predict_each(
+            self.cmp,
+            self.model,
+            std::slice::from_ref(s),
+            self.sim,
+            &mut self.sims,
+        );
+        let (r, c) = residual(self.cmp, s, &y)?;
+        Some((r, c, y.columns(s.start, s.len).into_owned()))
+    }
+
+    fn cost(&self, e: &SegEval) -> f64 {
+        e.1
+    }
+
+    fn linearize(&mut self, s: &Segment, e: &SegEval) -> Result<DVector<f64>, String> {
+        match (self.exact, self.integ) {
+            (Some(pinv), _) => Ok(pinv * &e.0),
+            (None, Some(integ)) => {
+                self.sims += 1;
+                sens_step(integ, self.cmp, s, &e.0, self.scale)
+                    .ok_or_else(|| "the sensitivities failed".into())
+            }
+            (None, None) => Err("no integrator".into()),
         }
-        let mut pending: Vec<usize> = idx
-            .iter()
-            .copied()
-            .filter(|&i| step_of[i].is_some())
+    }
+
+    fn step(&mut self, lin: &DVector<f64>, _lambda: f64) -> Result<DVector<f64>, String> {
+        Ok(lin.clone())
+    }
+
+    fn trial(&self, s: &Segment, d: &DVector<f64>, t: f64) -> Segment {
+        let n = self.model.ndof();
+        Segment {
+            start: s.start,
+            len: s.len,
+            u0: (0..n).map(|q| s.u0[q] + t * d[q]).collect(),
+            v0: (0..n).map(|q| s.v0[q] + t * d[n + q]).collect(),
+        }
+    }
+}
+
+/// A segment's refined start and its evaluation, when it improved.
+type Improved = Option<(Segment, SegEval)>;
+
+/// How one segment's refinement went: iterations in which it took part,
+/// whether the last of them failed to lower its cost, whether it is still
+/// worth a step.
+struct SegmentRun {
+    attempts: usize,
+    last_failed: bool,
+    active: bool,
+}
+
+/// The segments being refined, their predictions and residuals, and what
+/// the driver's problems share.
+struct Refining<'a> {
+    cmp: &'a Comparison,
+    model: &'a Model,
+    sim: SimSettings,
+    pinv: BTreeMap<usize, DMatrix<f64>>,
+    linear: bool,
+    integ: Option<Integrator>,
+    scale: DVector<f64>,
+    segs: Vec<Segment>,
+    y: DMatrix<f64>,
+    res: Vec<Option<(DVector<f64>, f64)>>,
+    sims: usize,
+}
+
+impl Refining<'_> {
+    /// Up to `iterations` Gauss–Newton iterations of every segment marked
+    /// in `active` (each its own problem of the least-squares driver, in
+    /// parallel): a step that does not lower the segment's cost is halved
+    /// down to 1/16, and a segment stops when no step lowers its cost or a
+    /// step gains less than [`super::settings::StartSettings::settled`] of
+    /// it. Updates `active`; returns the iterations run (the most any
+    /// segment took part in) and the segments whose last iteration, at that
+    /// count, failed.
+    fn run(&mut self, iterations: usize, active: &mut [bool]) -> (usize, usize) {
+        use crate::lsq;
+        let stop = lsq::Stopping {
+            max_iterations: iterations,
+            x_tol: None,
+            cost: lsq::CostTest::Gain(self.cmp.starts.settled),
+            light: 0.0,
+            stall: None,
+            count_failed_attempt: true,
+        };
+        let method = lsq::Method::LineSearch { min_t: 1.0 / 16.0 };
+        let idx: Vec<usize> = (0..self.segs.len()).filter(|&i| active[i]).collect();
+        let this = &*self;
+        let runs: Vec<(SegmentRun, Improved, usize)> = idx
+            .par_iter()
+            .map(|&i| {
+                let Some((r, c)) = this.res[i].clone() else {
+                    let failed = SegmentRun {
+                        attempts: usize::from(iterations > 0),
+                        last_failed: true,
+                        active: false,
+                    };
+                    return (failed, None, 0);
+                };
+                let seg = &this.segs[i];
+                let mut q = StartProblem {
+                    cmp: this.cmp,
+                    model: this.model,
+                    sim: this.sim,
+                    exact: this.pinv.get(&seg.len).filter(|_| this.linear),
+                    integ: this.integ.as_ref(),
+                    scale: &this.scale,
+                    sims: 0,
+                };
+                let y0 = this.y.columns(seg.start, seg.len).into_owned();
+                let out = lsq::minimize_from(&mut q, seg.clone(), (r, c, y0), method, &stop);
+                let run = segment_run(&out.termination, out.iterations);
+                let improved = out.history.len() > 1;
+                let kept = improved.then(|| (out.point, out.eval.expect("evaluated")));
+                (run, kept, q.sims)
+            })
             .collect();
-        let mut improved = vec![false; self.segs.len()];
-        // the driver's halving schedule, all pending segments at one t:
-        // 1, 1/2, …, 1/16
-        crate::lsq::halving(1.0, 1.0 / 16.0, |t| {
-            if pending.is_empty() {
-                return crate::lsq::Halve::Stop;
+        let done = runs.iter().map(|r| r.0.attempts).max().unwrap_or(0);
+        let mut stalled = 0;
+        for (&i, (run, kept, sims)) in idx.iter().zip(runs) {
+            self.sims += sims;
+            stalled += usize::from(run.attempts == done && run.last_failed);
+            active[i] = run.active;
+            if let Some((seg, (r, c, y))) = kept {
+                self.y.columns_mut(seg.start, seg.len).copy_from(&y);
+                self.res[i] = Some((r, c));
+                self.segs[i] = seg;
             }
-            let trial: Vec<Segment> = pending
-                .iter()
-                .map(|&i| {
-                    let d = step_of[i].as_ref().expect("pending segments have a step");
-                    let s = &self.segs[i];
-                    Segment {
-                        start: s.start,
-                        len: s.len,
-                        u0: (0..n).map(|q| s.u0[q] + t * d[q]).collect(),
-                        v0: (0..n).map(|q| s.v0[q] + t * d[n + q]).collect(),
-                    }
-                })
-                .collect();
-            let yt = predict_each(self.cmp, self.model, &trial, self.sim, self.sims);
-            let mut still = vec![];
-            for (ti, &i) in pending.iter().enumerate() {
-                let old = self.res[i].as_ref().map_or(f64::INFINITY, |r| r.1);
-                match residual(self.cmp, &trial[ti], &yt) {
-                    Some(r) if r.1 < old => {
-                        copy_segment(self.y, &yt, &trial[ti]);
-                        self.segs[i] = trial[ti].clone();
-                        self.res[i] = Some(r);
-                        improved[i] = true;
-                    }
-                    _ => still.push(i),
-                }
-            }
-            pending = std::mem::take(&mut still);
-            crate::lsq::Halve::Again
-        });
-        improved
+        }
+        (done, stalled)
+    }
+}
+
+/// A segment's [`SegmentRun`] from how its driver stopped after
+/// `iterations` (failed attempts counted).
+fn segment_run(t: &crate::lsq::Termination, iterations: usize) -> SegmentRun {
+    use crate::lsq::Termination as T;
+    match t {
+        // the last step gained enough: worth another
+        T::IterationLimit => SegmentRun {
+            attempts: iterations,
+            last_failed: false,
+            active: true,
+        },
+        T::Converged(_) => SegmentRun {
+            attempts: iterations,
+            last_failed: false,
+            active: false,
+        },
+        // no step could be taken: an attempt that failed
+        T::LinearizationFailed(_) | T::SolveFailed(_) => SegmentRun {
+            attempts: iterations + 1,
+            last_failed: true,
+            active: false,
+        },
+        _ => SegmentRun {
+            attempts: iterations,
+            last_failed: true,
+            active: false,
+        },
     }
 }
 
@@ -550,10 +662,9 @@ fn refine_local(
     continue_from: bool,
 ) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
     let mut sims = 0;
-    let mut segs = segments.to_vec();
-    let mut y = predict_each(cmp, model, &segs, sim, &mut sims);
-    let mut res: Vec<Option<(DVector<f64>, f64)>> =
-        segs.iter().map(|s| residual(cmp, s, &y)).collect();
+    let segs = segments.to_vec();
+    let y = predict_each(cmp, model, &segs, sim, &mut sims);
+    let res: Vec<Option<(DVector<f64>, f64)>> = segs.iter().map(|s| residual(cmp, s, &y)).collect();
     let cost0: f64 = res.iter().flatten().map(|r| r.1).sum();
     let sampled = SampledModel::from_model(&model.linear_part(), cmp.fs, sim.substeps).ok();
     let Some(sm) = sampled else {
@@ -569,87 +680,74 @@ fn refine_local(
         return (segs, y, fit);
     };
     // a linear model: the Jacobian is exact and one step solves the problem
-    let mut exact = if model.is_nonlinear() {
+    let jac = if model.is_nonlinear() {
         None
     } else {
         Jacobians::new(&sm, cmp)
     };
-    let scale = sm.state_scale();
-    let iterations = if exact.is_some() {
-        iterations.min(1)
-    } else {
-        iterations
+    let exact = jac.is_some();
+    let mut pinv = BTreeMap::new();
+    if let Some(mut jac) = jac {
+        for s in &segs {
+            if let Some(p) = jac.pinv(s.len) {
+                pinv.entry(s.len).or_insert_with(|| p.clone());
+            }
+        }
+    }
+    let iterations = if exact { iterations.min(1) } else { iterations };
+    let mut run = Refining {
+        cmp,
+        model,
+        sim,
+        pinv,
+        linear: exact,
+        integ: (!exact)
+            .then(|| Integrator::new(model, cmp.fs, sim).ok())
+            .flatten(),
+        scale: sm.state_scale(),
+        segs,
+        y,
+        res,
+        sims,
     };
-    let mut stalled = 0;
-    let mut done = 0;
-    let mut continued = 0;
     // segments still worth a step: one whose last step failed would take
     // the same step again, and one whose last step gained less than
     // [`super::settings::StartSettings::settled`] of its cost has settled
-    let mut active = vec![true; segs.len()];
-    for it in 0..iterations {
-        done += 1;
-        // from the second iteration of a nonlinear model: a segment may
-        // start instead from where the previous one ends (continuity),
-        // when that predicts it better (a refinement stuck in a local
-        // minimum; the cost is rough in a contact, docs/updating.md)
-        if continue_from && exact.is_none() && it == 1 {
-            let changed = continuity(cmp, model, sim, &mut segs, &mut y, &mut res, &mut sims);
-            continued = changed.len();
-            for i in changed {
-                active[i] = true;
-            }
+    let mut active = vec![true; run.segs.len()];
+    // from the second iteration of a nonlinear model: a segment may start
+    // instead from where the previous one ends (continuity), when that
+    // predicts it better (a refinement stuck in a local minimum; the cost
+    // is rough in a contact, docs/updating.md)
+    let with_continuity = continue_from && !exact && iterations >= 2;
+    let first = if with_continuity { 1 } else { iterations };
+    let (mut done, mut stalled) = run.run(first, &mut active);
+    let mut continued = 0;
+    if with_continuity {
+        let Refining {
+            segs, y, res, sims, ..
+        } = &mut run;
+        let changed = continuity(cmp, model, sim, segs, y, res, sims);
+        continued = changed.len();
+        for i in changed {
+            active[i] = true;
         }
-        let idx: Vec<usize> = (0..segs.len()).filter(|&i| active[i]).collect();
-        if idx.is_empty() {
-            done -= 1;
-            break;
-        }
-        let steps = match exact.as_mut() {
-            Some(jac) => idx
-                .iter()
-                .map(|&i| {
-                    let r = res[i].as_ref().map(|r| &r.0);
-                    r.and_then(|r| Some(jac.pinv(segs[i].len)? * r))
-                })
-                .collect(),
-            None => {
-                let sub: Vec<Segment> = idx.iter().map(|&i| segs[i].clone()).collect();
-                let sub_res: Vec<_> = idx.iter().map(|&i| res[i].clone()).collect();
-                sens_steps(cmp, model, sim, &sub, &sub_res, &scale, &mut sims)
-            }
-        };
-        let before: Vec<f64> = res
-            .iter()
-            .map(|r| r.as_ref().map_or(f64::INFINITY, |r| r.1))
-            .collect();
-        let mut run = Stepping {
-            cmp,
-            model,
-            sim,
-            segs: &mut segs,
-            y: &mut y,
-            res: &mut res,
-            sims: &mut sims,
-        };
-        let improved = run.line_search(&idx, steps);
-        stalled = idx.iter().filter(|&&i| !improved[i]).count();
-        for &i in &idx {
-            let after = res[i].as_ref().map_or(f64::INFINITY, |r| r.1);
-            active[i] = improved[i] && after < (1.0 - cmp.starts.settled) * before[i];
+        let (more, st) = run.run(iterations - 1, &mut active);
+        if more > 0 {
+            done += more;
+            stalled = st;
         }
     }
-    let cost1: f64 = res.iter().flatten().map(|r| r.1).sum();
+    let cost1: f64 = run.res.iter().flatten().map(|r| r.1).sum();
     let fit = StartFit {
         iterations: done,
         continued,
         grown: 0,
-        simulations: sims,
+        simulations: run.sims,
         cost: (cost0, cost1),
         stalled,
         note: String::new(),
     };
-    (segs, y, fit)
+    (run.segs, run.y, fit)
 }
 
 /// Run-in starts for chosen segments, given as [`Pick`]s with the

@@ -426,6 +426,20 @@ impl Element {
         true
     }
 
+    /// True for a law of the velocity (friction, dampers), whose slope is
+    /// `∂f/∂v`; false for a law of the displacement (`∂f/∂u`). The
+    /// element's slope products ([`Element::add_slope_product`]) act on the
+    /// relative value between its [`Element::ends`] of the one or the other.
+    pub fn is_velocity_law(&self) -> bool {
+        matches!(
+            self,
+            Element::Friction { .. }
+                | Element::QuadraticDamper { .. }
+                | Element::CubicDamper { .. }
+                | Element::RelativeFriction { .. }
+        )
+    }
+
     /// The DOFs the element acts on: `(i, j)`, `j = None` for ground.
     pub fn ends(&self) -> (usize, Option<usize>) {
         match *self {

@@ -58,6 +58,7 @@ use crate::error::{Result, TacitError};
 use crate::model::elements::{self, ElementParam};
 use nalgebra::{DMatrix, DMatrixView, Dyn, LU};
 use serde::Serialize;
+use std::ops::Range;
 
 static POWERS: OperatorCache<Vec<f64>> = OperatorCache::new();
 
@@ -183,6 +184,9 @@ struct TangentFactor {
     factor: Factor,
     /// Cholesky factor (column-major) when `factor` is `Chol`.
     l: Vec<f64>,
+    /// The tangent before its factorization (for the LU when it is not
+    /// positive definite).
+    full: Vec<f64>,
     /// Slopes the factor was built from.
     slopes: Vec<f64>,
     /// LU of `J_0` when it has no Cholesky factor.
@@ -190,7 +194,10 @@ struct TangentFactor {
     count: usize,
 }
 
-/// Derivative state and scratch of one run, seed-major (seed `j` at
+/// Derivative state and scratch of one run. `du`, `dv`, `da` are
+/// seed-minor (DOF `i` of seed `j` at `i s + j`), so that a sub-step
+/// advances every seed at once, each DOF's row one vector
+/// ([`Integrator::seeds_step`]); the rest is seed-major (seed `j` at
 /// `j n .. (j+1) n`).
 struct SensWork {
     s: usize,
@@ -202,10 +209,17 @@ struct SensWork {
     dz: Vec<f64>,
     dw: Vec<f64>,
     rhs: Vec<f64>,
+    /// One seed's `(δu, δv, δa)`, gathered (3n).
+    one: Vec<f64>,
+    /// One row of every seed (s).
+    row: Vec<f64>,
+    /// `δz`, `δw` and the right-hand sides of every seed (seed-minor).
+    all_z: Vec<f64>,
+    all_w: Vec<f64>,
+    all_rhs: Vec<f64>,
     /// Sub-steps each seed has yet to be advanced over (batched).
     pending: Vec<usize>,
     /// Scratch of the batched advance (3n).
-    x3: Vec<f64>,
     y3: Vec<f64>,
     /// `q` per parameter seed at the current state.
     q: Vec<f64>,
@@ -513,10 +527,12 @@ impl Integrator {
     ) {
         let n = dim::<N>(self.n);
         let ns0 = state.ncols();
+        let s = sw.s;
         for j in 0..ns0 {
-            sw.du[j * n..(j + 1) * n].copy_from_slice(&state.as_slice()[j * 2 * n..j * 2 * n + n]);
-            sw.dv[j * n..(j + 1) * n]
-                .copy_from_slice(&state.as_slice()[j * 2 * n + n..(j + 1) * 2 * n]);
+            for i in 0..n {
+                sw.du[i * s + j] = state[(i, j)];
+                sw.dv[i * s + j] = state[(n + i, j)];
+            }
         }
         let mut f = vec![0.0; n];
         for (e, s) in self.elements.iter().zip(sw.slopes0.iter_mut()) {
@@ -528,7 +544,9 @@ impl Integrator {
         for j in 0..sw.s {
             let r = j * n..(j + 1) * n;
             let mut g = vec![0.0; n];
-            self.g_derivative::<N>(&sw.slopes0, &sw.du[r.clone()], &sw.dv[r.clone()], &mut g);
+            gather(sw, j, n);
+            let (du, dv) = (&sw.one[..n], &sw.one[n..2 * n]);
+            self.g_derivative::<N>(&sw.slopes0, du, dv, &mut g);
             let mut rhs = nalgebra::DVector::from_fn(n, |i, _| -g[i]);
             if j >= ns0 {
                 let jp = j - ns0;
@@ -546,7 +564,9 @@ impl Integrator {
                 Some(ch) => ch.solve(&rhs),
                 None => nalgebra::DVector::from_element(n, f64::NAN),
             };
-            sw.da[r.clone()].copy_from_slice(da.as_slice());
+            for i in 0..n {
+                sw.da[i * s + j] = da[i];
+            }
             if self.alpha != 0.0 {
                 sw.dg[r].copy_from_slice(&g);
             }
@@ -594,6 +614,12 @@ impl Integrator {
         // sub-step only counts it, and is advanced by the power of the
         // constant sub-step map when it is next needed
         let batch = powers.is_some() && sw.eff.iter().all(|&e| e == 0.0);
+        // an element active: every seed steps, all at once
+        if !batch && alpha == 0.0 {
+            flush_all(powers, n, sw);
+            self.seeds_step::<N>(sw, 0..sw.s, ns0);
+            return ok;
+        }
         for j in 0..sw.s {
             let r = j * n..(j + 1) * n;
             let pr = (j >= ns0).then(|| (j - ns0) * n..(j - ns0 + 1) * n);
@@ -604,28 +630,27 @@ impl Integrator {
             if let Some(pw) = powers {
                 flush_seed(pw, n, j, sw);
             }
+            gather(sw, j, n);
             let pj = pr.map(|p| &sw.p[p]);
             let dg = (alpha != 0.0).then(|| &sw.dg[r.clone()]);
+            let (du, rest) = sw.one.split_at_mut(n);
+            let (dv, da) = rest.split_at_mut(n);
             let solved = self.seed_step::<N>(
                 &sw.eff,
-                (
-                    &mut sw.du[r.clone()],
-                    &mut sw.dv[r.clone()],
-                    &mut sw.da[r.clone()],
-                ),
+                (du, dv, da),
                 dg,
                 pj,
                 (&mut sw.dz, &mut sw.dw, &mut sw.rhs),
                 |b| self.solve_tangent::<N>(&sw.tangent, b),
             );
             if !solved {
-                for v in [&mut sw.du, &mut sw.dv, &mut sw.da] {
-                    v[r.clone()].fill(f64::NAN);
-                }
+                sw.one.fill(f64::NAN);
             }
+            scatter(sw, j, n);
             if alpha != 0.0 {
                 let dg = &mut sw.dg[r.clone()];
-                self.g_derivative::<N>(&ws.slopes, &sw.du[r.clone()], &sw.dv[r], dg);
+                let (du, dv) = (&sw.one[..n], &sw.one[n..2 * n]);
+                self.g_derivative::<N>(&ws.slopes, du, dv, dg);
                 if j >= ns0 {
                     let jp = j - ns0;
                     let q = if hht_differs { &sw.q_act } else { &sw.q };
@@ -695,6 +720,91 @@ impl Integrator {
             dv[i] = a1 * rhs[i] + dw[i];
         }
         ok
+    }
+
+    /// [`Integrator::seed_step`] for the seeds `cols` at once (α = 0), in
+    /// the seed-minor layout of [`SensWork`]: each operation runs along a
+    /// DOF's row of those seeds, and every seed sees the same operations in
+    /// the same order as in `seed_step` (the same bits). The tangent solve
+    /// is a triangular solve of all of them when the tangent has a Cholesky
+    /// factor, else one seed at a time; a seed whose solve fails becomes
+    /// NaN.
+    fn seeds_step<const N: usize>(&self, sw: &mut SensWork, cols: Range<usize>, ns0: usize) {
+        let n = dim::<N>(self.n);
+        let s = sw.s;
+        let (h, alpha, gamma, beta) = (self.h, self.alpha, self.gamma, self.beta);
+        let (a0, a1) = (1.0 / (beta * h * h), gamma / (beta * h));
+        let (a2, a3) = (1.0 / (beta * h), 0.5 / beta - 1.0);
+        let c1 = 1.0 + alpha;
+        let rows = Rows { s, cols };
+        let (du, dv, da) = (&mut sw.du, &mut sw.dv, &mut sw.da);
+        let (dz, dw, rhs) = (&mut sw.all_z, &mut sw.all_w, &mut sw.all_rhs);
+        let row = &mut sw.row;
+        for i in 0..n {
+            let r = rows.of(i);
+            let (du, dv, da) = (&du[r.clone()], &dv[r.clone()], &da[r.clone()]);
+            let (dz, dw) = (&mut dz[r.clone()], &mut dw[r]);
+            for x in 0..du.len() {
+                dz[x] = -a0 * du[x] - a2 * dv[x] - a3 * da[x];
+                dw[x] = dv[x] + h * (1.0 - gamma) * da[x] + h * gamma * dz[x];
+            }
+        }
+        match &self.m_diag {
+            Some(m) => {
+                for (i, &mi) in m.iter().enumerate().take(n) {
+                    let r = rows.of(i);
+                    let (r, z) = (&mut rhs[r.clone()], &dz[r]);
+                    r.iter_mut().zip(z).for_each(|(r, z)| *r = -mi * z);
+                }
+            }
+            None => {
+                (0..n).for_each(|i| rhs[rows.of(i)].fill(0.0));
+                rows.mat_axpy::<N>(self.m.as_slice(), n, dz, -1.0, rhs, row);
+            }
+        }
+        if !self.c_zero {
+            rows.mat_axpy::<N>(self.c.as_slice(), n, dw, -c1, rhs, row);
+        }
+        for (e, &sl) in self.elements.iter().zip(&sw.eff) {
+            if sl != 0.0 {
+                // the terms of Element::add_slope_product with
+                // (c_u, x_u) = (0, δw), (c_v, x_v) = (−c1, δw)
+                let c = if e.is_velocity_law() { -c1 } else { 0.0 } * sl;
+                rows.pair_axpy(e.ends(), c, dw, rhs);
+            }
+        }
+        for j in rows.cols.clone().filter(|&j| j >= ns0) {
+            let jp = j - ns0;
+            for i in 0..n {
+                rhs[i * s + j] -= sw.p[jp * n + i];
+            }
+        }
+        let factor = match &sw.tangent.factor {
+            Factor::J0 => self.j0_chol.as_deref(),
+            Factor::Chol => Some(&sw.tangent.l[..]),
+            _ => None,
+        };
+        match factor {
+            Some(l) => rows.chol_solve::<N>(l, n, rhs),
+            None => {
+                for j in rows.cols.clone() {
+                    let b = &mut sw.rhs[..n];
+                    (0..n).for_each(|i| b[i] = rhs[i * s + j]);
+                    let solved = self.solve_tangent::<N>(&sw.tangent, b);
+                    (0..n).for_each(|i| rhs[i * s + j] = if solved { b[i] } else { f64::NAN });
+                }
+            }
+        }
+        for i in 0..n {
+            let r = rows.of(i);
+            let (du, dv, da) = (&mut du[r.clone()], &mut dv[r.clone()], &mut da[r.clone()]);
+            let (dz, dw, rhs) = (&dz[r.clone()], &dw[r.clone()], &rhs[r]);
+            for x in 0..du.len() {
+                du[x] = rhs[x];
+                da[x] = a0 * rhs[x] + dz[x];
+                dv[x] = a1 * rhs[x] + dw[x];
+            }
+        }
     }
 
     /// The powers `L, L², …, L^S` (S sub-steps per sample; each `3n × 3n`,
@@ -780,12 +890,12 @@ impl Integrator {
         for (e, &sl) in self.elements.iter().zip(slopes) {
             e.add_slope(sl, c1, c1 * a1, &mut t.l, n);
         }
-        let full = DMatrix::from_column_slice(n, n, &t.l);
+        t.full.copy_from_slice(&t.l);
         if cholesky_in_place::<N>(&mut t.l, n) {
             t.factor = Factor::Chol;
             return true;
         }
-        let lu = full.lu();
+        let lu = DMatrix::from_column_slice(n, n, &t.full).lu();
         if lu.is_invertible() {
             t.factor = Factor::Lu(Box::new(lu));
             true
@@ -834,17 +944,137 @@ fn flush_seed(powers: &[f64], n: usize, j: usize, sw: &mut SensWork) {
     sw.pending[j] = 0;
     let m3 = 3 * n;
     let pw = &powers[(c - 1) * m3 * m3..c * m3 * m3];
-    let r = j * n..(j + 1) * n;
-    let x = &mut sw.x3;
-    x[..n].copy_from_slice(&sw.du[r.clone()]);
-    x[n..2 * n].copy_from_slice(&sw.dv[r.clone()]);
-    x[2 * n..].copy_from_slice(&sw.da[r.clone()]);
+    gather(sw, j, n);
     let y = &mut sw.y3;
     y.fill(0.0);
-    mat_vec_axpy::<0>(pw, m3, x, 1.0, y);
-    sw.du[r.clone()].copy_from_slice(&y[..n]);
-    sw.dv[r.clone()].copy_from_slice(&y[n..2 * n]);
-    sw.da[r].copy_from_slice(&y[2 * n..]);
+    mat_vec_axpy::<0>(pw, m3, &sw.one, 1.0, y);
+    sw.one.copy_from_slice(y);
+    scatter(sw, j, n);
+}
+
+/// Seed `j`'s `(δu, δv, δa)` into `sw.one`.
+#[inline(always)]
+fn gather(sw: &mut SensWork, j: usize, n: usize) {
+    let s = sw.s;
+    for i in 0..n {
+        sw.one[i] = sw.du[i * s + j];
+        sw.one[n + i] = sw.dv[i * s + j];
+        sw.one[2 * n + i] = sw.da[i * s + j];
+    }
+}
+
+/// `sw.one` back into seed `j`'s `(δu, δv, δa)`.
+#[inline(always)]
+fn scatter(sw: &mut SensWork, j: usize, n: usize) {
+    let s = sw.s;
+    for i in 0..n {
+        sw.du[i * s + j] = sw.one[i];
+        sw.dv[i * s + j] = sw.one[n + i];
+        sw.da[i * s + j] = sw.one[2 * n + i];
+    }
+}
+
+/// The seeds `cols` of arrays in the seed-minor layout of [`SensWork`]
+/// (`s` seeds per DOF row): [`Rows::of`] is DOF `i`'s part.
+struct Rows {
+    s: usize,
+    cols: Range<usize>,
+}
+
+impl Rows {
+    /// The indices of DOF `i` of the seeds.
+    #[inline(always)]
+    fn of(&self, i: usize) -> Range<usize> {
+        i * self.s + self.cols.start..i * self.s + self.cols.end
+    }
+
+    /// `Y += σ A X` (`A` column-major `n × n`; `row`: scratch of `s`): for
+    /// every seed the operations of [`mat_vec_axpy`] in its order. Zero
+    /// entries of `A` are skipped (a structural zero adds nothing).
+    #[inline(always)]
+    fn mat_axpy<const N: usize>(
+        &self,
+        a: &[f64],
+        n: usize,
+        x: &[f64],
+        sigma: f64,
+        y: &mut [f64],
+        row: &mut [f64],
+    ) {
+        let n = dim::<N>(n);
+        let row = &mut row[..self.cols.len()];
+        for k in 0..n {
+            let xk = &x[self.of(k)];
+            row.iter_mut().zip(xk).for_each(|(r, &x)| *r = sigma * x);
+            for i in 0..n {
+                let aik = a[k * n + i];
+                if aik == 0.0 {
+                    continue;
+                }
+                let yi = &mut y[self.of(i)];
+                for (y, &x) in yi.iter_mut().zip(row.iter()) {
+                    *y += aik * x;
+                }
+            }
+        }
+    }
+
+    /// A pair element's slope product: `y_i += c (x_i − x_j)`, `y_j −= c
+    /// (x_i − x_j)` (`x_i` alone to ground), as
+    /// [`elements::Element::add_slope_product`] computes it.
+    #[inline(always)]
+    fn pair_axpy(&self, (i, j): (usize, Option<usize>), c: f64, x: &[f64], y: &mut [f64]) {
+        let (ri, xi) = (self.of(i), &x[self.of(i)]);
+        match j {
+            Some(j) => {
+                let xj = &x[self.of(j)];
+                for (c0, ((&a, &b), k)) in xi.iter().zip(xj).zip(ri).enumerate() {
+                    let t = c * (a - b);
+                    y[k] += t;
+                    y[j * self.s + self.cols.start + c0] -= t;
+                }
+            }
+            None => {
+                for (yi, &a) in y[ri].iter_mut().zip(xi) {
+                    *yi += c * a;
+                }
+            }
+        }
+    }
+
+    /// [`chol_solve`] of every seed of `b`, each by the same operations in
+    /// the same order (the row index also places the rows of `b`).
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)]
+    fn chol_solve<const N: usize>(&self, l: &[f64], n: usize, b: &mut [f64]) {
+        let n = dim::<N>(n);
+        let l = &l[..n * n];
+        let w = self.cols.len();
+        for j in 0..n {
+            let col = &l[j * n..(j + 1) * n];
+            let (head, tail) = b.split_at_mut((j + 1) * self.s);
+            let bj = &mut head[self.of(j)];
+            bj.iter_mut().for_each(|y| *y *= col[j]);
+            for i in (j + 1)..n {
+                let o = (i - j - 1) * self.s + self.cols.start;
+                for (x, &y) in tail[o..o + w].iter_mut().zip(bj.iter()) {
+                    *x -= col[i] * y;
+                }
+            }
+        }
+        for i in (0..n).rev() {
+            let col = &l[i * n..(i + 1) * n];
+            let (head, tail) = b.split_at_mut((i + 1) * self.s);
+            let bi = &mut head[self.of(i)];
+            for k in (i + 1)..n {
+                let o = (k - i - 1) * self.s + self.cols.start;
+                for (x, &y) in bi.iter_mut().zip(&tail[o..o + w]) {
+                    *x -= col[k] * y;
+                }
+            }
+            bi.iter_mut().for_each(|x| *x *= col[i]);
+        }
+    }
 }
 
 /// Every seed advanced over its pending sub-steps.
@@ -875,8 +1105,12 @@ impl SensWork {
             dz: z(n),
             dw: z(n),
             rhs: z(n),
+            one: z(3 * n),
+            row: z(s),
+            all_z: z(n * s),
+            all_w: z(n * s),
+            all_rhs: z(n * s),
             pending: vec![0; s],
-            x3: z(3 * n),
             y3: z(3 * n),
             q: z(n * np),
             p: z(n * np),
@@ -888,6 +1122,7 @@ impl SensWork {
             tangent: TangentFactor {
                 factor: Factor::Stale,
                 l: z(n * n),
+                full: z(n * n),
                 slopes: z(integ.elements.len()),
                 j0_lu,
                 count: 0,
@@ -917,12 +1152,18 @@ impl SensOutputs {
     }
 
     fn store(&mut self, sw: &SensWork, k: usize) {
-        let n = self.n;
-        for j in 0..sw.s {
-            let r = j * n..(j + 1) * n;
-            self.du[j].column_mut(k).copy_from_slice(&sw.du[r.clone()]);
-            self.dv[j].column_mut(k).copy_from_slice(&sw.dv[r.clone()]);
-            self.da[j].column_mut(k).copy_from_slice(&sw.da[r]);
+        let (n, s) = (self.n, sw.s);
+        for j in 0..s {
+            for (out, src) in [
+                (&mut self.du[j], &sw.du),
+                (&mut self.dv[j], &sw.dv),
+                (&mut self.da[j], &sw.da),
+            ] {
+                let col = &mut out.as_mut_slice()[k * n..(k + 1) * n];
+                for (i, x) in col.iter_mut().enumerate() {
+                    *x = src[i * s + j];
+                }
+            }
         }
     }
 
