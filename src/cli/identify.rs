@@ -87,7 +87,8 @@ pub struct Args {
     #[arg(long)]
     no_locate: bool,
     /// Horizon method: weight rule for λ, μ (default: discrepancy principle
-    /// with the --noise level).
+    /// with the --noise level; the L-curve corner when no weight reaches
+    /// that level).
     #[arg(long, value_enum, default_value = "discrepancy")]
     weights: WeightRule,
     /// Horizon and lifted methods: λ > 0, weight of Σ‖f_k‖² in 1/N²
