@@ -4,8 +4,8 @@
 //!
 //! 0. **Declared first**: the diagnosis with the declared linear part
 //!    trusted ([`super::diagnose`]). Without a linear record, when it
-//!    explains the record up to the noise floor, it is the result and
-//!    nothing is calibrated; otherwise it is the alternative the calibrated
+//!    explains the record up to the noise floor and names no stiffness or
+//!    damping change, it is the result and nothing is calibrated; otherwise it is the alternative the calibrated
 //!    diagnosis must beat on the record (the lower multiple-shooting error
 //!    is reported, report.json `calibration.choice` gives both).
 //! 1. **Calibrate** ([`crate::calibrate`]): springs and damping (and masses
@@ -175,13 +175,22 @@ pub fn diagnose_calibrated(
         )?),
     };
     // without a linear record, a declared model that explains the record
-    // up to the noise floor is not recalibrated on it
+    // up to the noise floor with localized effects is not recalibrated on
+    // it
     if let Some(t) = trusted.as_ref() {
         let explained = t
             .after
             .relative_error
             .is_some_and(|e| e <= t.noise_floor(settings));
-        if linear_records.is_empty() && explained {
+        // a stiffness or damping change among its effects says the
+        // declared linear part is wrong: calibrated all the same
+        let linear_named = t.added.iter().any(|e| {
+            matches!(
+                e.candidate.kind,
+                EffectKind::Stiffness | EffectKind::Damping
+            )
+        });
+        if linear_records.is_empty() && explained && !linear_named {
             return Ok(trusted.expect("checked above"));
         }
     }
