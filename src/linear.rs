@@ -299,7 +299,11 @@ pub fn spectral_radius(a: &DMatrix<f64>) -> f64 {
 
 /// Orthonormal basis of the unobservable subspace of `(a, h)`: right
 /// singular vectors of `[h; h a; …; h a^{nx−1}]` with singular values below
-/// `1e-9` of the largest.
+/// `1e-9` of the largest, kept to its part that `a` maps into itself
+/// ([`invariant_part`]). The rank test alone takes a slow, observable mode
+/// of a finely sampled model for an unobservable one (a 1-Hz mode at
+/// 400 Hz: `a^k` for `k < nx` barely separates its displacement from its
+/// velocity); an unobservable subspace is invariant, that direction is not.
 pub fn unobservable(a: &DMatrix<f64>, h: &DMatrix<f64>) -> DMatrix<f64> {
     let (nx, p) = (a.nrows(), h.nrows());
     let mut obs = DMatrix::zeros(p * nx, nx);
@@ -314,12 +318,59 @@ pub fn unobservable(a: &DMatrix<f64>, h: &DMatrix<f64>) -> DMatrix<f64> {
     let idx: Vec<usize> = (0..nx)
         .filter(|&i| !(svd.singular_values[i] > 1e-9 * smax))
         .collect();
-    DMatrix::from_fn(nx, idx.len(), |r, c| vt[(idx[c], r)])
+    invariant_part(a, DMatrix::from_fn(nx, idx.len(), |r, c| vt[(idx[c], r)]))
+}
+
+/// The largest subspace of the span of `v` (orthonormal columns) that `a`
+/// maps into that span, to `1e-9 ‖a‖_max` per unit vector: `v` itself
+/// when it is invariant, else shrunk (`v ← v W`, `W` the right singular
+/// vectors of `(I − v vᵀ) a v` with singular values below the bound) until
+/// it is.
+pub fn invariant_part(a: &DMatrix<f64>, mut v: DMatrix<f64>) -> DMatrix<f64> {
+    let tol = 1e-9 * a.amax();
+    while v.ncols() > 0 {
+        let av = a * &v;
+        let out = &av - &v * v.tr_mul(&av);
+        let svd = out.svd(false, true);
+        let vt = svd.v_t.expect("v_t was requested");
+        let keep: Vec<usize> = (0..v.ncols())
+            .filter(|&i| !(svd.singular_values[i] > tol))
+            .collect();
+        if keep.len() == v.ncols() {
+            break;
+        }
+        let w = DMatrix::from_fn(v.ncols(), keep.len(), |r, c| vt[(keep[c], r)]);
+        v = &v * w;
+    }
+    v
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_an_invariant_subspace_is_kept() {
+        let (c, s) = (1e-3f64.cos(), 1e-3f64.sin());
+        // a slow rotation in (x0, x1), a decoupled x2
+        let a = DMatrix::from_row_slice(3, 3, &[c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 0.5]);
+        // x1 alone is not invariant: dropped
+        let v = DMatrix::from_column_slice(3, 1, &[0.0, 1.0, 0.0]);
+        assert_eq!(invariant_part(&a, v).ncols(), 0);
+        // x2 is: kept as given
+        let v = DMatrix::from_column_slice(3, 1, &[0.0, 0.0, 1.0]);
+        assert_eq!(invariant_part(&a, v.clone()), v);
+        // x1 and x2: shrunk to x2
+        let v = DMatrix::from_column_slice(3, 2, &[0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
+        let w = invariant_part(&a, v);
+        assert_eq!(w.ncols(), 1);
+        assert!((w[(2, 0)].abs() - 1.0).abs() < 1e-12, "{w}");
+        // a free mass under an accelerometer: position and velocity unseen
+        let h = 1.0 / 100.0;
+        let a = DMatrix::from_row_slice(2, 2, &[1.0, h, 0.0, 1.0]);
+        let acc = DMatrix::from_row_slice(1, 2, &[0.0, 0.0]);
+        assert_eq!(unobservable(&a, &acc).ncols(), 2);
+    }
     use crate::integrate::{Integrator, SimSettings};
     use crate::model::Model;
 

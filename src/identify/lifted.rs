@@ -583,22 +583,52 @@ fn steady_backward(
     }
 }
 
-/// The forward pass: scaled states (nx × N) and controls (nu × N).
-fn forward(sp: &Scaled, bw: &Backward) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+/// Rounding of the initial-state system `P_0 + P_prior` relative to its
+/// largest eigenvalue: eigenvalues within it are not determined.
+const INITIAL_ROUNDING: f64 = 1e-12;
+
+/// `x_0 = (P_0 + P_prior)⁻¹ p_0` and the number of directions dropped.
+/// Cholesky; when it fails (the prior's weight is below the rounding of
+/// `P_0` along directions the data barely see), the minimum-norm solution
+/// over the eigenvalues above [`INITIAL_ROUNDING`] × the largest: those
+/// directions take the prior mean (0). An eigenvalue below −that bound is
+/// not rounding, and an error.
+fn initial_state(mut h: DMatrix<f64>, rhs: &DVector<f64>) -> Result<(DVector<f64>, usize)> {
+    symmetrize(&mut h);
+    if let Some(ch) = h.clone().cholesky() {
+        return Ok((ch.solve(rhs), 0));
+    }
+    let eig = h.symmetric_eigen();
+    let (vmin, vmax) = (eig.eigenvalues.min(), eig.eigenvalues.max());
+    let cut = INITIAL_ROUNDING * vmax;
+    if !(vmax > 0.0 && vmax.is_finite() && vmin >= -cut) {
+        return Err(TacitError::Numerical(format!(
+            "lifted reconstruction: the initial-state system P_0 + P_prior is not positive definite: its eigenvalues run from {vmin:.3e} to {vmax:.3e}, below −{cut:.1e} (more than the rounding of P_0)"
+        )));
+    }
+    let q = &eig.eigenvectors;
+    let mut c = q.tr_mul(rhs);
+    let mut dropped = 0;
+    for (ci, v) in c.iter_mut().zip(eig.eigenvalues.iter()) {
+        if *v > cut {
+            *ci /= v;
+        } else {
+            *ci = 0.0;
+            dropped += 1;
+        }
+    }
+    Ok((q * c, dropped))
+}
+
+/// The forward pass: scaled states (nx × N), controls (nu × N) and the
+/// initial-state directions left to the prior ([`initial_state`]).
+fn forward(sp: &Scaled, bw: &Backward) -> Result<(DMatrix<f64>, DMatrix<f64>, usize)> {
     let (nx, nu, len) = (sp.nx, sp.nu, sp.len);
     let mut h = bw.p0.clone();
     for i in 0..nx {
         h[(i, i)] += sp.p0[i];
     }
-    symmetrize(&mut h);
-    let x0 = h
-        .cholesky()
-        .ok_or_else(|| {
-            TacitError::Numerical(
-                "lifted reconstruction: the initial-state system is not positive definite".into(),
-            )
-        })?
-        .solve(&bw.pv0);
+    let (x0, dropped) = initial_state(h, &bw.pv0)?;
     let mut xs = DMatrix::zeros(nx, len);
     let mut us = DMatrix::zeros(nu, len);
     let mut x = x0;
@@ -621,7 +651,7 @@ fn forward(sp: &Scaled, bw: &Backward) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
             std::mem::swap(&mut x, &mut xn);
         }
     }
-    Ok((xs, us))
+    Ok((xs, us, dropped))
 }
 
 /// Reconstruct the states and the sub-sample unknown force (see the module
@@ -667,13 +697,13 @@ pub fn reconstruct_along(
     let (n, r, len) = (sm.n, s.resolution, sp.len);
     let nq = directions.ncols();
     let mut bw = backward(&sp)?;
-    let (mut xs, mut us) = forward(&sp, &bw)?;
+    let (mut xs, mut us, mut dropped) = forward(&sp, &bw)?;
     let steady_note = riccati_note(&bw, len);
     let passes = if nq > 0 { s.reweight_passes } else { 0 };
     for _ in 0..passes {
         sp.lam_k = Some(group_l1_weights(&us, nq, r, s.reweight_floor));
         bw = backward(&sp)?;
-        (xs, us) = forward(&sp, &bw)?;
+        (xs, us, dropped) = forward(&sp, &bw)?;
     }
     // weighted residual
     let res = &sp.target - &sp.hx * &xs - &sp.hu * &us;
@@ -709,7 +739,7 @@ pub fn reconstruct_along(
         weighted_rms: wrms,
         residual: res,
         status: format!(
-            "solved: {steady_note}; {passes} group-L1 reweighting passes; {nq} force directions; R = {r} sub-intervals of {} Newmark sub-steps; {hidden} unobservable state directions (set by the priors); weighted residual RMS {wrms:.3} (1 = the assumed noise)",
+            "solved: {steady_note}; {passes} group-L1 reweighting passes; {nq} force directions; R = {r} sub-intervals of {} Newmark sub-steps; {hidden} unobservable state directions (set by the priors); {dropped} initial-state directions below the rounding of the Riccati matrix (set to the prior mean); weighted residual RMS {wrms:.3} (1 = the assumed noise)",
             lm.substeps_per_sub
         ),
         elapsed_s: t.elapsed().as_secs_f64(),
@@ -847,7 +877,7 @@ mod tests {
             sp.lam_k = weights.clone();
             sp.stage.direct = direct;
             let bw = backward(&sp).unwrap();
-            let (mut xs, mut us) = forward(&sp, &bw).unwrap();
+            let (mut xs, mut us, _) = forward(&sp, &bw).unwrap();
             for i in 0..2 * n {
                 xs.row_mut(i).scale_mut(sp.dx[i]);
             }
@@ -941,6 +971,28 @@ mod tests {
                     + &lm.bg1 * known.column(k + 1);
             }
         }
+    }
+
+    #[test]
+    fn the_initial_state_leaves_directions_below_rounding_to_the_prior() {
+        // eigenvalues 1e6, 2 and −1e-8 (rounding of the 1e6 one)
+        let q = DMatrix::from_row_slice(3, 3, &[0.6, 0.8, 0.0, -0.8, 0.6, 0.0, 0.0, 0.0, 1.0]);
+        let d = DMatrix::from_diagonal(&DVector::from_vec(vec![1e6, 2.0, -1e-8]));
+        let h = &q * d * q.transpose();
+        let rhs = DVector::from_vec(vec![1.0, 2.0, 3.0]);
+        let (x, dropped) = initial_state(h.clone(), &rhs).unwrap();
+        assert_eq!(dropped, 1);
+        // the solution on the two determined directions, 0 on the third
+        let c = q.tr_mul(&rhs);
+        let want = q.column(0) * (c[0] / 1e6) + q.column(1) * (c[1] / 2.0);
+        // (h carries rounding of 1e6 ε ≈ 1e-10)
+        assert!((&x - &want).amax() < 1e-8, "{x} vs {want}");
+        // a negative eigenvalue beyond rounding is an error with its facts
+        let d = DMatrix::from_diagonal(&DVector::from_vec(vec![1e6, 2.0, -1.0]));
+        let e = initial_state(&q * d * q.transpose(), &rhs)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("-1.000e0") && e.contains("1.000e6"), "{e}");
     }
 
     #[test]
