@@ -48,9 +48,9 @@
 //! [`diagnose::diagnose`] runs, in order ([`diagnose`] has the details):
 //!
 //! 1. prepare the record ([`diagnose::prepare`]);
-//! 2. locate the missing force's directions ([`diagnose::locate`]);
+//! 2. locate the missing force's directions ([`identify::locate`]);
 //! 3. identify states and force with the lifted smoother along them
-//!    ([`diagnose::lifted`]);
+//!    ([`identify::lifted`]);
 //! 4. score the declared model ([`diagnose::errors`], start states refined
 //!    by [`diagnose::starts`]);
 //! 5. rounds of trace ([`trace`]) → screen → fit ([`update`],

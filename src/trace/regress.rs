@@ -61,7 +61,7 @@ pub struct TraceInput<'a> {
     /// Effects already in the model (not proposed again).
     pub exclude: &'a [Candidate],
     /// Directions the force was located along (n × q, from
-    /// [`crate::diagnose::locate`]); a candidate acting along them is
+    /// [`crate::identify::locate`]); a candidate acting along them is
     /// preferred to a better-scoring one acting elsewhere, when it pays.
     pub located: Option<&'a DMatrix<f64>>,
 }
