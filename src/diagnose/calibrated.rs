@@ -5,8 +5,8 @@
 //! 0. **Declared first**: the diagnosis with the declared linear part
 //!    trusted ([`super::diagnose`]). Without a linear record, when it
 //!    explains the record up to the noise floor and names no stiffness or
-//!    damping change, it is the result and nothing is calibrated; otherwise it is the alternative the calibrated
-//!    diagnosis must beat on the record (the lower multiple-shooting error
+//!    damping change, it is the result and nothing is calibrated; otherwise
+//!    it is the alternative the calibrated diagnosis must beat on the record (the lower multiple-shooting error
 //!    is reported, report.json `calibration.choice` gives both).
 //! 1. **Calibrate** ([`crate::calibrate`]): springs and damping (and masses
 //!    on request) by the linear model's output error on segments with free
@@ -537,20 +537,14 @@ fn refine(d: &Diagnosis, cs: &CalibratedSettings, settings: &DiagnoseSettings) -
     // the start states refined for the model ([`super::starts`]: from the
     // reconstruction, with continuity and growing horizons against a start
     // on the wrong side of an impact)
-    let starts = refined_starts(cmp, &model, sim);
-    let mut problem = cmp.problem(&model, spread(&starts, cs.refine_segments), sim);
-    problem.parameters = refinement_parameters(&model, &d.added, cal)?;
-    let x0 = vec![0.0; problem.parameters.len()];
-    let fit = crate::update::FitSettings {
-        max_iterations: cs.refine_iterations,
-        ..settings.fit_settings()
-    };
-    let jf = match joint::fit(&problem, &x0, &fit, stall(settings)) {
-        Ok(jf) => jf,
-        Err(e) => return Ok(Refined::NotKept(format!("not refined: {e}"))),
-    };
+    let starts = starts_of(cmp, &cmp.shoot(&model, sim));
+    let (problem, jf) =
+        match joint_fit(d, &model, spread(&starts, cs.refine_segments), cs, settings)? {
+            Ok(f) => f,
+            Err(e) => return Ok(Refined::NotKept(format!("not refined: {e}"))),
+        };
     let refined = problem.model_at(&jf.x);
-    let (after, pred) = cmp.errors(&refined, sim);
+    let (refined_starts, after, pred) = scored(cmp, &refined, sim);
     let mut note = format!(
         "{} parameters refined with the start states of {} segments ({}, {} steps, fit cost {:.3e} → {:.3e}): multiple-shooting error {} → {}",
         problem.parameters.len(),
@@ -568,7 +562,7 @@ fn refine(d: &Diagnosis, cs: &CalibratedSettings, settings: &DiagnoseSettings) -
         100.0 * weighted(cmp, &jf.segments, None, pred.as_ref())
     );
     let mut best = (problem, refined, jf.segments, after, pred);
-    if let Some((long, n)) = long_stage(d, &best, cs, settings)? {
+    if let Some((long, n)) = long_stage(d, &best, refined_starts, cs, settings)? {
         note = format!("{note}; {n}");
         if lower(long.3.relative_error, best.3.relative_error) {
             best = long;
@@ -610,33 +604,25 @@ type Stage = (
 
 /// The refinement continued from `at` on long segments
 /// ([`CalibratedSettings::long_segments`] consecutive segments of the
-/// record's comparison each, over the whole record), where the damping of
-/// the lowest modes shows; None when off or when the fit fails. The note
-/// says what it did.
+/// record's comparison each, over the whole record, from `starts`: the
+/// start states refined for `at`'s model), where the damping of the lowest
+/// modes shows; None when off. The note says what it did.
 fn long_stage(
     d: &Diagnosis,
     at: &Stage,
+    starts: Vec<crate::update::Segment>,
     cs: &CalibratedSettings,
     settings: &DiagnoseSettings,
 ) -> Result<Option<(Stage, String)>> {
     if cs.long_segments < 2 {
         return Ok(None);
     }
-    let cmp = &d.prepared.comparison;
-    let sim = sim_of(d);
-    let segments = merged(&refined_starts(cmp, &at.1, sim), cs.long_segments, &[]);
+    let segments = merged(&starts, cs.long_segments);
     if segments.len() < 2 {
         return Ok(None);
     }
-    let mut problem = cmp.problem(&at.1, segments, sim);
-    problem.parameters = refinement_parameters(&at.1, &d.added, &cs.calibration)?;
-    let x0 = vec![0.0; problem.parameters.len()];
-    let fit = crate::update::FitSettings {
-        max_iterations: cs.refine_iterations,
-        ..settings.fit_settings()
-    };
-    let jf = match joint::fit(&problem, &x0, &fit, stall(settings)) {
-        Ok(jf) => jf,
+    let (problem, jf) = match joint_fit(d, &at.1, segments, cs, settings)? {
+        Ok(f) => f,
         Err(e) => {
             return Ok(Some((
                 at.clone(),
@@ -644,8 +630,9 @@ fn long_stage(
             )))
         }
     };
+    let cmp = &d.prepared.comparison;
     let refined = problem.model_at(&jf.x);
-    let (after, pred) = cmp.errors(&refined, sim);
+    let (after, pred) = cmp.errors(&refined, sim_of(d));
     let note = format!(
         "then on {} segments of {} samples ({}, {} steps): multiple-shooting error {} [weighted: fit {:.2} %, scored {:.2} %]",
         problem.segments.len(),
@@ -659,15 +646,52 @@ fn long_stage(
     Ok(Some(((problem, refined, jf.segments, after, pred), note)))
 }
 
-/// The record's segments with their start states refined for `model`
-/// ([`super::Comparison::shoot`]); the reconstructed ones when that fails.
-fn refined_starts(
+/// The joint refinement of `model`'s linear parameters and `d`'s effects
+/// together with the start states of `segments`: the problem and its fit,
+/// or why the fit failed.
+fn joint_fit(
+    d: &Diagnosis,
+    model: &Model,
+    segments: Vec<crate::update::Segment>,
+    cs: &CalibratedSettings,
+    settings: &DiagnoseSettings,
+) -> Result<std::result::Result<(crate::update::Problem, joint::JointFit), joint::JointError>> {
+    let mut problem = d.prepared.comparison.problem(model, segments, sim_of(d));
+    problem.parameters = refinement_parameters(model, &d.added, &cs.calibration)?;
+    let x0 = vec![0.0; problem.parameters.len()];
+    let fit = crate::update::FitSettings {
+        max_iterations: cs.refine_iterations,
+        ..settings.fit_settings()
+    };
+    Ok(joint::fit(&problem, &x0, &fit, stall(settings)).map(|jf| (problem, jf)))
+}
+
+/// The record's errors and predictions of `model` from one multiple
+/// shooting, with the segments whose start states it refined (the
+/// reconstructed ones when it fails).
+fn scored(
     cmp: &super::Comparison,
     model: &Model,
     sim: SimSettings,
+) -> (
+    Vec<crate::update::Segment>,
+    ErrorSet,
+    Option<nalgebra::DMatrix<f64>>,
+) {
+    let shot = cmp.shoot(model, sim);
+    let starts = starts_of(cmp, &shot);
+    let (errors, pred) = cmp.errors_of(model, sim, shot);
+    (starts, errors, pred)
+}
+
+/// The segments whose start states `shot` refined; the reconstructed ones
+/// when it failed.
+fn starts_of(
+    cmp: &super::Comparison,
+    shot: &super::errors::ShotResult,
 ) -> Vec<crate::update::Segment> {
-    cmp.shoot(model, sim)
-        .map_or_else(|_| cmp.segments.clone(), |(_, segs, _)| segs)
+    shot.as_ref()
+        .map_or_else(|_| cmp.segments.clone(), |(_, segs, _)| segs.clone())
 }
 
 /// Weighted relative error over `segs`: from the fit's segment costs when
@@ -698,25 +722,15 @@ fn weighted(
 }
 
 /// Segments of `k` consecutive segments of `all` each, started from the
-/// start state `fitted` holds for the same sample when it holds one.
-fn merged(
-    all: &[crate::update::Segment],
-    k: usize,
-    fitted: &[crate::update::Segment],
-) -> Vec<crate::update::Segment> {
+/// first one's start state (a last group of half or fewer is dropped).
+fn merged(all: &[crate::update::Segment], k: usize) -> Vec<crate::update::Segment> {
     all.chunks(k)
         .filter(|c| c.len() == k || c.len() * 2 > k)
         .map(|c| {
-            let first = fitted
-                .iter()
-                .find(|s| s.start == c[0].start)
-                .unwrap_or(&c[0]);
             let last = &c[c.len() - 1];
             crate::update::Segment {
-                start: c[0].start,
                 len: last.start + last.len - c[0].start,
-                u0: first.u0.clone(),
-                v0: first.v0.clone(),
+                ..c[0].clone()
             }
         })
         .collect()
