@@ -49,9 +49,15 @@ pub struct Args {
     #[arg(long)]
     record: PathBuf,
     /// Sensor DOFs numbered from 1, e.g. 1,5,6 (every output channel at
-    /// them is fitted).
-    #[arg(long, value_name = "DOFS")]
-    sensors: DofList,
+    /// them is fitted). Default: every measured DOF of the record. A model
+    /// from matrices names its sensors by point (--points).
+    #[arg(long, value_name = "DOFS", conflicts_with = "points")]
+    sensors: Option<DofList>,
+    /// Model from matrices (or a modal model): the sensor points by label,
+    /// comma-separated, e.g. n20:uy,n100:uy (every output channel at them
+    /// is fitted). Default: every measured point of the record.
+    #[arg(long, value_name = "LABELS", value_delimiter = ',')]
+    points: Option<Vec<String>>,
     /// Reduction onto the sensor DOFs (none = full-order model). Default:
     /// serep for paper, mhe and horizon; the lifted method works on the
     /// full-order model only.
@@ -261,17 +267,59 @@ fn validate_windows(a: &Args, samples: usize) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Options that take DOF numbers, refused on a model from matrices (its
+/// DOFs are the record's points after the reduction, numbered by it).
+fn matrix_options(a: &Args) -> anyhow::Result<()> {
+    let path = a.model.display();
+    if a.sensors.is_some() {
+        anyhow::bail!("--sensors: {path} is a model from matrices; name the sensors by point with --points (e.g. --points n20:uy,n100:uy), or leave both out to use every measured point");
+    }
+    let qp = [
+        ("--lower", !a.lower.is_empty()),
+        ("--upper", !a.upper.is_empty()),
+        ("--pair", !a.pair.is_empty()),
+        ("--active", a.active.is_some()),
+    ];
+    if let Some((opt, _)) = qp.iter().find(|q| q.1) {
+        anyhow::bail!("{opt}: the QP constraints take DOF numbers, which a model from matrices ({path}) does not have before its reduction; leave {opt} out (the default method locates the force at the points)");
+    }
+    Ok(())
+}
+
+/// The sensor DOFs (from 1): `--sensors`, the DOFs of `--points`, or
+/// every DOF the record measures.
+fn sensor_dofs(a: &Args, model: &Model, rec: &tacit::record::Record) -> anyhow::Result<Vec<usize>> {
+    if let Some(d) = &a.sensors {
+        check_dofs(&d.0, model.ndof(), "--sensors")?;
+        return Ok(d.0.clone());
+    }
+    if let Some(p) = &a.points {
+        return Ok(tacit::model::matrix::point_dofs(model, p, "--points")?);
+    }
+    let mut d: Vec<usize> = rec.outputs.iter().map(|c| c.dof).collect();
+    d.sort_unstable();
+    d.dedup();
+    if d.is_empty() {
+        anyhow::bail!("record {}: no output channel to identify from", a.record.display());
+    }
+    Ok(d)
+}
+
 /// Run `tacit identify`.
 pub fn run(a: Args) -> anyhow::Result<()> {
     validate(&a)?;
+    if tacit::model::matrix::is_matrix_file(&a.model)? {
+        matrix_options(&a)?;
+    }
     let staging = super::output::Staging::begin(&a.output, a.force)?;
-    let model = Model::from_file(&a.model)?;
+    // a model from matrices is reduced onto the record's points
+    let mut rec = super::read_record(&a.record)?;
+    let model = Model::load(&a.model, &mut [&mut rec])?;
     let n = model.ndof();
-    check_dofs(&a.sensors.0, n, "--sensors")?;
-    let rec = super::read_record_for(&a.record, &model)?;
+    let sensors = sensor_dofs(&a, &model, &rec)?;
     rec.validate(Some(n))?;
     validate_windows(&a, rec.len())?;
-    super::records::check(&rec, &model, Some(&a.sensors.0))?;
+    super::records::check(&rec, &model, Some(&sensors))?;
     check::memory(
         check::integration_bytes(n, 0, a.substeps, rec.len()) * 4.0
             + (rec.len() as f64) * (n as f64).powi(2) * 8.0 * 4.0,
@@ -283,9 +331,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         (Some(v), None) => Regularization::Fixed(v),
         (None, None) => IdentifySettings::default().regularization,
     };
-    let prob = Problem::new(&model.linear_part(), &rec, &a.sensors.0)?;
+    let prob = Problem::new(&model.linear_part(), &rec, &sensors)?;
     if a.method == CliMethod::Horizon {
-        return run_horizon(&a, &prob, staging);
+        return run_horizon(&a, &model, &prob, staging);
     }
     if a.method == CliMethod::Lifted {
         return run_lifted(&a, &model, &prob, staging);
@@ -331,7 +379,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         bar.set_position(done as u64);
     })?;
     bar.finish_and_clear();
-    finish(&a, &est, staging)
+    finish(&a, &model, &est, staging)
 }
 
 /// Write the outputs whole, print the summary, and fail (after writing)
@@ -339,16 +387,22 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 /// holds a non-finite value.
 fn finish(
     a: &Args,
+    model: &Model,
     est: &identify::ForceEstimate,
     staging: super::output::Staging,
 ) -> anyhow::Result<()> {
     if let Some(e) = identify::finite::error(est) {
         return Err(e.into());
     }
-    let files = identify::output::write_all(est, staging.dir(), !a.no_figures)
+    let mut files = identify::output::write_all(est, staging.dir(), !a.no_figures)
         .map_err(|e| staging.user_message(e.into()))?;
+    if !model.points.is_empty() {
+        let more = write_point_forces(est, model, staging.dir())
+            .map_err(|e| staging.user_message(e.into()))?;
+        files.extend(more);
+    }
     staging.commit()?;
-    report(est)?;
+    report(est, model)?;
     for f in files {
         let name = f.file_name().map(|n| a.output.join(n)).unwrap_or(f);
         outln!("wrote {}", name.display());
@@ -367,7 +421,12 @@ fn finish(
 
 /// `--method horizon`: the full-horizon formulation through the same
 /// outputs as the window methods.
-fn run_horizon(a: &Args, prob: &Problem, staging: super::output::Staging) -> anyhow::Result<()> {
+fn run_horizon(
+    a: &Args,
+    model: &Model,
+    prob: &Problem,
+    staging: super::output::Staging,
+) -> anyhow::Result<()> {
     use tacit::horizon;
     let sys = identify::System::new(prob, a.reduce.unwrap_or(Reduce::Serep), a.substeps)?;
     let mut bounds: Vec<(usize, f64, f64)> = vec![];
@@ -406,7 +465,7 @@ fn run_horizon(a: &Args, prob: &Problem, staging: super::output::Staging) -> any
         ..Default::default()
     };
     let (_, est) = horizon::convert::identify_problem(prob, &sys, &[], &hs)?;
-    finish(a, &est, staging)
+    finish(a, model, &est, staging)
 }
 
 /// The located, lifted smoother through the same outputs.
@@ -435,10 +494,10 @@ fn run_lifted(
         substeps: a.substeps,
     };
     let est = identify::identify_located(model, prob, &settings)?;
-    finish(a, &est, staging)
+    finish(a, model, &est, staging)
 }
 
-fn report(est: &identify::ForceEstimate) -> anyhow::Result<()> {
+fn report(est: &identify::ForceEstimate, model: &Model) -> anyhow::Result<()> {
     let (b, af, rp) = est.overall_errors();
     outln!(
         "{} on {} ({} samples): status {}",
@@ -470,8 +529,12 @@ fn report(est: &identify::ForceEstimate) -> anyhow::Result<()> {
             100.0 * c.error_after
         );
     }
-    let rms: Vec<String> = est.force_rms().iter().map(|v| format!("{v:.3}")).collect();
-    outln!("force RMS per DOF [N]: {}", rms.join(", "));
+    if model.points.is_empty() {
+        let rms: Vec<String> = est.force_rms().iter().map(|v| format!("{v:.3}")).collect();
+        outln!("force RMS per DOF [N]: {}", rms.join(", "));
+    } else {
+        outln!("{}", point_summary(est, model));
+    }
     outln!(
         "time: setup {:.3} s, selection {:.3} s, solve {:.3} s",
         est.timings.setup,
@@ -504,4 +567,100 @@ fn status_words(s: &Status) -> String {
             stage.words()
         ),
     }
+}
+
+/// The points the location search selected, by label (`n100:uy`,
+/// `a50:uy–b50:uy`), from the estimate's settings; empty when it found
+/// none or did not run.
+fn located_points(est: &identify::ForceEstimate, model: &Model) -> Vec<String> {
+    let dirs = est.settings["located"]["directions"].as_array();
+    dirs.into_iter()
+        .flatten()
+        .filter_map(|d| d["dofs"].as_array())
+        .map(|dofs| {
+            let names: Vec<String> = dofs
+                .iter()
+                .filter_map(|v| v.as_u64())
+                .map(|d| model.dof_name(d as usize))
+                .collect();
+            names.join("–")
+        })
+        .collect()
+}
+
+/// One line: the force RMS at each point, the largest on the modal
+/// coordinates, and where the force was located.
+fn point_summary(est: &identify::ForceEstimate, model: &Model) -> String {
+    let rms = est.force_rms();
+    let np = model.points.len();
+    let at: Vec<String> = model
+        .points
+        .iter()
+        .zip(&rms)
+        .map(|(l, v)| format!("{l} {v:.3}"))
+        .collect();
+    let mut s = format!("force RMS per point [N]: {}", at.join(", "));
+    if rms.len() > np {
+        let top = rms[np..].iter().fold(0.0f64, |m, &v| m.max(v));
+        s += &format!(
+            "; generalized force on the {} modal coordinates: largest RMS {top:.3}",
+            rms.len() - np
+        );
+    }
+    let located = located_points(est, model);
+    if !located.is_empty() {
+        s += &format!("\nforce located at point {}", located.join(" + "));
+    }
+    s
+}
+
+/// For a model that names its points: `forces_at_points.csv` (`time`,
+/// then the internal force at each point, N, headed by its label) and
+/// `points.json` (each point's reduced DOF, label and force RMS, with the
+/// true force's RMS and the correlation with it when the record is
+/// simulated, the located points, and a model from matrices' reduction).
+fn write_point_forces(
+    est: &identify::ForceEstimate,
+    model: &Model,
+    dir: &std::path::Path,
+) -> anyhow::Result<Vec<PathBuf>> {
+    use std::fmt::Write;
+    let csv = dir.join("forces_at_points.csv");
+    let mut text = String::from("time");
+    for l in &model.points {
+        write!(text, ",{l}")?;
+    }
+    text.push('\n');
+    for (k, t) in est.time.iter().enumerate() {
+        write!(text, "{t:.9e}")?;
+        for i in 0..model.points.len() {
+            write!(text, ",{:.9e}", est.force[(i, k)])?;
+        }
+        text.push('\n');
+    }
+    tacit::io::write_string(&csv, &text)?;
+    let rms = est.force_rms();
+    let points: Vec<serde_json::Value> = model
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let mut p = serde_json::json!({"dof": i + 1, "label": l, "force_rms": rms[i]});
+            if let Some(t) = est.truth.as_ref().filter(|t| t.space == "dof") {
+                p["true_force_rms"] = t.rms_true[i].into();
+                p["correlation_with_truth"] = t.correlation[i].into();
+            }
+            p
+        })
+        .collect();
+    let doc = serde_json::json!({
+        "convention": identify::output::CONVENTION,
+        "points": points,
+        "modal_coordinates": model.ndof() - model.points.len(),
+        "located": located_points(est, model),
+        "reduction": model.matrices.as_ref().and_then(|l| l.report.as_ref()),
+    });
+    let json = dir.join("points.json");
+    tacit::io::write_json(&json, &doc)?;
+    Ok(vec![csv, json])
 }

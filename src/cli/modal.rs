@@ -95,6 +95,16 @@ pub struct Args {
     /// Write the updated model to this TOML file (with `--update`).
     #[arg(long, requires = "update", value_name = "FILE")]
     save_model: Option<PathBuf>,
+    /// Model from matrices without a record: the full model's modes up to
+    /// this frequency, Hz (default: the model file's [reduction]
+    /// cutoff_hz).
+    #[arg(long, value_name = "HZ", conflicts_with = "record")]
+    up_to: Option<f64>,
+    /// Model from matrices without a record: the points (labels,
+    /// comma-separated) at which to give the mode shapes, e.g.
+    /// n20:uy,n100:uy (default: none, frequencies only).
+    #[arg(long, value_name = "LABELS", value_delimiter = ',', conflicts_with = "record")]
+    points: Option<Vec<String>>,
 }
 
 fn parse_window(s: &str) -> Result<Window, String> {
@@ -130,7 +140,30 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .model
         .as_ref()
         .expect("clap requires --model without --write-model");
-    let model = Model::from_file(path)?;
+    let from_matrices = tacit::model::matrix::is_matrix_file(path)?;
+    if from_matrices {
+        matrix_options(&a, path)?;
+        if a.record.is_empty() {
+            return full_model_modes(&a, path);
+        }
+    } else if a.up_to.is_some() || a.points.is_some() {
+        anyhow::bail!(
+            "--up-to and --points: {} is not a model from matrices (its modes are all listed without them)",
+            path.display()
+        );
+    }
+    let model = if from_matrices {
+        // reduced onto the records' points, its cut-off set by their band
+        let mut recs = a
+            .record
+            .iter()
+            .map(|p| super::read_record(p))
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let mut refs: Vec<&mut tacit::record::Record> = recs.iter_mut().collect();
+        Model::load(path, &mut refs)?
+    } else {
+        Model::from_file(path)?
+    };
     if a.test_modes.is_none() && a.record.is_empty() {
         if a.update.is_some() || a.dofs.is_some() || a.modes.is_some() {
             anyhow::bail!("--update, --dofs and --modes need --test-modes or --record");
@@ -177,6 +210,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         #[derive(serde::Serialize)]
         struct Doc<'a> {
             model: &'a str,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            points: Option<Vec<String>>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            reduction: Option<&'a tacit::model::matrix::ReductionReport>,
             test_modes: &'a TestModes,
             fit: Option<serde_json::Value>,
             correlation: &'a correlate::Correlation,
@@ -185,6 +222,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         }
         let doc = Doc {
             model: &model.name,
+            points: (!model.points.is_empty())
+                .then(|| test.dofs.iter().map(|&d| model.dof_name(d)).collect()),
+            reduction: reduction(&model),
             test_modes: &test,
             fit: fit_doc,
             correlation: &corr,
@@ -205,6 +245,17 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             ""
         }
     );
+    if !model.points.is_empty() {
+        let at: Vec<String> = test
+            .dofs
+            .iter()
+            .map(|&d| format!("{d} = {}", model.dof_name(d)))
+            .collect();
+        outln!("measured points (DOF = label): {}", at.join(", "));
+    }
+    if let Some(r) = reduction(&model) {
+        outln!("{}", reduction_line(r));
+    }
     out!("{}", report::modes_table(&[(test.name.as_str(), &test)]));
     outln!("\ncorrelation with model {} (before updating)", model.name);
     out!("{}", report::correlation_table(&corr, None));
@@ -478,6 +529,96 @@ fn model_modes(model: &Model, json: bool) -> anyhow::Result<()> {
         out!("{:>4} {:>10}  ", m.mode, f);
         for x in &m.shape {
             out!("{x:>7.3}");
+        }
+        outln!();
+    }
+    Ok(())
+}
+
+/// The reduction of a model from matrices, if the model is one.
+fn reduction(model: &Model) -> Option<&tacit::model::matrix::ReductionReport> {
+    model.matrices.as_ref().and_then(|l| l.report.as_ref())
+}
+
+/// The reduction in one paragraph: size, kept points, the full model's
+/// frequencies in the check against the reduced ones.
+fn reduction_line(r: &tacit::model::matrix::ReductionReport) -> String {
+    let f: Vec<String> = r
+        .frequencies
+        .iter()
+        .map(|c| format!("{:.3} ({:.3})", c.full_hz, c.reduced_hz))
+        .collect();
+    format!(
+        "model reduced (Craig–Bampton): {} DOFs → {} points + {} modes up to {:.1} Hz; full (reduced) model frequencies up to {:.1} Hz: {}; largest error {:.3} %",
+        r.full_dofs,
+        r.kept.len(),
+        r.modal_coordinates,
+        r.cutoff_hz,
+        r.check_up_to_hz,
+        f.join(", "),
+        100.0 * r.max_error
+    )
+}
+
+/// Options that take DOF numbers or update springs, refused on a model
+/// from matrices; the error names the option.
+fn matrix_options(a: &Args, path: &Path) -> anyhow::Result<()> {
+    let p = path.display();
+    if a.test_modes.is_some() {
+        anyhow::bail!("--test-modes: {p} is a model from matrices, reduced onto the points of a record; give the record (--record) to identify the test modes at its points");
+    }
+    if a.update.is_some() {
+        anyhow::bail!("--update: modal updating corrects the springs of a lumped model; {p} is a model from matrices (for its stiffness use `tacit update --free stiffness_scale`)");
+    }
+    let by_dof = [
+        ("--sensors", a.sensors.is_some()),
+        ("--input-dof", a.input_dof.is_some()),
+        ("--dofs", a.dofs.is_some()),
+    ];
+    if let Some((opt, _)) = by_dof.iter().find(|o| o.1) {
+        anyhow::bail!("{opt}: {p} is a model from matrices, whose DOFs are the record's points after the reduction; leave {opt} out (every acceleration channel and the record's force are used, named by point)");
+    }
+    Ok(())
+}
+
+/// A model from matrices without a record: the full model's modes up to
+/// `--up-to` (or the file's cut-off), shapes at `--points`.
+fn full_model_modes(a: &Args, path: &Path) -> anyhow::Result<()> {
+    let mm = tacit::model::matrix::MatrixModel::from_file(path)?;
+    let top = match (a.up_to, mm.reduction.cutoff_hz) {
+        (Some(f), _) | (None, Some(f)) => f,
+        (None, None) => anyhow::bail!(
+            "{}: a model from matrices has more modes than can be listed; give --up-to HZ (or a record with --record)",
+            path.display()
+        ),
+    };
+    check::positive("--up-to", top, 1e7, "frequency, Hz")?;
+    let points = a.points.clone().unwrap_or_default();
+    let modes = mm.full_modes(top, 1000, &points)?;
+    if a.json {
+        outln!("{}", serde_json::to_string_pretty(&modes)?);
+        return Ok(());
+    }
+    outln!(
+        "model {} ({} DOFs), full model, undamped modes up to {top} Hz{}{}",
+        path.display(),
+        mm.n,
+        if modes.complete { "" } else { " (stopped at 1000 modes)" },
+        if points.is_empty() {
+            String::new()
+        } else {
+            ", mass-normalised shapes at the points".into()
+        }
+    );
+    out!("{:>4} {:>10}  ", "mode", "freq (Hz)");
+    for p in &points {
+        out!("{p:>11}");
+    }
+    outln!();
+    for (r, f) in modes.freq_hz.iter().enumerate() {
+        out!("{:>4} {f:>10.4}  ", r + 1);
+        for x in &modes.shapes[r] {
+            out!("{x:>11.4e}");
         }
         outln!();
     }

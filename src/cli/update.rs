@@ -37,8 +37,11 @@ pub struct Args {
     record: PathBuf,
     /// Free parameters, comma-separated: spring labels as in the model
     /// file (k3) or ranges (k1..k4), m<i> (mass of DOF i), zeta, and the
-    /// elements' gap<i>, kc<i>, friction<i>, cubic<i> or cubic, where i
-    /// counts the model file's elements of that kind from 1.
+    /// elements' gap<i>, kc<i> (contact), friction<i>, cubic<i> or cubic,
+    /// cgap<i>, kcl<i> (clearance), rfriction<i> (relative friction), where
+    /// i counts the model file's elements of that kind from 1; a model
+    /// from matrices also takes stiffness_scale and mass_scale (multipliers
+    /// of its stiffness and mass matrices).
     #[arg(long, value_name = "PARAMS")]
     free: String,
     /// Metric: generalized least squares or principal components.
@@ -49,9 +52,15 @@ pub struct Args {
     data: String,
     /// Only these measured DOFs, numbered from 1 (default: every channel
     /// of the kinds).
-    #[arg(long, value_name = "DOFS")]
+    #[arg(long, value_name = "DOFS", conflicts_with = "points")]
     dofs: Option<super::DofList>,
-    /// Model order: full, or reduced to the measured DOFs.
+    /// Model from matrices (or a modal model): only these measured points,
+    /// by label, comma-separated, e.g. n60:uy,n100:uy (default: every
+    /// channel of the kinds).
+    #[arg(long, value_name = "LABELS", value_delimiter = ',')]
+    points: Option<Vec<String>>,
+    /// Model order: full, or reduced to the measured DOFs (a model from
+    /// matrices is already reduced onto its points: none only).
     #[arg(long, value_enum, default_value = "none")]
     reduce: ReduceArg,
     /// Optimizer: lm (Levenberg–Marquardt), gn (Gauss–Newton), bfgs or
@@ -109,11 +118,34 @@ fn validate(a: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Options that take DOF numbers or a further reduction, refused on a
+/// model from matrices (its DOFs are the record's points after the
+/// Craig–Bampton reduction, numbered by it).
+fn matrix_options(a: &Args) -> anyhow::Result<()> {
+    let path = a.model.display();
+    if a.dofs.is_some() {
+        anyhow::bail!("--dofs: {path} is a model from matrices; name the measured points with --points (e.g. --points n60:uy,n100:uy), or leave both out to fit every channel");
+    }
+    if a.reduce != ReduceArg::None {
+        anyhow::bail!("--reduce: {path} is a model from matrices, already reduced (Craig–Bampton) onto the record's points and the elements' points; leave --reduce out");
+    }
+    for (opt, given) in [("--u0", &a.u0), ("--v0", &a.v0)] {
+        if given.is_some() {
+            anyhow::bail!("{opt}: {path} is a model from matrices, whose reduced coordinates are set by the reduction; leave {opt} out (the start is the record's true state when it has one of the same reduction, else rest)");
+        }
+    }
+    Ok(())
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
     validate(&a)?;
+    if tacit::model::matrix::is_matrix_file(&a.model)? {
+        matrix_options(&a)?;
+    }
     let staging = super::output::Staging::begin(&a.output, a.force)?;
-    let model = Model::from_file(&a.model)?;
-    let rec = super::read_record_for(&a.record, &model)?;
+    // a model from matrices is reduced onto the record's points
+    let mut rec = super::read_record(&a.record)?;
+    let model = Model::load(&a.model, &mut [&mut rec])?;
     rec.validate(Some(model.ndof()))?;
     if let Some(f) = tacit::record::checks::magnitudes(&rec) {
         anyhow::bail!(
@@ -170,24 +202,28 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     let written = files().map_err(|e| staging.user_message(e))?;
     staging.commit()?;
-    print_summary(&result)?;
+    print_summary(&problem, &result)?;
     outln!("wrote {} in {}", written.join(", "), a.output.display());
     Ok(())
 }
 
 fn build_problem(a: &Args, model: &Model, rec: &Record) -> anyhow::Result<Problem> {
-    let params = update::parse_free(&a.free, model)?;
+    let params = free_parameters(&a.free, model)?;
     let quantities = parse_quantities(&a.data)?;
     if let Some(d) = &a.dofs {
         super::check_dofs(&d.0, model.ndof(), "--dofs")?;
     }
+    let chosen = match &a.points {
+        Some(p) => Some(tacit::model::matrix::point_dofs(model, p, "--points")?),
+        None => a.dofs.as_ref().map(|d| d.0.clone()),
+    };
     let n = model.ndof();
     let state = |given: &Option<String>, row: fn(&record::Truth) -> &Vec<Vec<f64>>, what: &str| {
         initial_state(given, rec, n, row, what)
     };
     let u0 = state(&a.u0, |t| &t.u, "--u0")?;
     let v0 = state(&a.v0, |t| &t.v, "--v0")?;
-    let dofs = a.dofs.as_ref().map(|d| d.0.as_slice());
+    let dofs = chosen.as_deref();
     let mut p = Problem::from_record(model, rec, &quantities, dofs, params, u0, v0)?;
     if let Some(len) = a.segment {
         p.segments = shooting::from_truth(rec, len)?;
@@ -208,6 +244,89 @@ fn build_problem(a: &Args, model: &Model, rec: &Record) -> anyhow::Result<Proble
         ..Default::default()
     };
     Ok(p)
+}
+
+/// The free parameters: the element kinds and matrix scales named here
+/// (`cgap<i>`, `kcl<i>`, `rfriction<i>`, `stiffness_scale`,
+/// `mass_scale`), the rest by [`update::parse_free`].
+fn free_parameters(spec: &str, model: &Model) -> anyhow::Result<Vec<update::Parameter>> {
+    let mut own = vec![];
+    let mut rest = vec![];
+    for raw in spec.split(',').map(str::trim).filter(|r| !r.is_empty()) {
+        match extra_target(raw, model)? {
+            Some(t) => own.push(t),
+            None => rest.push(raw),
+        }
+    }
+    let mut params = if rest.is_empty() && !own.is_empty() {
+        vec![]
+    } else {
+        update::parse_free(&rest.join(","), model)?
+    };
+    for t in own {
+        let p = update::Parameter::relative(model, t)?;
+        if params.iter().any(|q| q.target == t) {
+            anyhow::bail!("--free: {} is given twice", p.name);
+        }
+        params.push(p);
+    }
+    Ok(params)
+}
+
+/// A parameter name [`update::parse_free`] does not read, or `None`.
+fn extra_target(raw: &str, model: &Model) -> anyhow::Result<Option<update::Target>> {
+    use update::Target;
+    let lower = raw.to_ascii_lowercase();
+    let scales = model.matrices.as_ref().is_some_and(|l| l.by_scales);
+    match lower.as_str() {
+        "stiffness_scale" | "mass_scale" if !scales => anyhow::bail!(
+            "--free {raw}: only a model from matrices has a {lower} (model {} is not one)",
+            model.name
+        ),
+        "stiffness_scale" => return Ok(Some(Target::StiffnessScale)),
+        "mass_scale" => return Ok(Some(Target::MassScale)),
+        _ => {}
+    }
+    type Make = fn(usize) -> Target;
+    let kinds: [(&str, usize, Make, &str); 3] = [
+        ("cgap", model.clearances.len(), Target::ClearanceGap, "clearances"),
+        ("kcl", model.clearances.len(), Target::ClearanceStiffness, "clearances"),
+        (
+            "rfriction",
+            model.relative_frictions.len(),
+            Target::RelativeFrictionLevel,
+            "relative friction elements",
+        ),
+    ];
+    for (prefix, count, make, what) in kinds {
+        let Some(i) = lower.strip_prefix(prefix).and_then(|s| s.parse::<usize>().ok()) else {
+            continue;
+        };
+        if i == 0 || i > count {
+            anyhow::bail!("--free {raw}: the model has {count} {what} (numbered from 1)");
+        }
+        return Ok(Some(make(i - 1)));
+    }
+    Ok(None)
+}
+
+/// Where a parameter acts, by point label on a model that names its
+/// points (`n100:uy`, `a50:uy–b50:uy`), by DOF otherwise; empty for a
+/// parameter of the whole model.
+fn place(t: update::Target, m: &Model) -> String {
+    use update::Target;
+    let dofs: Vec<usize> = match t {
+        Target::SpringStiffness(i) => m.springs.get(i).map(|s| s.dofs.clone()).unwrap_or_default(),
+        Target::Mass(i) => vec![i + 1],
+        Target::ContactGap(i) | Target::ContactStiffness(i) => m.contacts.get(i).map(|e| e.dofs.clone()).unwrap_or_default(),
+        Target::FrictionLevel(i) => m.frictions.get(i).map(|e| vec![e.dof]).unwrap_or_default(),
+        Target::CubicK3(i) => m.cubics.get(i).map(|e| e.dofs.clone()).unwrap_or_default(),
+        Target::ClearanceGap(i) | Target::ClearanceStiffness(i) => m.clearances.get(i).map(|e| e.dofs.clone()).unwrap_or_default(),
+        Target::RelativeFrictionLevel(i) => m.relative_frictions.get(i).map(|e| e.dofs.clone()).unwrap_or_default(),
+        _ => vec![],
+    };
+    let names: Vec<String> = dofs.iter().map(|&d| m.dof_name(d)).collect();
+    names.join("–")
 }
 
 fn parse_quantities(s: &str) -> anyhow::Result<Vec<Quantity>> {
@@ -256,10 +375,16 @@ fn initial_state(
     }
 }
 
-fn print_summary(r: &FitResult) -> anyhow::Result<()> {
+fn print_summary(problem: &Problem, r: &FitResult) -> anyhow::Result<()> {
     for p in &r.parameters {
+        let at = problem
+            .parameters
+            .iter()
+            .find(|x| x.name == p.name)
+            .map_or(String::new(), |x| place(x.target, &problem.model));
+        let at = if at.is_empty() { at } else { format!(" ({at})") };
         outln!(
-            "{:>10}: {:>12.6e} -> {:>12.6e} ({:+.2} %){}",
+            "{:>10}{at}: {:>12.6e} -> {:>12.6e} ({:+.2} %){}",
             p.name,
             p.nominal,
             p.value,
@@ -328,11 +453,15 @@ fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
         p.alpha,
         p.segments.len()
     ));
-    s.push_str("| parameter | nominal | fitted | change % | bounds |\n|---|---|---|---|---|\n");
+    s.push_str("| parameter | at | nominal | fitted | change % | bounds |\n|---|---|---|---|---|---|\n");
     for q in &r.parameters {
         s.push_str(&format!(
-            "| {} | {:.6e} | {:.6e} | {:+.2} | [{:.3e}, {:.3e}]{} |\n",
+            "| {} | {} | {:.6e} | {:.6e} | {:+.2} | [{:.3e}, {:.3e}]{} |\n",
             q.name,
+            p.parameters
+                .iter()
+                .find(|x| x.name == q.name)
+                .map_or(String::new(), |x| place(x.target, &p.model)),
             q.nominal,
             q.value,
             q.percent_change,

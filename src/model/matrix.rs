@@ -619,15 +619,64 @@ impl MatrixModel {
     }
 }
 
-/// Full-model frequencies up to `top` Hz against the reduced ones.
-fn check_frequencies(
-    m: &SpMat,
-    k: &SpMat,
-    reduced_hz: &[f64],
-    top: f64,
-) -> Result<Vec<FrequencyCheck>> {
-    // K may be singular (a free structure): factor K + σM with σ below the
-    // band; the Ritz step uses K itself
+/// Modes of the full model (every free DOF) up to a frequency.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FullModes {
+    /// Frequencies, Hz, ascending.
+    pub freq_hz: Vec<f64>,
+    /// The points the shapes are given at.
+    pub points: Vec<String>,
+    /// Mass-normalised shape of each mode at `points` (one row per mode).
+    pub shapes: Vec<Vec<f64>>,
+    /// False when `max_modes` stopped the modes below `up_to_hz`.
+    pub complete: bool,
+    /// The upper frequency asked for, Hz.
+    pub up_to_hz: f64,
+}
+
+impl MatrixModel {
+    /// The full model's modes up to `up_to_hz` (at most `max_modes`),
+    /// from a sparse factorization and the sparse eigensolver, with the
+    /// shapes at `points` (labels; a fixed point's value is 0). Errors
+    /// name the label.
+    pub fn full_modes(&self, up_to_hz: f64, max_modes: usize, points: &[String]) -> Result<FullModes> {
+        let free = self.free();
+        let mut pos = vec![usize::MAX; self.n];
+        for (i, &d) in free.iter().enumerate() {
+            pos[d] = i;
+        }
+        let mut rows = vec![];
+        for l in points {
+            let d = self.dof_of(l).ok_or_else(|| {
+                model_err(&self.source, format!("point \"{l}\" is not in [points]"))
+            })?;
+            rows.push(pos[d]);
+        }
+        let mff = sparse::block(&self.m, &free, &free)?;
+        let kff = sparse::block(&self.k, &free, &free)?;
+        let factor = shifted_factor(&mff, &kff, up_to_hz)
+            .map_err(|e| model_err(&self.source, e.to_string()))?;
+        let (modes, complete) = sparse::modes_up_to(&kff, &mff, &factor, up_to_hz, max_modes)?;
+        let shapes = (0..modes.omega2.len())
+            .map(|r| {
+                rows.iter()
+                    .map(|&i| if i == usize::MAX { 0.0 } else { modes.shapes[(i, r)] })
+                    .collect()
+            })
+            .collect();
+        Ok(FullModes {
+            freq_hz: modes.freq_hz(),
+            points: points.to_vec(),
+            shapes,
+            complete,
+            up_to_hz,
+        })
+    }
+}
+
+/// The Cholesky factor of `K + σM` with σ = (2π · 0.01 · `top`)²: K may be
+/// singular (a free structure).
+fn shifted_factor(m: &SpMat, k: &SpMat, top: f64) -> Result<Factor> {
     let sigma = (2.0 * std::f64::consts::PI * top * 0.01).powi(2);
     let shifted = sparse::from_entries(
         k.nrows(),
@@ -641,12 +690,24 @@ fn check_frequencies(
             )
             .collect::<Vec<_>>(),
     )?;
-    let factor = Factor::new(&shifted).ok_or_else(|| {
+    Factor::new(&shifted).ok_or_else(|| {
         TacitError::Numerical(
             "the full stiffness is not positive semi-definite (K + σM has no Cholesky factor)"
                 .into(),
         )
-    })?;
+    })
+}
+
+/// Full-model frequencies up to `top` Hz against the reduced ones.
+fn check_frequencies(
+    m: &SpMat,
+    k: &SpMat,
+    reduced_hz: &[f64],
+    top: f64,
+) -> Result<Vec<FrequencyCheck>> {
+    // K may be singular (a free structure): factor K + σM with σ below the
+    // band; the Ritz step uses K itself
+    let factor = shifted_factor(m, k, top)?;
     let (modes, _) = sparse::modes_up_to(k, m, &factor, top, 2 * reduced_hz.len() + 20)?;
     Ok(modes
         .freq_hz()
@@ -785,6 +846,50 @@ pub(super) fn map_element_labels(t: &mut toml::Table, to: &dyn Fn(&str) -> Optio
             }
         }
     }
+}
+
+/// True when the model file at `path` has a `[matrices]` section; an
+/// unreadable file is an error naming it.
+pub fn is_matrix_file(path: &Path) -> Result<bool> {
+    let text = std::fs::read_to_string(path).map_err(|e| TacitError::io(path, e))?;
+    Ok(is_matrix_model(&text))
+}
+
+/// The DOFs (from 1) of point labels of a model that names its points (a
+/// reduced model from matrices, a modal model). The error names `option`,
+/// the label and the points the model has.
+pub fn point_dofs(model: &Model, labels: &[String], option: &str) -> Result<Vec<usize>> {
+    if model.points.is_empty() {
+        return Err(TacitError::Setting(format!(
+            "{option}: model {} names no points (a lumped model); give DOF numbers instead",
+            model.name
+        )));
+    }
+    let mut out: Vec<usize> = vec![];
+    for l in labels {
+        let d = model
+            .points
+            .iter()
+            .position(|p| p == l)
+            .ok_or_else(|| {
+                TacitError::Setting(format!(
+                    "{option}: point \"{l}\" is not a point of model {} (points: {})",
+                    model.name,
+                    model.points.join(", ")
+                ))
+            })?
+            + 1;
+        if out.contains(&d) {
+            return Err(TacitError::Setting(format!(
+                "{option}: point \"{l}\" is listed twice"
+            )));
+        }
+        out.push(d);
+    }
+    if out.is_empty() {
+        return Err(TacitError::Setting(format!("{option}: no point given")));
+    }
+    Ok(out)
 }
 
 /// Add the reduction to a diagnose report directory: `reduction.json`
