@@ -300,7 +300,10 @@ fn sensor_dofs(a: &Args, model: &Model, rec: &tacit::record::Record) -> anyhow::
     d.sort_unstable();
     d.dedup();
     if d.is_empty() {
-        anyhow::bail!("record {}: no output channel to identify from", a.record.display());
+        anyhow::bail!(
+            "record {}: no output channel to identify from",
+            a.record.display()
+        );
     }
     Ok(d)
 }

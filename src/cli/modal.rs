@@ -103,7 +103,12 @@ pub struct Args {
     /// Model from matrices without a record: the points (labels,
     /// comma-separated) at which to give the mode shapes, e.g.
     /// n20:uy,n100:uy (default: none, frequencies only).
-    #[arg(long, value_name = "LABELS", value_delimiter = ',', conflicts_with = "record")]
+    #[arg(
+        long,
+        value_name = "LABELS",
+        value_delimiter = ',',
+        conflicts_with = "record"
+    )]
     points: Option<Vec<String>>,
 }
 
@@ -603,7 +608,11 @@ fn full_model_modes(a: &Args, path: &Path) -> anyhow::Result<()> {
         "model {} ({} DOFs), full model, undamped modes up to {top} Hz{}{}",
         path.display(),
         mm.n,
-        if modes.complete { "" } else { " (stopped at 1000 modes)" },
+        if modes.complete {
+            ""
+        } else {
+            " (stopped at 1000 modes)"
+        },
         if points.is_empty() {
             String::new()
         } else {

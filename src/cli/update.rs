@@ -289,8 +289,18 @@ fn extra_target(raw: &str, model: &Model) -> anyhow::Result<Option<update::Targe
     }
     type Make = fn(usize) -> Target;
     let kinds: [(&str, usize, Make, &str); 3] = [
-        ("cgap", model.clearances.len(), Target::ClearanceGap, "clearances"),
-        ("kcl", model.clearances.len(), Target::ClearanceStiffness, "clearances"),
+        (
+            "cgap",
+            model.clearances.len(),
+            Target::ClearanceGap,
+            "clearances",
+        ),
+        (
+            "kcl",
+            model.clearances.len(),
+            Target::ClearanceStiffness,
+            "clearances",
+        ),
         (
             "rfriction",
             model.relative_frictions.len(),
@@ -299,7 +309,10 @@ fn extra_target(raw: &str, model: &Model) -> anyhow::Result<Option<update::Targe
         ),
     ];
     for (prefix, count, make, what) in kinds {
-        let Some(i) = lower.strip_prefix(prefix).and_then(|s| s.parse::<usize>().ok()) else {
+        let Some(i) = lower
+            .strip_prefix(prefix)
+            .and_then(|s| s.parse::<usize>().ok())
+        else {
             continue;
         };
         if i == 0 || i > count {
@@ -318,11 +331,23 @@ fn place(t: update::Target, m: &Model) -> String {
     let dofs: Vec<usize> = match t {
         Target::SpringStiffness(i) => m.springs.get(i).map(|s| s.dofs.clone()).unwrap_or_default(),
         Target::Mass(i) => vec![i + 1],
-        Target::ContactGap(i) | Target::ContactStiffness(i) => m.contacts.get(i).map(|e| e.dofs.clone()).unwrap_or_default(),
+        Target::ContactGap(i) | Target::ContactStiffness(i) => m
+            .contacts
+            .get(i)
+            .map(|e| e.dofs.clone())
+            .unwrap_or_default(),
         Target::FrictionLevel(i) => m.frictions.get(i).map(|e| vec![e.dof]).unwrap_or_default(),
         Target::CubicK3(i) => m.cubics.get(i).map(|e| e.dofs.clone()).unwrap_or_default(),
-        Target::ClearanceGap(i) | Target::ClearanceStiffness(i) => m.clearances.get(i).map(|e| e.dofs.clone()).unwrap_or_default(),
-        Target::RelativeFrictionLevel(i) => m.relative_frictions.get(i).map(|e| e.dofs.clone()).unwrap_or_default(),
+        Target::ClearanceGap(i) | Target::ClearanceStiffness(i) => m
+            .clearances
+            .get(i)
+            .map(|e| e.dofs.clone())
+            .unwrap_or_default(),
+        Target::RelativeFrictionLevel(i) => m
+            .relative_frictions
+            .get(i)
+            .map(|e| e.dofs.clone())
+            .unwrap_or_default(),
         _ => vec![],
     };
     let names: Vec<String> = dofs.iter().map(|&d| m.dof_name(d)).collect();
@@ -382,7 +407,11 @@ fn print_summary(problem: &Problem, r: &FitResult) -> anyhow::Result<()> {
             .iter()
             .find(|x| x.name == p.name)
             .map_or(String::new(), |x| place(x.target, &problem.model));
-        let at = if at.is_empty() { at } else { format!(" ({at})") };
+        let at = if at.is_empty() {
+            at
+        } else {
+            format!(" ({at})")
+        };
         outln!(
             "{:>10}{at}: {:>12.6e} -> {:>12.6e} ({:+.2} %){}",
             p.name,
@@ -453,7 +482,9 @@ fn report(a: &Args, p: &Problem, r: &FitResult) -> String {
         p.alpha,
         p.segments.len()
     ));
-    s.push_str("| parameter | at | nominal | fitted | change % | bounds |\n|---|---|---|---|---|---|\n");
+    s.push_str(
+        "| parameter | at | nominal | fitted | change % | bounds |\n|---|---|---|---|---|---|\n",
+    );
     for q in &r.parameters {
         s.push_str(&format!(
             "| {} | {} | {:.6e} | {:.6e} | {:+.2} | [{:.3e}, {:.3e}]{} |\n",

@@ -639,7 +639,12 @@ impl MatrixModel {
     /// from a sparse factorization and the sparse eigensolver, with the
     /// shapes at `points` (labels; a fixed point's value is 0). Errors
     /// name the label.
-    pub fn full_modes(&self, up_to_hz: f64, max_modes: usize, points: &[String]) -> Result<FullModes> {
+    pub fn full_modes(
+        &self,
+        up_to_hz: f64,
+        max_modes: usize,
+        points: &[String],
+    ) -> Result<FullModes> {
         let free = self.free();
         let mut pos = vec![usize::MAX; self.n];
         for (i, &d) in free.iter().enumerate() {
@@ -660,7 +665,13 @@ impl MatrixModel {
         let shapes = (0..modes.omega2.len())
             .map(|r| {
                 rows.iter()
-                    .map(|&i| if i == usize::MAX { 0.0 } else { modes.shapes[(i, r)] })
+                    .map(|&i| {
+                        if i == usize::MAX {
+                            0.0
+                        } else {
+                            modes.shapes[(i, r)]
+                        }
+                    })
                     .collect()
             })
             .collect();
@@ -867,18 +878,13 @@ pub fn point_dofs(model: &Model, labels: &[String], option: &str) -> Result<Vec<
     }
     let mut out: Vec<usize> = vec![];
     for l in labels {
-        let d = model
-            .points
-            .iter()
-            .position(|p| p == l)
-            .ok_or_else(|| {
-                TacitError::Setting(format!(
-                    "{option}: point \"{l}\" is not a point of model {} (points: {})",
-                    model.name,
-                    model.points.join(", ")
-                ))
-            })?
-            + 1;
+        let d = model.points.iter().position(|p| p == l).ok_or_else(|| {
+            TacitError::Setting(format!(
+                "{option}: point \"{l}\" is not a point of model {} (points: {})",
+                model.name,
+                model.points.join(", ")
+            ))
+        })? + 1;
         if out.contains(&d) {
             return Err(TacitError::Setting(format!(
                 "{option}: point \"{l}\" is listed twice"
