@@ -60,6 +60,10 @@ pub struct ReductionSpec {
     pub max_modes: Option<usize>,
 }
 
+/// A matrix in memory: its size (rows, columns) and its entries
+/// `(row, column, value)`, 0-based.
+pub type Entries = ((usize, usize), Vec<(usize, usize, f64)>);
+
 /// Default cut-off over band top.
 pub const BAND_FACTOR: f64 = 2.0;
 /// Default most fixed-interface modes.
@@ -250,28 +254,42 @@ pub fn read_matrix_market(path: &Path, what: &str, n: Option<usize>) -> Result<S
     }
     let coo = nalgebra_sparse::io::load_coo_from_matrix_market_file::<f64, _>(path)
         .map_err(|e| err(format!("not a real Matrix Market coordinate matrix: {e}")))?;
-    let (r, c) = (coo.nrows(), coo.ncols());
+    let e: Vec<(usize, usize, f64)> = coo.triplet_iter().map(|(i, j, &v)| (i, j, v)).collect();
+    checked_matrix((coo.nrows(), coo.ncols()), e, n).map_err(err)
+}
+
+/// A sparse matrix from its entries `(row, column, value)` (0-based,
+/// duplicates summed), checked: square, `n × n` when `n` (the mass
+/// matrix's size) is given, indices in range, finite, symmetric within
+/// 1e-9 of the largest entry. The error names the entry (from 1).
+pub fn checked_matrix(
+    (r, c): (usize, usize),
+    mut e: Vec<(usize, usize, f64)>,
+    n: Option<usize>,
+) -> std::result::Result<SpMat, String> {
     if r != c {
-        return Err(err(format!("the matrix is {r} × {c}; it must be square")));
+        return Err(format!("the matrix is {r} × {c}; it must be square"));
     }
     if let Some(n) = n {
         if r != n {
-            return Err(err(format!(
+            return Err(format!(
                 "the matrix is {r} × {r} but the mass matrix is {n} × {n}"
-            )));
+            ));
         }
     }
-    let mut e: Vec<(usize, usize, f64)> = coo.triplet_iter().map(|(i, j, &v)| (i, j, v)).collect();
-    if let Some(&(i, j, v)) = e.iter().find(|t| !t.2.is_finite()) {
-        return Err(err(format!(
-            "entry ({}, {}) = {v} is not finite",
+    if let Some(&(i, j, _)) = e.iter().find(|t| t.0 >= r || t.1 >= r) {
+        return Err(format!(
+            "entry ({}, {}) is outside the {r} × {r} matrix",
             i + 1,
             j + 1
-        )));
+        ));
+    }
+    if let Some(&(i, j, v)) = e.iter().find(|t| !t.2.is_finite()) {
+        return Err(format!("entry ({}, {}) = {v} is not finite", i + 1, j + 1));
     }
     e.retain(|t| t.2 != 0.0);
-    let a = sparse::from_entries(r, r, &e)?;
-    check_symmetric(&a).map_err(err)?;
+    let a = sparse::from_entries(r, r, &e).map_err(|e| e.to_string())?;
+    check_symmetric(&a)?;
     Ok(a)
 }
 
@@ -313,6 +331,64 @@ impl MatrixModel {
                 "[points]: a model from matrices needs a table of point labels".into(),
             )
         })?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let m = read_matrix_market(&dir.join(&spec.mass), "[matrices] mass", None)?;
+        let n = m.nrows();
+        let k = read_matrix_market(&dir.join(&spec.stiffness), "[matrices] stiffness", Some(n))?;
+        let c = match &spec.damping {
+            Some(f) => Some(read_matrix_market(
+                &dir.join(f),
+                "[matrices] damping",
+                Some(n),
+            )?),
+            None => None,
+        };
+        Self::from_parts(path, (m, k, c), &spec.fixed, points_t, rest)
+    }
+
+    /// A model from matrices held in memory (mass `m`, stiffness `k`,
+    /// damping `c`, each checked by [`checked_matrix`] and named so in
+    /// errors) and the rest of a model file as a table: `[points]`, and
+    /// optionally `fixed` (labels), `[interfaces]`, `[reduction]`,
+    /// `[damping]`, `name` and the elements placed by label. `name` names
+    /// the model in errors. The checks are those of [`MatrixModel::from_file`].
+    pub fn from_matrices(
+        name: &str,
+        m: Entries,
+        k: Entries,
+        c: Option<Entries>,
+        mut table: toml::Table,
+    ) -> Result<MatrixModel> {
+        let path = Path::new(name);
+        let err = |what: &'static str| move |e: String| model_err(path, format!("{what}: {e}"));
+        let m = checked_matrix(m.0, m.1, None).map_err(err("mass matrix"))?;
+        let n = m.nrows();
+        let k = checked_matrix(k.0, k.1, Some(n)).map_err(err("stiffness matrix"))?;
+        let c = match c {
+            Some(c) => Some(checked_matrix(c.0, c.1, Some(n)).map_err(err("damping matrix"))?),
+            None => None,
+        };
+        let fixed: Vec<String> = match table.remove("fixed") {
+            Some(v) => v
+                .try_into()
+                .map_err(|e: toml::de::Error| model_err(path, format!("fixed: {e}")))?,
+            None => vec![],
+        };
+        let points_t = table.remove("points").ok_or_else(|| {
+            model_err(path, "points: a model from matrices needs point labels".into())
+        })?;
+        Self::from_parts(path, (m, k, c), &fixed, points_t, table)
+    }
+
+    /// The checks and the model once the matrices are read.
+    fn from_parts(
+        path: &Path,
+        (m, k, c): (SpMat, SpMat, Option<SpMat>),
+        fixed_labels: &[String],
+        points_t: toml::Value,
+        mut rest: toml::Table,
+    ) -> Result<MatrixModel> {
+        let take = |t: &mut toml::Table, key: &str| t.remove(key);
         let interfaces: InterfacesSpec = match take(&mut rest, "interfaces") {
             Some(v) => v
                 .try_into()
@@ -331,18 +407,7 @@ impl MatrixModel {
                 "masses: a model from matrices takes its masses from [matrices] mass".into(),
             ));
         }
-        let dir = path.parent().unwrap_or(Path::new("."));
-        let m = read_matrix_market(&dir.join(&spec.mass), "[matrices] mass", None)?;
         let n = m.nrows();
-        let k = read_matrix_market(&dir.join(&spec.stiffness), "[matrices] stiffness", Some(n))?;
-        let c = match &spec.damping {
-            Some(f) => Some(read_matrix_market(
-                &dir.join(f),
-                "[matrices] damping",
-                Some(n),
-            )?),
-            None => None,
-        };
         let (points, index) = read_points(path, points_t, n)?;
         let label_of = |what: &str, l: &str| -> Result<usize> {
             index
@@ -351,7 +416,7 @@ impl MatrixModel {
                 .ok_or_else(|| model_err(path, format!("{what}: point \"{l}\" is not in [points]")))
         };
         let mut fixed = vec![];
-        for l in &spec.fixed {
+        for l in fixed_labels {
             fixed.push(label_of("[matrices] fixed", l)?);
         }
         fixed.sort_unstable();
@@ -380,6 +445,41 @@ impl MatrixModel {
         };
         mm.check_mass()?;
         Ok(mm)
+    }
+
+    /// Reduce onto the points of the records' channels (a channel named by
+    /// DOF, `accel_5`, stands for DOF 5 of the matrices, which must have a
+    /// label), the cut-off from the widest band of the records; errors
+    /// name the record, the channel and the point. The channels are not
+    /// resolved here ([`Model::resolve_channels`]).
+    pub fn reduce_for_records(&self, records: &[&crate::record::Record]) -> Result<Model> {
+        let src = self.source.display();
+        let mut labels = vec![];
+        for r in records {
+            for c in r.inputs.iter().chain(&r.outputs) {
+                let l = match &c.point {
+                    Some(p) if self.dof_of(p).is_none() => {
+                        return Err(TacitError::record(
+                            r.source.clone(),
+                            format!("channel {}: point \"{p}\" is not in [points] of {src}", c.name()),
+                        ))
+                    }
+                    Some(p) => p.as_str(),
+                    None => self.label_of(c.dof).ok_or_else(|| {
+                        TacitError::record(
+                            r.source.clone(),
+                            format!("channel {}: DOF {} of the matrices has no label in [points] of {src}", c.name(), c.dof),
+                        )
+                    })?,
+                };
+                labels.push(l.to_string());
+            }
+        }
+        let top = records
+            .iter()
+            .filter_map(|r| crate::record::band_top(r))
+            .fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.max(b))));
+        self.reduce(&labels, top)
     }
 
     /// The label's DOF (0-based).

@@ -209,32 +209,8 @@ impl Model {
             modal::from_toml_str(&text, &path.display().to_string())?
         } else if matrix::is_matrix_model(&text) {
             let mm = matrix::MatrixModel::from_file(path)?;
-            let mut labels = vec![];
-            for r in records.iter() {
-                for c in r.inputs.iter().chain(&r.outputs) {
-                    let l = match &c.point {
-                        Some(p) if mm.dof_of(p).is_none() => {
-                            return Err(TacitError::record(
-                                r.source.clone(),
-                                format!("channel {}: point \"{p}\" is not in [points] of {}", c.name(), path.display()),
-                            ))
-                        }
-                        Some(p) => p.as_str(),
-                        None => mm.label_of(c.dof).ok_or_else(|| {
-                            TacitError::record(
-                                r.source.clone(),
-                                format!("channel {}: DOF {} of the matrices has no label in [points] of {}", c.name(), c.dof, path.display()),
-                            )
-                        })?,
-                    };
-                    labels.push(l.to_string());
-                }
-            }
-            let top = records
-                .iter()
-                .filter_map(|r| crate::record::band_top(r))
-                .fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.max(b))));
-            mm.reduce(&labels, top)?
+            let recs: Vec<&crate::record::Record> = records.iter().map(|r| &**r).collect();
+            mm.reduce_for_records(&recs)?
         } else {
             Model::from_toml_str(&text, &path.display().to_string())?
         };
