@@ -29,7 +29,7 @@ test: setup
 python: setup
 	@dpkg -s python3-venv python3-dev >/dev/null 2>&1 || { $(SUDO) apt-get update && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y python3-venv python3-dev; }
 	python3 -m venv .venv
-	.venv/bin/pip install -q maturin pytest numpy
+	.venv/bin/pip install -q maturin pytest numpy scipy
 	. .venv/bin/activate && maturin develop --release -m python/Cargo.toml
 	.venv/bin/python -m pytest -q python/tests
 

@@ -62,16 +62,13 @@ pub fn group_estimates(
             substeps: s,
         })
         .collect();
-    let m = &model.inner;
+    let m = model.reduced("group_estimates")?;
     let fit = py
         .detach(|| joint::fit_diagnosed(m, (&effect, &kind, &dofs), &diagnosed, &settings))
         .map_err(err)?;
     let json = serde_json::to_string(&fit).map_err(err)?;
     Ok((
         json,
-        Model {
-            inner: fit.model,
-            path: None,
-        },
+        Model::dense(fit.model, None),
     ))
 }

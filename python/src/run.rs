@@ -58,12 +58,15 @@ fn input_spec(
 /// `input_dof` (from 1). `sensors`: DOFs from 1 (default: every DOF);
 /// `kinds`: any of `disp`, `vel`, `accel`; `noise`: standard deviation as
 /// a fraction of each channel's RMS; `substeps`: Newmark sub-steps per
-/// sample (a stiff contact needs 40 at 512 Hz).
+/// sample (a stiff contact needs 40 at 512 Hz). A model from matrices
+/// takes `points` (sensor labels) and `input_point` instead of `sensors`
+/// and `input_dof`: it is reduced onto them (cut-off twice the top of the
+/// input's band) and the channels are named by point (`accel:n20:uy`).
 #[pyfunction]
 #[pyo3(signature = (model, samples = 4096, fs = 512.0, input = "random", rms = 20.0,
     band = (5.0, 200.0), amplitude = 10.0, sweep = (5.0, 150.0), force = None,
     input_dof = 1, sensors = None, kinds = vec!["accel".to_string()], noise = 0.0,
-    seed = 7, substeps = 10))]
+    seed = 7, substeps = 10, points = None, input_point = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn simulate(
     py: Python<'_>,
@@ -82,7 +85,17 @@ pub fn simulate(
     noise: f64,
     seed: u64,
     substeps: usize,
+    points: Option<Vec<String>>,
+    input_point: Option<String>,
 ) -> PyResult<Record> {
+    let top = match (input, &force) {
+        (_, Some(_)) => fs / 4.0,
+        ("sweep", None) => sweep.0.max(sweep.1),
+        _ => band.1,
+    };
+    let (reduced, sensors, input_dof) =
+        at_points(model, points, input_point, top, sensors, input_dof)?;
+    let model = &reduced;
     let kinds = kinds
         .iter()
         .map(|k| {
@@ -103,7 +116,7 @@ pub fn simulate(
             sweep,
             force.map(|f| convert::to_vec(&f)),
         )?,
-        sensors: sensors.unwrap_or_else(|| (1..=model.inner.ndof()).collect()),
+        sensors: sensors.unwrap_or_else(|| (1..=model.ndof()).collect()),
         kinds,
         noise,
         seed,
@@ -115,9 +128,48 @@ pub fn simulate(
         v0: vec![],
     };
     spec.settings.validate().map_err(err)?;
-    let m = &model.inner;
-    let (inner, _) = py.detach(|| simulate_record(m, &spec)).map_err(err)?;
+    let m = &**model;
+    let (mut inner, _) = py.detach(|| simulate_record(m, &spec)).map_err(err)?;
+    if !m.points.is_empty() {
+        for c in inner.inputs.iter_mut().chain(inner.outputs.iter_mut()) {
+            c.point = Some(m.dof_name(c.dof));
+        }
+    }
     Ok(Record { inner })
+}
+
+/// The model to simulate with its sensor and input DOFs: a model from
+/// matrices reduced onto `points` and `input_point` (its DOFs in the
+/// reduced numbering), any other model as it is with `sensors` and
+/// `input_dof`.
+fn at_points(
+    model: &Model,
+    points: Option<Vec<String>>,
+    input_point: Option<String>,
+    band_top: f64,
+    sensors: Option<Vec<usize>>,
+    input_dof: usize,
+) -> PyResult<(std::borrow::Cow<'_, tacit::model::Model>, Option<Vec<usize>>, usize)> {
+    let Some(mm) = &model.matrix else {
+        if points.is_some() || input_point.is_some() {
+            return Err(err(format!("points and input_point name points of a model from matrices; {} is not one (give sensors and input_dof)", model.inner.name)));
+        }
+        return Ok((std::borrow::Cow::Borrowed(&model.inner), sensors, input_dof));
+    };
+    let name = mm.source.display();
+    if sensors.is_some() {
+        return Err(err(format!("sensors: {name} is a model from matrices; give the sensor points by label (points=[...])")));
+    }
+    let (Some(points), Some(input)) = (points, input_point) else {
+        return Err(err(format!("{name}: a model from matrices needs points=[...] (the sensors) and input_point=\"...\" (where the force acts)")));
+    };
+    let mut labels = points.clone();
+    labels.push(input.clone());
+    let reduced = mm.reduce(&labels, Some(band_top)).map_err(err)?;
+    let dof = |l: &str| reduced.points.iter().position(|p| p == l).map_or(0, |i| i + 1);
+    let sensors = points.iter().map(|l| dof(l)).collect();
+    let input_dof = dof(&input);
+    Ok((std::borrow::Cow::Owned(reduced), Some(sensors), input_dof))
 }
 
 /// Modes of the undamped linear part: `(freq_hz, shapes, rigid)` with
@@ -125,7 +177,7 @@ pub fn simulate(
 /// column per mode (ndof × ndof) and a flag per rigid-body mode.
 #[pyfunction]
 pub fn modal<'py>(py: Python<'py>, model: &Model) -> PyResult<ModesOut<'py>> {
-    let lin = model.inner.linear_part();
+    let lin = model.reduced("modal")?.linear_part();
     let modes = tacit::modal::solve(&lin.mass_matrix(), &lin.stiffness_matrix()).map_err(err)?;
     Ok((
         convert::vector(py, &modes.freq_hz),
@@ -140,13 +192,13 @@ pub fn modal<'py>(py: Python<'py>, model: &Model) -> PyResult<ModesOut<'py>> {
 /// the force per DOF (N, ndof × samples, left-hand side of
 /// M a + C v + K u + f = f_ext) and the time of every sample (s).
 #[pyfunction]
-#[pyo3(signature = (model, record, sensors, resolution = 8, noise = 0.01, locate = true, substeps = 10))]
+#[pyo3(signature = (model, record, sensors = None, resolution = 8, noise = 0.01, locate = true, substeps = 10))]
 #[allow(clippy::too_many_arguments)]
 pub fn identify<'py>(
     py: Python<'py>,
     model: &Model,
     record: &Record,
-    sensors: Vec<usize>,
+    sensors: Option<Vec<usize>>,
     resolution: usize,
     noise: f64,
     locate: bool,
@@ -161,8 +213,18 @@ pub fn identify<'py>(
     if !locate {
         s.locate.ratio = 0.0;
     }
-    let rec = resolved(model, &record.inner)?;
-    let (m, rec) = (&model.inner, &rec);
+    if model.matrix.is_some() && sensors.is_some() {
+        return Err(err("sensors: a model from matrices uses every measured point of the record (leave sensors out)"));
+    }
+    let reduced = model.for_records(&[&record.inner])?;
+    let rec = resolved(&reduced, &record.inner)?;
+    let sensors = sensors.unwrap_or_else(|| {
+        let mut d: Vec<usize> = rec.outputs.iter().map(|c| c.dof).collect();
+        d.sort_unstable();
+        d.dedup();
+        d
+    });
+    let (m, rec) = (&*reduced, &rec);
     let est = py
         .detach(|| {
             let prob = Problem::new(&m.linear_part(), rec, &sensors)?;
@@ -182,9 +244,12 @@ pub fn identify<'py>(
 
 /// A copy of `rec` with its channels resolved against `model` (a
 /// universal file's node and direction: the node on a lumped model).
-fn resolved(model: &Model, rec: &tacit::record::Record) -> PyResult<tacit::record::Record> {
+fn resolved(
+    model: &tacit::model::Model,
+    rec: &tacit::record::Record,
+) -> PyResult<tacit::record::Record> {
     let mut r = rec.clone();
-    model.inner.resolve_channels(&mut r).map_err(err)?;
+    model.resolve_channels(&mut r).map_err(err)?;
     Ok(r)
 }
 
@@ -226,21 +291,26 @@ pub fn diagnose(
         None => DiagnoseSettings::default(),
     };
     settings.validate().map_err(err)?;
+    // a model from matrices is reduced onto the records' points
+    let mut all: Vec<&tacit::record::Record> = vec![&record.inner];
+    all.extend(validation.as_ref().map(|v| &v.inner));
+    all.extend(linear_records.iter().map(|r| &r.inner));
+    let reduced = model.for_records(&all)?;
     let linear: Vec<tacit::record::Record> = linear_records
         .iter()
-        .map(|r| resolved(model, &r.inner))
+        .map(|r| resolved(&reduced, &r.inner))
         .collect::<PyResult<_>>()?;
     let val = validation
         .as_ref()
-        .map(|v| resolved(model, &v.inner))
+        .map(|v| resolved(&reduced, &v.inner))
         .transpose()?;
-    let rec = resolved(model, &record.inner)?;
-    let (m, rec) = (&model.inner, &rec);
+    let rec = resolved(&reduced, &record.inner)?;
+    let (m, rec) = (&*reduced, &rec);
     let cal = calibrated::CalibratedSettings {
         off: trust_linear,
         ..Default::default()
     };
-    let meta = meta(model, record, val.as_ref(), sensors.as_deref()).map_err(err)?;
+    let meta = meta(model, m, rec, val.as_ref(), sensors.as_deref()).map_err(err)?;
     let (paths, fitted) = py
         .detach(|| -> tacit::error::Result<_> {
             let d = calibrated::diagnose_calibrated(
@@ -255,16 +325,22 @@ pub fn diagnose(
             )?;
             let mut meta = meta;
             meta.sensors = d.prepared.channels.iter().map(|c| c.1 + 1).collect();
-            let paths = report::write(&output, &meta, &d, &settings)?;
+            let mut paths = report::write(&output, &meta, &d, &settings)?;
+            if let Some(r) = m.matrices.as_ref().and_then(|l| l.report.as_ref()) {
+                let effects: Vec<(String, Vec<usize>)> = d
+                    .effects
+                    .iter()
+                    .map(|e| (e.label.clone(), e.dofs.clone()))
+                    .collect();
+                tacit::model::matrix::append_report(&output, r, &effects)?;
+                paths.push(output.join("reduction.json"));
+            }
             Ok((paths, d.model))
         })
         .map_err(err)?;
     Ok((
         paths,
-        Model {
-            inner: fitted,
-            path: None,
-        },
+        Model::dense(fitted, None),
     ))
 }
 
@@ -273,7 +349,8 @@ pub fn diagnose(
 /// record cannot be used.
 fn meta(
     model: &Model,
-    record: &Record,
+    reduced: &tacit::model::Model,
+    record: &tacit::record::Record,
     val: Option<&tacit::record::Record>,
     sensors: Option<&[usize]>,
 ) -> tacit::Result<report::Meta> {
@@ -285,13 +362,13 @@ fn meta(
         }
     };
     let mut warnings = vec![];
-    for r in std::iter::once(&record.inner).chain(val) {
-        let found = model_checks::warnings(r, &model.inner, sensors)?;
+    for r in std::iter::once(record).chain(val) {
+        let found = model_checks::warnings(r, reduced, sensors)?;
         warnings.extend(model_checks::labelled(&name(&r.source), &found));
     }
     Ok(report::Meta {
         model: model.path.as_deref().map_or("<memory>".into(), name),
-        record: name(&record.inner.source),
+        record: name(&record.source),
         validation_record: val.map(|v| name(&v.source)),
         sensors: vec![],
         tacit_version: env!("CARGO_PKG_VERSION").to_string(),

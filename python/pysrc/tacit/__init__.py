@@ -82,6 +82,97 @@ def _model_to_dict(self: Model) -> Dict[str, Any]:
     return json.loads(self.to_json())
 
 
+def _triplets(a: Any, what: str) -> tuple:
+    """A dense array or a SciPy sparse matrix as (rows, columns, row
+    indices, column indices, values) of its non-zero entries, 0-based."""
+    if hasattr(a, "tocoo"):  # scipy.sparse, without importing SciPy
+        c = a.tocoo()
+        rows, cols = c.shape
+        return (
+            int(rows),
+            int(cols),
+            np.asarray(c.row, dtype=np.int64).tolist(),
+            np.asarray(c.col, dtype=np.int64).tolist(),
+            np.asarray(c.data, dtype=np.float64).tolist(),
+        )
+    try:
+        arr = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise TacitError(f"{what}: not a real matrix ({e})") from None
+    if arr.ndim != 2:
+        raise TacitError(f"{what}: a 2-D array is needed, got {arr.ndim} dimension(s)")
+    r, c = np.nonzero(arr)
+    return (arr.shape[0], arr.shape[1], r.tolist(), c.tolist(), arr[r, c].tolist())
+
+
+def _model_from_matrices(
+    M: Any,
+    K: Any,
+    points: Dict[str, int],
+    *,
+    damping: Optional[Dict[str, Any]] = None,
+    C: Any = None,
+    elements: Sequence[Dict[str, Any]] = (),
+    fixed: Sequence[str] = (),
+    interfaces: Optional[Dict[str, Any]] = None,
+    reduction: Optional[Dict[str, Any]] = None,
+    name: str = "matrices",
+) -> Model:
+    """A model from mass and stiffness matrices, as a finite element code
+    gives them: ``M`` (kg) and ``K`` (N/m) dense NumPy arrays or SciPy
+    sparse matrices of the same size, symmetric; ``C`` (N s/m) an optional
+    damping matrix added to ``damping``.
+
+    ``points`` names DOFs: ``{"n12:uy": 25, ...}``, the DOF numbered from
+    1 (row 25 of the matrices is row index 24). A DOF without a label can
+    be neither measured, driven nor hold an element. ``fixed``: labels of
+    DOFs held at zero (clamped). ``damping``: as in a model file, e.g.
+    ``{"kind": "modal", "ratio": 0.01}``. ``elements``: the nonlinear
+    elements placed by label, each a dict with ``kind`` (``contact``,
+    ``clearance``, ``relative_friction``, ``cubic``, ...) and the keys of
+    the model file, e.g. ``{"kind": "contact", "dofs": ["n100:uy"], "gap":
+    2e-4, "stiffness": 5e4}`` (gap in m, stiffness in N/m).
+    ``interfaces``: ``{"points": [...], "pairs": [[a, b], ...]}`` where an
+    effect may act that no sensor sees. ``reduction``: ``{"cutoff_hz":
+    ..., "band_factor": 2.0, "max_modes": 200}``.
+
+    The checks are those of a model file with ``[matrices]``
+    (docs/formats.md): sizes, finite entries, symmetry (the error names the
+    entry), labels in range and each DOF labelled once, every label used
+    existing, the mass of the free DOFs positive definite; each failure
+    raises :class:`TacitError` naming the matrix, the entry or the label.
+
+    The model is reduced (Craig–Bampton) onto the points of a record when
+    it is used: :func:`simulate` takes ``points`` and ``input_point``,
+    :func:`identify` and :func:`diagnose` the points of the record's
+    channels (``accel:n100:uy``); :meth:`Model.reduce` reduces it by hand.
+    """
+    table: Dict[str, Any] = {"name": name, "points": dict(points), "fixed": list(fixed)}
+    if damping is not None:
+        table["damping"] = damping
+    if interfaces is not None:
+        table["interfaces"] = interfaces
+    if reduction is not None:
+        table["reduction"] = reduction
+    for i, e in enumerate(elements):
+        e = dict(e)
+        kind = e.pop("kind", None)
+        if not isinstance(kind, str):
+            raise TacitError(f"elements[{i}]: give its kind (\"contact\", \"clearance\", ...)")
+        if kind in ("name", "points", "fixed", "damping", "interfaces", "reduction"):
+            raise TacitError(f"elements[{i}]: kind {kind!r} is not an element")
+        table.setdefault(kind, []).append(e)
+    try:
+        text = json.dumps(table, default=_plain)
+    except TypeError as e:
+        raise TacitError(f"model {name}: {e}") from None
+    c = None if C is None else _triplets(C, "damping matrix C")
+    return Model._from_matrices(
+        name, _triplets(M, "mass matrix M"), _triplets(K, "stiffness matrix K"), c, text
+    )
+
+
+Model.from_matrices = staticmethod(_model_from_matrices)  # type: ignore[attr-defined]
 Model.from_dict = staticmethod(_model_from_dict)  # type: ignore[attr-defined]
 Model.to_dict = _model_to_dict  # type: ignore[attr-defined]
 
@@ -111,6 +202,11 @@ def simulate(model: Union[Model, PathLike], **options: Any) -> Record:
     ``"disp"``, ``"vel"``], ``noise`` (fraction of each channel's RMS)
     [0], ``seed`` [7], ``substeps`` (Newmark sub-steps per sample; a
     2e6 N/m contact at 512 Hz needs 40) [10].
+
+    A model from matrices (:meth:`Model.from_matrices`) takes ``points``
+    (the sensor labels) and ``input_point`` (the label where the force
+    acts) instead of ``sensors`` and ``input_dof``; it is reduced onto them
+    and its channels are named by point (``accel:n100:uy``).
     """
     if "force" in options and options["force"] is not None:
         options["force"] = np.ascontiguousarray(options["force"], dtype=np.float64)
@@ -161,7 +257,7 @@ class Identification:
 def identify(
     model: Union[Model, PathLike],
     record: Union[Record, PathLike],
-    sensors: Sequence[int],
+    sensors: Optional[Sequence[int]] = None,
     *,
     resolution: int = 8,
     noise: float = 0.01,
@@ -170,14 +266,16 @@ def identify(
 ) -> Identification:
     """Identify the internal force the linear part of ``model`` lacks from
     ``record``, with accelerometers (or other channels) at ``sensors`` (DOFs
-    from 1): the located, lifted smoother of ``tacit identify``. ``noise``
+    from 1; default every measured DOF): the located, lifted smoother of
+    ``tacit identify``. A model from matrices is reduced onto the record's
+    points first and uses all of them (leave ``sensors`` out). ``noise``
     is the assumed channel noise as a fraction of each channel's RMS;
     ``resolution`` the sub-intervals per sample on which the force is
     constant; ``locate=False`` leaves an unknown force at every DOF."""
     s, f, t = _tacit.identify(
         _as_model(model),
         _as_record(record),
-        list(sensors),
+        None if sensors is None else list(sensors),
         resolution=resolution,
         noise=noise,
         locate=locate,
