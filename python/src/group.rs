@@ -67,8 +67,5 @@ pub fn group_estimates(
         .detach(|| joint::fit_diagnosed(m, (&effect, &kind, &dofs), &diagnosed, &settings))
         .map_err(err)?;
     let json = serde_json::to_string(&fit).map_err(err)?;
-    Ok((
-        json,
-        Model::dense(fit.model, None),
-    ))
+    Ok((json, Model::dense(fit.model, None)))
 }

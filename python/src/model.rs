@@ -161,7 +161,7 @@ impl Model {
 
     /// True for a model from matrices not yet reduced.
     #[getter]
-    fn from_matrices_unreduced(&self) -> bool {
+    fn unreduced(&self) -> bool {
         self.matrix.is_some()
     }
 
@@ -180,8 +180,7 @@ impl Model {
     /// full and the reduced model) as JSON text, or None.
     fn reduction_json(&self) -> PyResult<Option<String>> {
         let r = self.inner.matrices.as_ref().and_then(|l| l.report.as_ref());
-        r.map(|r| serde_json::to_string(r).map_err(err))
-            .transpose()
+        r.map(|r| serde_json::to_string(r).map_err(err)).transpose()
     }
 
     /// A model from TOML text (the model file format).
@@ -246,12 +245,18 @@ impl Model {
 
     /// The model without its nonlinear elements.
     fn linear_part(&self) -> PyResult<Model> {
-        Ok(Model::dense(self.reduced("linear_part")?.linear_part(), None))
+        Ok(Model::dense(
+            self.reduced("linear_part")?.linear_part(),
+            None,
+        ))
     }
 
     /// Mass matrix, kg (ndof × ndof).
     fn mass_matrix<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        Ok(convert::matrix(py, &self.reduced("mass_matrix")?.mass_matrix()))
+        Ok(convert::matrix(
+            py,
+            &self.reduced("mass_matrix")?.mass_matrix(),
+        ))
     }
 
     /// Stiffness matrix of the linear springs, N/m (ndof × ndof).

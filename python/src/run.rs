@@ -149,7 +149,11 @@ fn at_points(
     band_top: f64,
     sensors: Option<Vec<usize>>,
     input_dof: usize,
-) -> PyResult<(std::borrow::Cow<'_, tacit::model::Model>, Option<Vec<usize>>, usize)> {
+) -> PyResult<(
+    std::borrow::Cow<'_, tacit::model::Model>,
+    Option<Vec<usize>>,
+    usize,
+)> {
     let Some(mm) = &model.matrix else {
         if points.is_some() || input_point.is_some() {
             return Err(err(format!("points and input_point name points of a model from matrices; {} is not one (give sensors and input_dof)", model.inner.name)));
@@ -166,7 +170,13 @@ fn at_points(
     let mut labels = points.clone();
     labels.push(input.clone());
     let reduced = mm.reduce(&labels, Some(band_top)).map_err(err)?;
-    let dof = |l: &str| reduced.points.iter().position(|p| p == l).map_or(0, |i| i + 1);
+    let dof = |l: &str| {
+        reduced
+            .points
+            .iter()
+            .position(|p| p == l)
+            .map_or(0, |i| i + 1)
+    };
     let sensors = points.iter().map(|l| dof(l)).collect();
     let input_dof = dof(&input);
     Ok((std::borrow::Cow::Owned(reduced), Some(sensors), input_dof))
@@ -338,10 +348,7 @@ pub fn diagnose(
             Ok((paths, d.model))
         })
         .map_err(err)?;
-    Ok((
-        paths,
-        Model::dense(fitted, None),
-    ))
+    Ok((paths, Model::dense(fitted, None)))
 }
 
 /// The report header: files (or `<memory>`), the warnings of the record

@@ -69,7 +69,7 @@ def test_numpy_beam_reduces_as_the_matrix_market_files():
 
 def test_modes_of_the_reduced_beam_against_the_closed_form():
     model = beam_model(50)
-    assert model.from_matrices_unreduced and model.ndof == 102
+    assert model.unreduced and model.ndof == 102
     with pytest.raises(tacit.TacitError, match="Model.reduce"):
         model.mass_matrix()
     red = model.reduce(["n25:uy", "n50:uy"], band_top_hz=1000.0)

@@ -400,8 +400,8 @@ fn finish(
     let mut files = identify::output::write_all(est, staging.dir(), !a.no_figures)
         .map_err(|e| staging.user_message(e.into()))?;
     if !model.points.is_empty() {
-        let more = write_point_forces(est, model, staging.dir())
-            .map_err(|e| staging.user_message(e.into()))?;
+        let more =
+            write_point_forces(est, model, staging.dir()).map_err(|e| staging.user_message(e))?;
         files.extend(more);
     }
     staging.commit()?;

@@ -375,7 +375,10 @@ impl MatrixModel {
             None => vec![],
         };
         let points_t = table.remove("points").ok_or_else(|| {
-            model_err(path, "points: a model from matrices needs point labels".into())
+            model_err(
+                path,
+                "points: a model from matrices needs point labels".into(),
+            )
         })?;
         Self::from_parts(path, (m, k, c), &fixed, points_t, table)
     }
@@ -1032,4 +1035,96 @@ pub fn append_report(
         s += "\n";
     }
     write!(f, "\n{s}{}", r.markdown()).map_err(|e| TacitError::io(&p, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A chain of three unit masses and unit springs, the first to
+    /// ground, labelled `a`, `b`, `c`; `extra` is added to the table.
+    fn chain(extra: &str) -> Result<MatrixModel> {
+        let m = ((3, 3), (0..3).map(|i| (i, i, 1.0)).collect());
+        let k = (
+            (3, 3),
+            vec![
+                (0, 0, 2.0),
+                (1, 1, 2.0),
+                (2, 2, 1.0),
+                (0, 1, -1.0),
+                (1, 0, -1.0),
+                (1, 2, -1.0),
+                (2, 1, -1.0),
+            ],
+        );
+        let table: toml::Table = format!("[points]\na = 1\nb = 2\nc = 3\n{extra}")
+            .parse()
+            .unwrap();
+        MatrixModel::from_matrices("chain", m, k, None, table)
+    }
+
+    #[test]
+    fn matrices_in_memory_are_checked_as_files_are() {
+        let mm = chain("").unwrap();
+        assert_eq!(mm.n, 3);
+        assert_eq!(mm.dof_of("c"), Some(2));
+        let e = checked_matrix((2, 2), vec![(0, 1, 1.0), (1, 0, 2.0)], None).unwrap_err();
+        assert!(e.contains("not symmetric") && e.contains("(1, 2)"), "{e}");
+        let e = checked_matrix((2, 2), vec![(0, 2, 1.0)], None).unwrap_err();
+        assert!(
+            e.contains("entry (1, 3) is outside the 2 × 2 matrix"),
+            "{e}"
+        );
+        let e = checked_matrix((2, 2), vec![], Some(3)).unwrap_err();
+        assert!(e.contains("mass matrix is 3 × 3"), "{e}");
+        let e = checked_matrix((2, 2), vec![(1, 1, f64::INFINITY)], None).unwrap_err();
+        assert!(e.contains("(2, 2) = inf is not finite"), "{e}");
+        let e = chain("d = 3\n").unwrap_err().to_string();
+        assert!(
+            e.contains("chain") && e.contains("\"d\"") && e.contains("\"c\""),
+            "{e}"
+        );
+        let e = chain("[[contact]]\ndofs = [\"z\"]\ngap = 1e-3\nstiffness = 1.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("contact[0].dofs") && e.contains("\"z\""), "{e}");
+    }
+
+    #[test]
+    fn full_modes_are_the_chains_and_point_dofs_name_the_points() {
+        let mm = chain("").unwrap();
+        // eigenvalues of [[2,-1,0],[-1,2,-1],[0,-1,1]]: 2 − 2 cos((2r − 1)π/7)
+        let modes = mm.full_modes(1.0, 10, &["c".to_string()]).unwrap();
+        assert_eq!(modes.freq_hz.len(), 3);
+        for (r, f) in modes.freq_hz.iter().enumerate() {
+            let lam = 2.0 - 2.0 * ((2 * r + 1) as f64 * std::f64::consts::PI / 7.0).cos();
+            let exact = lam.sqrt() / (2.0 * std::f64::consts::PI);
+            assert!((f / exact - 1.0).abs() < 1e-9, "{f} {exact}");
+        }
+        // mass-normalised: the shapes at every point have unit length
+        let all: Vec<String> = ["a", "b", "c"].iter().map(|s| s.to_string()).collect();
+        let m = mm.full_modes(1.0, 10, &all).unwrap();
+        for s in &m.shapes {
+            let n2: f64 = s.iter().map(|x| x * x).sum();
+            assert!((n2 - 1.0).abs() < 1e-9, "{n2}");
+        }
+        let red = mm
+            .reduce(&["b".to_string(), "c".to_string()], Some(1.0))
+            .unwrap();
+        assert_eq!(red.points, ["b", "c"]);
+        let d = point_dofs(&red, &["c".to_string(), "b".to_string()], "--points").unwrap();
+        assert_eq!(d, vec![2, 1]);
+        let e = point_dofs(&red, &["a".to_string()], "--points")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("--points") && e.contains("\"a\"") && e.contains("b, c"),
+            "{e}"
+        );
+        let lumped = Model::from_toml_str("masses = [1.0]\n", "m").unwrap();
+        let e = point_dofs(&lumped, &["a".to_string()], "--points")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("names no points"), "{e}");
+    }
 }
