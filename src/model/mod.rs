@@ -267,7 +267,7 @@ impl Model {
         if matrix::is_matrix_model(&text) {
             return Err(TacitError::model(
                 path.display().to_string(),
-                "a model from matrices ([matrices]) is reduced onto the points of a record: use it with `tacit diagnose`, or `tacit simulate --points ... --input-point ...`; this command takes a lumped model (masses and springs)",
+                "a model from matrices ([matrices]) is reduced onto the points of a record: read it with the records it meets (`Model::load`, as the commands do) or reduce it (`MatrixModel::reduce`)",
             ));
         }
         Model::from_toml_str(&text, &path.display().to_string())
