@@ -20,7 +20,9 @@
 //! also fits the Level-1 model with a cubic spring and a quadratic damper
 //! between wing and payload by open-loop output error on the estimation
 //! record and scores it on every level file in DIR (report.json
-//! `interface_fit`, OUT/model-interface.toml).
+//! `interface_fit`, OUT/model-interface.toml); `--interface-linear
+//! held|free` holds the Level-1 linear part (default) or fits the
+//! coupling spring and the wing bending and torsion damping with it.
 
 use std::path::{Path, PathBuf};
 use tacit::cases::f16;
@@ -34,6 +36,7 @@ struct Args {
     calibration: f16::Calibration,
     min_gain: Option<f64>,
     interface_fit: bool,
+    interface_linear: f16::LinearPart,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -46,6 +49,7 @@ fn args() -> anyhow::Result<Args> {
         calibration: f16::Calibration::Reidentify,
         min_gain: None,
         interface_fit: false,
+        interface_linear: f16::LinearPart::Held,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let mut it = argv.iter();
@@ -59,6 +63,14 @@ fn args() -> anyhow::Result<Args> {
             .ok_or_else(|| anyhow::anyhow!("{flag} needs a value"))?;
         if flag == "--min-gain" {
             a.min_gain = Some(value.parse()?);
+            continue;
+        }
+        if flag == "--interface-linear" {
+            a.interface_linear = match value.as_str() {
+                "held" => f16::LinearPart::Held,
+                "free" => f16::LinearPart::Free,
+                _ => anyhow::bail!("--interface-linear {value}: expected held or free"),
+            };
             continue;
         }
         if flag == "--calibration" {
@@ -120,7 +132,13 @@ fn main() -> anyhow::Result<()> {
             .filter(|p| p.exists())
             .collect();
         let refs: Vec<&Path> = levels.iter().map(|p| p.as_path()).collect();
-        let (fit, model) = f16::interface_study(&a.linear, &a.estimate, &refs, &settings)?;
+        let (fit, model) = f16::interface_study(
+            &a.linear,
+            &a.estimate,
+            &refs,
+            a.interface_linear,
+            &settings,
+        )?;
         for (file, before, after) in &fit.errors {
             println!("interface model on {file}: Level-1 model {before:.3?}, interface model {after:.3?} m/s^2");
         }

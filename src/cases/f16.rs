@@ -388,19 +388,33 @@ impl F16Result {
     }
 }
 
+/// What the interface fit ([`interface_fit`]) does with the linear part.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LinearPart {
+    /// Held at the low-level model: only the effect's coefficients are
+    /// fitted, so the model reduces to the low-level model at low
+    /// amplitude.
+    Held,
+    /// Fitted with the effect: the coupling spring between the two
+    /// points and the damping ratios of the modes nearest the given
+    /// frequencies.
+    Free,
+}
+
 /// The Level-1 model with a softening-or-stiffening cubic spring and a
 /// quadratic damper between `a` and `b` (DOFs from 1), their coefficients
-/// (and the coupling spring between the two points, when the model has
-/// one) fitted by open-loop output error on the whole record from rest.
-/// `starts`: (k3, c2) to start from (the trace's estimates);
-/// `ratios_near_hz`: the modal damping ratios of the modes nearest these
-/// frequencies are fitted with them.
+/// fitted by open-loop output error on the whole record from rest.
+/// `starts`: (k3, c2) to start from (the trace's estimates). With
+/// [`LinearPart::Free`] the coupling spring between the two points (when
+/// the model has one) and the modal damping ratios of the modes nearest
+/// `ratios_near_hz` are fitted with them.
 pub fn interface_fit(
     model: &Model,
     rec: &Record,
     pair: [usize; 2],
     starts: (f64, f64),
-    ratios_near_hz: &[f64],
+    (linear, ratios_near_hz): (LinearPart, &[f64]),
     substeps: usize,
 ) -> Result<Model> {
     use crate::model::{Cubic, QuadraticDamper};
@@ -422,11 +436,14 @@ pub fn interface_fit(
         Parameter::relative(&m, Target::DamperC2(m.quadratic_dampers.len() - 1))?
             .with_relative_bounds(-0.999, 20.0),
     ];
-    if let Some(i) = m
-        .springs
-        .iter()
-        .position(|s| s.dofs.len() == 2 && s.dofs.contains(&pair[0]) && s.dofs.contains(&pair[1]))
-    {
+    let spring = if linear == LinearPart::Free {
+        m.springs
+            .iter()
+            .position(|s| s.dofs.len() == 2 && s.dofs.contains(&pair[0]) && s.dofs.contains(&pair[1]))
+    } else {
+        None
+    };
+    if let Some(i) = spring {
         params.push(
             Parameter::relative(&m, Target::SpringStiffness(i))?.with_relative_bounds(-0.9, 1.0),
         );
@@ -436,7 +453,12 @@ pub fn interface_fit(
         .filter(|&r| !modes.rigid[r])
         .map(|r| modes.freq_hz[r])
         .collect();
-    for f in ratios_near_hz {
+    let ratios = if linear == LinearPart::Free {
+        ratios_near_hz
+    } else {
+        &[]
+    };
+    for f in ratios {
         let r = (0..flex.len())
             .min_by(|&a, &b| (flex[a] - f).abs().total_cmp(&(flex[b] - f).abs()))
             .ok_or_else(|| TacitError::Numerical("the model has no flexible mode".into()))?;
@@ -460,6 +482,8 @@ pub fn interface_fit(
 /// The interface fit ([`interface_fit`]) scored on several records.
 #[derive(Debug, Clone, Serialize)]
 pub struct InterfaceFit {
+    /// The linear part held at the Level-1 model or fitted with the effect.
+    pub linear: LinearPart,
     /// Cubic spring between `wing` and `payload`, N/m³.
     pub k3: f64,
     /// Quadratic damper between them, N s²/m².
@@ -473,12 +497,14 @@ pub struct InterfaceFit {
     pub seconds: f64,
 }
 
-/// Fit the interface model on `estimate` (wing bending and torsion
-/// damping freed with it) and score it with the Level-1 model on `records`.
+/// Fit the interface model on `estimate` (with [`LinearPart::Free`] the
+/// wing bending and torsion damping and the coupling spring freed with it)
+/// and score it with the Level-1 model on `records`.
 pub fn interface_study(
     linear: &Path,
     estimate: &Path,
     records: &[&Path],
+    part: LinearPart,
     s: &Settings,
 ) -> Result<(InterfaceFit, Model)> {
     let lin = read(linear)?;
@@ -487,7 +513,14 @@ pub fn interface_study(
     let mut est = read(estimate)?;
     l1.resolve_channels(&mut est)?;
     let t = std::time::Instant::now();
-    let m = interface_fit(&l1, &est, [2, 3], (-3.0e12, 1.5e5), &[5.2, 7.3], s.substeps)?;
+    let m = interface_fit(
+        &l1,
+        &est,
+        [2, 3],
+        (-3.0e12, 1.5e5),
+        (part, &[5.2, 7.3]),
+        s.substeps,
+    )?;
     let seconds = t.elapsed().as_secs_f64();
     let mut errors = vec![];
     for p in records {
@@ -506,6 +539,7 @@ pub fn interface_study(
             .map(|sp| sp.stiffness)
     };
     let fit = InterfaceFit {
+        linear: part,
         k3: m.cubics.last().map_or(0.0, |c| c.k3),
         c2: m.quadratic_dampers.last().map_or(0.0, |d| d.c2),
         coupling: coupling(&l1).zip(coupling(&m)),
