@@ -17,12 +17,14 @@
 //! reidentify: the modal model identified again at that level);
 //! `--min-gain G` sets the share of the residual an effect must remove to
 //! be selected and kept (default the diagnosis's 0.05); `--interface-fit`
-//! also fits the Level-1 model with a cubic spring and a quadratic damper
+//! also fits the Level-1 model with a cubic spring and a damper
 //! between wing and payload by open-loop output error on the estimation
 //! record and scores it on every level file in DIR (report.json
 //! `interface_fit`, OUT/model-interface.toml); `--interface-linear
 //! held|free` holds the Level-1 linear part (default) or fits the
-//! coupling spring and the wing bending and torsion damping with it.
+//! coupling spring and the wing bending and torsion damping with it;
+//! `--interface-damper quadratic|cubic` chooses the damper's law (default
+//! cubic).
 
 use std::path::{Path, PathBuf};
 use tacit::cases::f16;
@@ -37,6 +39,7 @@ struct Args {
     min_gain: Option<f64>,
     interface_fit: bool,
     interface_linear: f16::LinearPart,
+    interface_damper: f16::Damper,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -50,6 +53,7 @@ fn args() -> anyhow::Result<Args> {
         min_gain: None,
         interface_fit: false,
         interface_linear: f16::LinearPart::Held,
+        interface_damper: f16::Damper::Cubic,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let mut it = argv.iter();
@@ -70,6 +74,14 @@ fn args() -> anyhow::Result<Args> {
                 "held" => f16::LinearPart::Held,
                 "free" => f16::LinearPart::Free,
                 _ => anyhow::bail!("--interface-linear {value}: expected held or free"),
+            };
+            continue;
+        }
+        if flag == "--interface-damper" {
+            a.interface_damper = match value.as_str() {
+                "quadratic" => f16::Damper::Quadratic,
+                "cubic" => f16::Damper::Cubic,
+                _ => anyhow::bail!("--interface-damper {value}: expected quadratic or cubic"),
             };
             continue;
         }
@@ -136,7 +148,7 @@ fn main() -> anyhow::Result<()> {
             &a.linear,
             &a.estimate,
             &refs,
-            a.interface_linear,
+            (a.interface_linear, a.interface_damper),
             &settings,
         )?;
         for (file, before, after) in &fit.errors {

@@ -44,12 +44,22 @@
 //!    p = (H_x − H_u L)ᵀ r_k + (A − G L)ᵀ e,\quad
 //!    l_k = Q_{uu}^{-1}(H_uᵀ r_k + Gᵀ e), $$
 //!
-//! and `u_k = −L x_k + l_k`. The matrix step is the shared one of
-//! [`crate::riccati`] in its output form: with `Z = [H_u; G]`,
-//! `S = diag(I, P')`, `M = Z Λ⁻¹ Zᵀ` (`Λ` the diagonal force weights), the
-//! push-through identity `Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹` reduces every
-//! solve to size `p + 2n` whatever `R` is (`Q_uu` is factored directly
-//! when it is the smaller). `P` does not depend on the data: once it stops
+//! and `u_k = −L x_k + l_k`. The matrix step is the one of
+//! [`crate::riccati::grouped`]: with `Z = [H_u; G]`, `S = diag(I, P')` and
+//! `M = Z Λ⁻¹ Zᵀ` (`Λ` the diagonal force weights, equal over the `R`
+//! sub-intervals of one force direction, so `M` is a weighted sum of one
+//! Gram matrix per direction), the push-through identity
+//! `Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹` puts every product and solve in size
+//! `p + 2n` whatever `R` is, and the forward pass needs per sample only
+//! `T_k = (I + S M)⁻¹ S Y` ((p + 2n) × 2n) and `ω_k = (I + S M)⁻¹ [r_k; e]`:
+//! `u_k = Λ_k⁻¹ Zᵀ (ω_k − T_k x_k)`. When the gains of the whole record
+//! would take more than 32 MB (the F-16 modal model with a force at each
+//! of its 9 coordinates: 21 × 18 per sample, 223 MB over 73 728 samples),
+//! the backward pass keeps `P` every `K = ⌈√N⌉` samples instead and the
+//! forward pass recomputes the gains of one block at a time from the `P`
+//! at its end (the same steps, so the same gains): one more matrix step
+//! per sample, memory `O(√N)` matrices besides the `O(N)` data and
+//! estimates. `P` does not depend on the data: once it stops
 //! changing the steady gains are used, so a sample costs a few
 //! matrix–vector products. States the outputs never see (the unobservable
 //! subspace `N` of `(A, C_y)`: a free-free model's rigid-body displacement

@@ -36,7 +36,8 @@
 
 use super::dense::{mul, view, view_mut};
 use super::symmetrize;
-use nalgebra::{DMatrix, DVector, Dyn, LU};
+use faer::linalg::solvers::{PartialPivLu, Solve};
+use nalgebra::{DMatrix, DVector};
 
 /// The stage and the buffers of its step (see the module docs).
 #[derive(Debug, Clone)]
@@ -57,8 +58,8 @@ pub(crate) struct Grouped {
     pub closed: DMatrix<f64>,
     /// `P` of the last step (n × n).
     pub pm: DMatrix<f64>,
-    /// LU factors of `F = I + S M` of the last step.
-    lu: Option<LU<f64, Dyn, Dyn>>,
+    /// LU factors of `I + M S = Fᵀ` of the last step.
+    lu: Option<PartialPivLu<f64>>,
 }
 
 impl Grouped {
@@ -127,14 +128,15 @@ impl Grouped {
         for i in 0..q {
             g[(i, i)] += 1.0;
         }
-        let f = g.transpose();
         // closed = G⁻¹ Y
+        let lu = PartialPivLu::new(view(&g));
         self.closed.copy_from(&self.y);
-        if !g.lu().solve_mut(&mut self.closed) || !self.closed.iter().all(|v| v.is_finite()) {
+        lu.solve_in_place(view_mut(&mut self.closed));
+        if !self.closed.iter().all(|v| v.is_finite()) {
             self.lu = None;
             return false;
         }
-        self.lu = Some(f.lu());
+        self.lu = Some(lu);
         // T = S closed, P = Yᵀ T
         self.t.rows_mut(0, p).copy_from(&self.closed.rows(0, p));
         let low = view(&self.closed).submatrix(p, 0, n, n);
@@ -156,10 +158,18 @@ impl Grouped {
         true
     }
 
-    /// `ω = F⁻¹ v` with the factors of the last successful step.
+    /// `ω = F⁻¹ v` with the factors of the last successful step (a
+    /// transposed solve with those of `I + M S = Fᵀ`).
     pub fn solve(&self, v: &DVector<f64>) -> DVector<f64> {
         let lu = self.lu.as_ref().expect("a successful step before solve");
-        lu.solve(v).expect("F was factored by the step")
+        let mut w = v.clone();
+        let n = w.len();
+        lu.solve_transpose_in_place(faer::MatMut::from_column_major_slice_mut(
+            w.as_mut_slice(),
+            n,
+            1,
+        ));
+        w
     }
 }
 
