@@ -482,9 +482,9 @@ pub fn interface_fit(
         Parameter::relative(&m, damper)?.with_relative_bounds(-0.999, c_up),
     ];
     let spring = if linear == LinearPart::Free {
-        m.springs
-            .iter()
-            .position(|s| s.dofs.len() == 2 && s.dofs.contains(&pair[0]) && s.dofs.contains(&pair[1]))
+        m.springs.iter().position(|s| {
+            s.dofs.len() == 2 && s.dofs.contains(&pair[0]) && s.dofs.contains(&pair[1])
+        })
     } else {
         None
     };

@@ -971,7 +971,11 @@ mod tests {
             }
         });
         let xs = sm.simulate(&DVector::zeros(2 * n), &known);
-        let channels = vec![(Quantity::Accel, 0), (Quantity::Accel, 1), (Quantity::Disp, 2)];
+        let channels = vec![
+            (Quantity::Accel, 0),
+            (Quantity::Accel, 1),
+            (Quantity::Disp, 2),
+        ];
         let (cy, dy) = sm.outputs(&channels).unwrap();
         let mut measured = &cy * &xs + &dy * &known;
         for (i, v) in measured.iter_mut().enumerate() {

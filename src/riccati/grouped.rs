@@ -193,9 +193,7 @@ mod tests {
         let mut st = Grouped::new(&a, &b, &hx, &hu, &group, 2, &lambda);
         assert!(st.step(&pn, &w));
         let lam = DVector::from_fn(m, |i, _| lambda[i] * w[group[i]]);
-        let quu = hu.transpose() * &hu
-            + DMatrix::from_diagonal(&lam)
-            + b.transpose() * &pn * &b;
+        let quu = hu.transpose() * &hu + DMatrix::from_diagonal(&lam) + b.transpose() * &pn * &b;
         let qux = hu.transpose() * &hx + b.transpose() * &pn * &a;
         let chol = quu.cholesky().unwrap();
         let l = chol.solve(&qux);
