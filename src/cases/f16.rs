@@ -545,7 +545,7 @@ fn relative_velocity_rms(
         .map(|k| run.v[(i, k)] - run.v[(j, k)])
         .collect();
     let nu = crate::signal::rms_of(&rel);
-    if !run.completed() || !(nu > 0.0 && nu.is_finite()) {
+    if !(run.completed() && nu > 0.0 && nu.is_finite()) {
         return Err(TacitError::Numerical(format!(
             "the relative velocity of DOFs {} and {} in the simulation of {} is {nu} m/s RMS: no start for a cubic damper",
             pair[0],
