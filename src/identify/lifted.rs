@@ -411,7 +411,7 @@ impl Scaled {
         let mut zt = DMatrix::zeros(nu, p + nx);
         zt.columns_mut(0, p).copy_from(&hu.transpose());
         zt.columns_mut(p, nx).copy_from(&g.transpose());
-        let block = gain_block(len, p + nx, nx);
+        let block = gain_block(len, grouped.gain_rows(), nx);
         let (su, sv) = s.x0_std;
         let p0 = DVector::from_fn(nx, |i, _| {
             let sd = if i < n { su } else { sv };
@@ -461,7 +461,7 @@ fn project_vector(null: &DMatrix<f64>, p: &mut DVector<f64>) {
 }
 
 /// Bytes of gains the backward pass may store for the forward pass
-/// (`T_k`, (p + nx) × nx per sample); beyond, it keeps the Riccati matrix
+/// (`T_k`, (p + nx) × nx per sample, or `L_k`, nu × nx); beyond, it keeps the Riccati matrix
 /// every [`Scaled::block`] samples and the forward pass recomputes the
 /// gains of one block at a time.
 const GAIN_BUDGET: usize = 32 << 20;
@@ -490,7 +490,8 @@ struct Backward {
     checkpoints: Vec<Option<DMatrix<f64>>>,
     /// Steady `T`.
     steady: Option<DMatrix<f64>>,
-    /// `ω_k = F_k⁻¹ [r_k; e_k]` ((p + nx) × N).
+    /// `ω_k = F_k⁻¹ [r_k; e_k]` ((p + nx) × N), or `l_k` (nu × N) in the
+    /// control space.
     omega: DMatrix<f64>,
     p0: DMatrix<f64>,
     pv0: DVector<f64>,
@@ -546,7 +547,7 @@ fn data_step(
         e.gemv(-1.0, pn, &sp.c.column(k), 1.0);
         v.rows_mut(p_out, sp.nx).copy_from(&e);
     }
-    omega.set_column(k, &st.solve(&v));
+    omega.set_column(k, &st.feed(&v));
     pv.gemv_tr(1.0, &st.closed, &v, 0.0);
     project_vector(&sp.null, pv);
 }
@@ -556,7 +557,7 @@ fn backward(sp: &Scaled) -> Result<Backward> {
     let mut st = sp.grouped.clone();
     let mut p = DMatrix::zeros(nx, nx);
     let mut pv = DVector::zeros(nx);
-    let mut omega = DMatrix::zeros(st.p + nx, len);
+    let mut omega = DMatrix::zeros(st.gain_rows(), len);
     let mut stored: Vec<DMatrix<f64>> = Vec::new();
     let mut checkpoints = vec![None; len.div_ceil(block)];
     let mut w = vec![0.0; sp.groups];
@@ -675,7 +676,8 @@ fn initial_state(mut h: DMatrix<f64>, rhs: &DVector<f64>) -> Result<(DVector<f64
 
 /// The forward pass: scaled states (nx × N), controls (nu × N) and the
 /// initial-state directions left to the prior ([`initial_state`]). The
-/// control is `u_k = Λ_k⁻¹ Zᵀ (ω_k − T_k x_k)` ([`crate::riccati::grouped`]).
+/// control is `u_k = Λ_k⁻¹ Zᵀ (ω_k − T_k x_k)`, or `l_k − L_k x_k` when
+/// the step is taken in the control space ([`crate::riccati::grouped`]).
 fn forward(sp: &Scaled, bw: &Backward) -> Result<(DMatrix<f64>, DMatrix<f64>, usize)> {
     let (nx, nu, len) = (sp.nx, sp.nu, sp.len);
     let mut h = bw.p0.clone();
@@ -703,12 +705,17 @@ fn forward(sp: &Scaled, bw: &Backward) -> Result<(DMatrix<f64>, DMatrix<f64>, us
             }
             &gains[k - lo]
         };
-        dev.copy_from(&bw.omega.column(k));
-        dev.gemv(-1.0, t, &x, 1.0);
-        u.gemv(1.0, &sp.zt, &dev, 0.0);
-        sp.prior_at(k, &mut lam);
-        for (ui, li) in u.iter_mut().zip(&lam) {
-            *ui /= li;
+        if sp.grouped.direct {
+            u.copy_from(&bw.omega.column(k));
+            u.gemv(-1.0, t, &x, 1.0);
+        } else {
+            dev.copy_from(&bw.omega.column(k));
+            dev.gemv(-1.0, t, &x, 1.0);
+            u.gemv(1.0, &sp.zt, &dev, 0.0);
+            sp.prior_at(k, &mut lam);
+            for (ui, li) in u.iter_mut().zip(&lam) {
+                *ui /= li;
+            }
         }
         us.set_column(k, &u);
         if k + 1 < len {
@@ -925,12 +932,14 @@ mod tests {
         let res = reconstruct(&sm, &known, &measured, &channels, &s).unwrap();
         assert!(res.status.starts_with("solved"), "{}", res.status);
         let varying = DMatrix::from_fn(n, len, |i, k| 0.3 + ((i * 7 + k * 3) % 5) as f64);
-        for (weights, block) in [None, Some(varying)]
+        for ((weights, block), direct) in [None, Some(varying)]
             .into_iter()
             .flat_map(|w| [(w.clone(), len), (w, 3)])
+            .flat_map(|c| [(c.clone(), false), (c, true)])
         {
             // the sweep, with optional time-varying weights, every gain
-            // stored or checkpointed every 3 samples
+            // stored or checkpointed every 3 samples, the step in the
+            // output space or in the control space
             let mut sp = Scaled::new(
                 &sm,
                 &lm,
@@ -943,6 +952,7 @@ mod tests {
             .unwrap();
             sp.lam_k = weights.clone();
             sp.block = block;
+            sp.grouped.direct = direct;
             let bw = backward(&sp).unwrap();
             let (mut xs, mut us, _) = forward(&sp, &bw).unwrap();
             for i in 0..2 * n {
