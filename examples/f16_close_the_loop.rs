@@ -17,10 +17,14 @@
 //! reidentify: the modal model identified again at that level);
 //! `--min-gain G` sets the share of the residual an effect must remove to
 //! be selected and kept (default the diagnosis's 0.05); `--interface-fit`
-//! also fits the Level-1 model with a cubic spring and a quadratic damper
+//! also fits the Level-1 model with a cubic spring and a damper
 //! between wing and payload by open-loop output error on the estimation
 //! record and scores it on every level file in DIR (report.json
-//! `interface_fit`, OUT/model-interface.toml).
+//! `interface_fit`, OUT/model-interface.toml); `--interface-linear
+//! held|free` holds the Level-1 linear part (default) or fits the
+//! coupling spring and the wing bending and torsion damping with it;
+//! `--interface-damper quadratic|cubic` chooses the damper's law (default
+//! cubic).
 
 use std::path::{Path, PathBuf};
 use tacit::cases::f16;
@@ -34,6 +38,8 @@ struct Args {
     calibration: f16::Calibration,
     min_gain: Option<f64>,
     interface_fit: bool,
+    interface_linear: f16::LinearPart,
+    interface_damper: f16::Damper,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -46,6 +52,8 @@ fn args() -> anyhow::Result<Args> {
         calibration: f16::Calibration::Reidentify,
         min_gain: None,
         interface_fit: false,
+        interface_linear: f16::LinearPart::Held,
+        interface_damper: f16::Damper::Cubic,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let mut it = argv.iter();
@@ -59,6 +67,22 @@ fn args() -> anyhow::Result<Args> {
             .ok_or_else(|| anyhow::anyhow!("{flag} needs a value"))?;
         if flag == "--min-gain" {
             a.min_gain = Some(value.parse()?);
+            continue;
+        }
+        if flag == "--interface-linear" {
+            a.interface_linear = match value.as_str() {
+                "held" => f16::LinearPart::Held,
+                "free" => f16::LinearPart::Free,
+                _ => anyhow::bail!("--interface-linear {value}: expected held or free"),
+            };
+            continue;
+        }
+        if flag == "--interface-damper" {
+            a.interface_damper = match value.as_str() {
+                "quadratic" => f16::Damper::Quadratic,
+                "cubic" => f16::Damper::Cubic,
+                _ => anyhow::bail!("--interface-damper {value}: expected quadratic or cubic"),
+            };
             continue;
         }
         if flag == "--calibration" {
@@ -120,7 +144,13 @@ fn main() -> anyhow::Result<()> {
             .filter(|p| p.exists())
             .collect();
         let refs: Vec<&Path> = levels.iter().map(|p| p.as_path()).collect();
-        let (fit, model) = f16::interface_study(&a.linear, &a.estimate, &refs, &settings)?;
+        let (fit, model) = f16::interface_study(
+            &a.linear,
+            &a.estimate,
+            &refs,
+            (a.interface_linear, a.interface_damper),
+            &settings,
+        )?;
         for (file, before, after) in &fit.errors {
             println!("interface model on {file}: Level-1 model {before:.3?}, interface model {after:.3?} m/s^2");
         }

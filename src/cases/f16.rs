@@ -388,45 +388,107 @@ impl F16Result {
     }
 }
 
+/// What the interface fit ([`interface_fit`]) does with the linear part.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LinearPart {
+    /// Held at the low-level model: only the effect's coefficients are
+    /// fitted, so the model reduces to the low-level model at low
+    /// amplitude.
+    Held,
+    /// Fitted with the effect: the coupling spring between the two
+    /// points and the damping ratios of the modes nearest the given
+    /// frequencies.
+    Free,
+}
+
+/// The damper of the interface model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Damper {
+    /// `c_2 ν|ν|`: its equivalent damping grows as the amplitude.
+    Quadratic,
+    /// `c_3 ν³`: its equivalent damping grows as the amplitude squared, as
+    /// the cubic spring's stiffness, so both fade together at low level.
+    Cubic,
+}
+
+/// What [`interface_fit`] fits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InterfaceSpec {
+    /// The two points, DOFs from 1.
+    pub pair: [usize; 2],
+    /// Start values: the cubic spring's k3 (N/m³) and the quadratic
+    /// damper's c2 (N s²/m²); a cubic damper starts from
+    /// `c2 / ν_rms` (`ν_rms` the RMS relative velocity of the pair in the
+    /// model's simulation of the record).
+    pub starts: (f64, f64),
+    /// The damper's law.
+    pub damper: Damper,
+    /// The linear part held or fitted.
+    pub linear: LinearPart,
+    /// With [`LinearPart::Free`]: the modal damping ratios of the modes
+    /// nearest these frequencies (Hz) are fitted too.
+    pub ratios_near_hz: Vec<f64>,
+}
+
 /// The Level-1 model with a softening-or-stiffening cubic spring and a
-/// quadratic damper between `a` and `b` (DOFs from 1), their coefficients
-/// (and the coupling spring between the two points, when the model has
-/// one) fitted by open-loop output error on the whole record from rest.
-/// `starts`: (k3, c2) to start from (the trace's estimates);
-/// `ratios_near_hz`: the modal damping ratios of the modes nearest these
-/// frequencies are fitted with them.
+/// damper ([`Damper`]) between the two points of `spec`, their
+/// coefficients fitted by open-loop output error on the whole record from
+/// rest. With [`LinearPart::Free`] the coupling spring between the two
+/// points (when the model has one) and the modal damping ratios of
+/// `spec.ratios_near_hz` are fitted with them.
 pub fn interface_fit(
     model: &Model,
     rec: &Record,
-    pair: [usize; 2],
-    starts: (f64, f64),
-    ratios_near_hz: &[f64],
+    spec: &InterfaceSpec,
     substeps: usize,
 ) -> Result<Model> {
-    use crate::model::{Cubic, QuadraticDamper};
+    use crate::model::{Cubic, CubicDamper, QuadraticDamper};
     use crate::update::{
         self, optimize::FitSettings, param::Parameter, param::Target, problem::Problem,
     };
+    let (pair, starts, linear) = (spec.pair, spec.starts, spec.linear);
     let mut m = model.clone();
     m.cubics.push(Cubic {
         dofs: pair.to_vec(),
         k3: starts.0,
     });
-    m.quadratic_dampers.push(QuadraticDamper {
-        dofs: pair.to_vec(),
-        c2: starts.1.max(1.0),
-    });
+    // the held linear part needs more of the effects to reach the record
+    let (k3_up, c_up) = match linear {
+        LinearPart::Held => (20.0, 200.0),
+        LinearPart::Free => (5.0, 20.0),
+    };
+    let damper = match spec.damper {
+        Damper::Quadratic => {
+            m.quadratic_dampers.push(QuadraticDamper {
+                dofs: pair.to_vec(),
+                c2: starts.1.max(1.0),
+            });
+            Target::DamperC2(m.quadratic_dampers.len() - 1)
+        }
+        Damper::Cubic => {
+            let nu = relative_velocity_rms(model, rec, pair, substeps)?;
+            m.cubic_dampers.push(CubicDamper {
+                dofs: pair.to_vec(),
+                c3: (starts.1 / nu).max(1.0),
+            });
+            Target::DamperC3(m.cubic_dampers.len() - 1)
+        }
+    };
     let mut params = vec![
         Parameter::relative(&m, Target::CubicK3(m.cubics.len() - 1))?
-            .with_relative_bounds(-1.0, 5.0),
-        Parameter::relative(&m, Target::DamperC2(m.quadratic_dampers.len() - 1))?
-            .with_relative_bounds(-0.999, 20.0),
+            .with_relative_bounds(-1.0, k3_up),
+        Parameter::relative(&m, damper)?.with_relative_bounds(-0.999, c_up),
     ];
-    if let Some(i) = m
-        .springs
-        .iter()
-        .position(|s| s.dofs.len() == 2 && s.dofs.contains(&pair[0]) && s.dofs.contains(&pair[1]))
-    {
+    let spring = if linear == LinearPart::Free {
+        m.springs.iter().position(|s| {
+            s.dofs.len() == 2 && s.dofs.contains(&pair[0]) && s.dofs.contains(&pair[1])
+        })
+    } else {
+        None
+    };
+    if let Some(i) = spring {
         params.push(
             Parameter::relative(&m, Target::SpringStiffness(i))?.with_relative_bounds(-0.9, 1.0),
         );
@@ -436,7 +498,12 @@ pub fn interface_fit(
         .filter(|&r| !modes.rigid[r])
         .map(|r| modes.freq_hz[r])
         .collect();
-    for f in ratios_near_hz {
+    let ratios = if linear == LinearPart::Free {
+        &spec.ratios_near_hz[..]
+    } else {
+        &[]
+    };
+    for f in ratios {
         let r = (0..flex.len())
             .min_by(|&a, &b| (flex[a] - f).abs().total_cmp(&(flex[b] - f).abs()))
             .ok_or_else(|| TacitError::Numerical("the model has no flexible mode".into()))?;
@@ -457,13 +524,51 @@ pub fn interface_fit(
     Ok(update::fit(&p, &FitSettings::default())?.model)
 }
 
+/// RMS of the relative velocity between the two DOFs of `pair` (from 1)
+/// in the open-loop simulation of `model` under the record's force, m/s.
+fn relative_velocity_rms(
+    model: &Model,
+    rec: &Record,
+    pair: [usize; 2],
+    substeps: usize,
+) -> Result<f64> {
+    let nd = model.ndof();
+    let force = crate::signal::force_matrix(rec, nd);
+    let sim = SimSettings {
+        substeps,
+        ..Default::default()
+    };
+    let run =
+        Integrator::new(model, rec.fs, sim)?.run(force.as_view(), &vec![0.0; nd], &vec![0.0; nd]);
+    let (i, j) = (pair[0] - 1, pair[1] - 1);
+    let rel: Vec<f64> = (0..run.v.ncols())
+        .map(|k| run.v[(i, k)] - run.v[(j, k)])
+        .collect();
+    let nu = crate::signal::rms_of(&rel);
+    if !(run.completed() && nu > 0.0 && nu.is_finite()) {
+        return Err(TacitError::Numerical(format!(
+            "the relative velocity of DOFs {} and {} in the simulation of {} is {nu} m/s RMS: no start for a cubic damper",
+            pair[0],
+            pair[1],
+            rec.source.display()
+        )));
+    }
+    Ok(nu)
+}
+
 /// The interface fit ([`interface_fit`]) scored on several records.
 #[derive(Debug, Clone, Serialize)]
 pub struct InterfaceFit {
+    /// The linear part held at the Level-1 model or fitted with the effect.
+    pub linear: LinearPart,
+    /// The damper's law.
+    pub damper: Damper,
     /// Cubic spring between `wing` and `payload`, N/m³.
     pub k3: f64,
-    /// Quadratic damper between them, N s²/m².
+    /// Quadratic damper between them, N s²/m² (0 with a cubic damper).
     pub c2: f64,
+    /// Cubic damper between them, N s³/m³ (0 with a quadratic damper).
+    pub c3: f64,
     /// The coupling spring `wing`–`payload`: Level-1 value and fitted, N/m.
     pub coupling: Option<(f64, f64)>,
     /// Per record: file, the Level-1 model's and the interface model's
@@ -473,12 +578,14 @@ pub struct InterfaceFit {
     pub seconds: f64,
 }
 
-/// Fit the interface model on `estimate` (wing bending and torsion
-/// damping freed with it) and score it with the Level-1 model on `records`.
+/// Fit the interface model on `estimate` (with [`LinearPart::Free`] the
+/// wing bending and torsion damping and the coupling spring freed with it)
+/// and score it with the Level-1 model on `records`.
 pub fn interface_study(
     linear: &Path,
     estimate: &Path,
     records: &[&Path],
+    (part, damper): (LinearPart, Damper),
     s: &Settings,
 ) -> Result<(InterfaceFit, Model)> {
     let lin = read(linear)?;
@@ -487,7 +594,14 @@ pub fn interface_study(
     let mut est = read(estimate)?;
     l1.resolve_channels(&mut est)?;
     let t = std::time::Instant::now();
-    let m = interface_fit(&l1, &est, [2, 3], (-3.0e12, 1.5e5), &[5.2, 7.3], s.substeps)?;
+    let spec = InterfaceSpec {
+        pair: [2, 3],
+        starts: (-3.0e12, 1.5e5),
+        damper,
+        linear: part,
+        ratios_near_hz: vec![5.2, 7.3],
+    };
+    let m = interface_fit(&l1, &est, &spec, s.substeps)?;
     let seconds = t.elapsed().as_secs_f64();
     let mut errors = vec![];
     for p in records {
@@ -506,8 +620,11 @@ pub fn interface_study(
             .map(|sp| sp.stiffness)
     };
     let fit = InterfaceFit {
+        linear: part,
+        damper,
         k3: m.cubics.last().map_or(0.0, |c| c.k3),
         c2: m.quadratic_dampers.last().map_or(0.0, |d| d.c2),
+        c3: m.cubic_dampers.last().map_or(0.0, |d| d.c3),
         coupling: coupling(&l1).zip(coupling(&m)),
         errors,
         seconds,

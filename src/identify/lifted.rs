@@ -44,12 +44,22 @@
 //!    p = (H_x − H_u L)ᵀ r_k + (A − G L)ᵀ e,\quad
 //!    l_k = Q_{uu}^{-1}(H_uᵀ r_k + Gᵀ e), $$
 //!
-//! and `u_k = −L x_k + l_k`. The matrix step is the shared one of
-//! [`crate::riccati`] in its output form: with `Z = [H_u; G]`,
-//! `S = diag(I, P')`, `M = Z Λ⁻¹ Zᵀ` (`Λ` the diagonal force weights), the
-//! push-through identity `Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹` reduces every
-//! solve to size `p + 2n` whatever `R` is (`Q_uu` is factored directly
-//! when it is the smaller). `P` does not depend on the data: once it stops
+//! and `u_k = −L x_k + l_k`. The matrix step is the one of
+//! [`crate::riccati::grouped`]: with `Z = [H_u; G]`, `S = diag(I, P')` and
+//! `M = Z Λ⁻¹ Zᵀ` (`Λ` the diagonal force weights, equal over the `R`
+//! sub-intervals of one force direction, so `M` is a weighted sum of one
+//! Gram matrix per direction), the push-through identity
+//! `Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹` puts every product and solve in size
+//! `p + 2n` whatever `R` is, and the forward pass needs per sample only
+//! `T_k = (I + S M)⁻¹ S Y` ((p + 2n) × 2n) and `ω_k = (I + S M)⁻¹ [r_k; e]`:
+//! `u_k = Λ_k⁻¹ Zᵀ (ω_k − T_k x_k)`. When the gains of the whole record
+//! would take more than 32 MB (the F-16 modal model with a force at each
+//! of its 9 coordinates: 21 × 18 per sample, 223 MB over 73 728 samples),
+//! the backward pass keeps `P` every `K = ⌈√N⌉` samples instead and the
+//! forward pass recomputes the gains of one block at a time from the `P`
+//! at its end (the same steps, so the same gains): one more matrix step
+//! per sample, memory `O(√N)` matrices besides the `O(N)` data and
+//! estimates. `P` does not depend on the data: once it stops
 //! changing the steady gains are used, so a sample costs a few
 //! matrix–vector products. States the outputs never see (the unobservable
 //! subspace `N` of `(A, C_y)`: a free-free model's rigid-body displacement
@@ -63,7 +73,7 @@
 use crate::error::{Result, TacitError};
 use crate::linear::SampledModel;
 use crate::record::Quantity;
-use crate::riccati::{rel_change, symmetrize, RelativeTo, Riccati, Stage};
+use crate::riccati::{rel_change, symmetrize, Grouped, RelativeTo};
 use nalgebra::{DMatrix, DVector};
 use std::time::Instant;
 
@@ -259,9 +269,17 @@ struct Scaled {
     g: DMatrix<f64>,
     hx: DMatrix<f64>,
     hu: DMatrix<f64>,
-    /// The Riccati stage in output form (`H_x`, `H_u`; the force prior is
-    /// the step's diagonal).
-    stage: Stage,
+    /// The Riccati stage in output form with the controls grouped by force
+    /// direction (the R sub-intervals of one direction share a weight).
+    grouped: Grouped,
+    /// `Zᵀ = [H_u; G]ᵀ` (nu × (p + nx)).
+    zt: DMatrix<f64>,
+    /// Force directions q (the groups of the controls).
+    groups: usize,
+    /// Samples per block of the backward pass's checkpoints: the forward
+    /// pass recomputes the gains of one block at a time from the Riccati
+    /// matrix stored at its end; `len` (one block) stores every gain.
+    block: usize,
     /// `r_k` (p × N).
     target: DMatrix<f64>,
     /// `c_k` (nx × (N−1)).
@@ -387,7 +405,13 @@ impl Scaled {
             c.row_mut(i).scale_mut(1.0 / dx[i]);
         }
         let null = crate::linear::unobservable(&a, &hx);
-        let stage = Stage::with_outputs(&a, &g, &hx, &hu);
+        let lambda = DVector::from_element(nu, s.lambda / r as f64 * df * df);
+        let group: Vec<usize> = (0..nu).map(|i| i % nq.max(1)).collect();
+        let grouped = Grouped::new(&a, &g, &hx, &hu, &group, nq, lambda.as_slice());
+        let mut zt = DMatrix::zeros(nu, p + nx);
+        zt.columns_mut(0, p).copy_from(&hu.transpose());
+        zt.columns_mut(p, nx).copy_from(&g.transpose());
+        let block = gain_block(len, grouped.gain_rows(), nx);
         let (su, sv) = s.x0_std;
         let p0 = DVector::from_fn(nx, |i, _| {
             let sd = if i < n { su } else { sv };
@@ -401,10 +425,13 @@ impl Scaled {
             g,
             hx,
             hu,
-            stage,
+            grouped,
+            zt,
+            groups: nq,
+            block,
             target,
             c,
-            lambda: DVector::from_element(nu, s.lambda / r as f64 * df * df),
+            lambda,
             lam_k: None,
             p0,
             null,
@@ -433,16 +460,39 @@ fn project_vector(null: &DMatrix<f64>, p: &mut DVector<f64>) {
     }
 }
 
+/// Bytes of gains the backward pass may store for the forward pass
+/// (`T_k`, (p + nx) × nx per sample, or `L_k`, nu × nx); beyond, it keeps the Riccati matrix
+/// every [`Scaled::block`] samples and the forward pass recomputes the
+/// gains of one block at a time.
+const GAIN_BUDGET: usize = 32 << 20;
+
+/// Samples per checkpoint block: the whole record when its gains fit in
+/// [`GAIN_BUDGET`], else `⌈√N⌉` (at least 64), so that the checkpoints
+/// (`N/K` matrices nx × nx) and one block's gains (`K` matrices
+/// q × nx) both grow as `√N`.
+fn gain_block(len: usize, q: usize, nx: usize) -> usize {
+    if len * q * nx * 8 <= GAIN_BUDGET {
+        len
+    } else {
+        ((len as f64).sqrt().ceil() as usize).max(64)
+    }
+}
+
 /// The backward pass.
 struct Backward {
-    /// Samples `k ≥ j0` use `transient[k − j0]`, `k < j0` the steady gain.
+    /// Samples `k ≥ j0` use their own gain `T_k`, `k < j0` the steady one.
     j0: usize,
-    /// `L_k` of the transient samples.
-    transient: Vec<DMatrix<f64>>,
-    /// Steady `L`.
+    /// `T_k` of the samples `k ≥ j0` (index `k − j0`) when every gain is
+    /// stored; empty when checkpointed.
+    stored: Vec<DMatrix<f64>>,
+    /// The Riccati matrix `P_e` at the end `e` of every block of
+    /// [`Scaled::block`] samples (index: the block), when checkpointed.
+    checkpoints: Vec<Option<DMatrix<f64>>>,
+    /// Steady `T`.
     steady: Option<DMatrix<f64>>,
-    /// `l_k` (nu × N).
-    lff: DMatrix<f64>,
+    /// `ω_k = F_k⁻¹ [r_k; e_k]` ((p + nx) × N), or `l_k` (nu × N) in the
+    /// control space.
+    omega: DMatrix<f64>,
     p0: DMatrix<f64>,
     pv0: DVector<f64>,
 }
@@ -451,80 +501,89 @@ const RICCATI_TOL: f64 = 1e-13;
 
 fn not_definite(k: usize) -> TacitError {
     TacitError::Numerical(format!(
-        "lifted reconstruction: Q_uu of the Riccati step is not positive definite at sample {k}"
+        "lifted reconstruction: the Riccati step is singular (I + S M not invertible) at sample {k}"
     ))
 }
 
 impl Scaled {
-    /// The force prior of sample `k` (the diagonal of `Q_uu`'s `Λ`).
+    /// The force prior of sample `k` (the diagonal of `Λ_k`).
     fn prior_at(&self, k: usize, out: &mut [f64]) {
         for (i, o) in out.iter_mut().enumerate() {
             *o = self.lambda[i] * self.lam_k.as_ref().map_or(1.0, |m| m[(i % m.nrows(), k)]);
         }
     }
-}
 
-/// Gains of one step of the output-form Riccati step `ric` (`K = Q_uu⁻¹
-/// Zᵀ`, `Y − Z L`): `l_k = K_r r_k + K_e e`, `p_k = M r_k + Φᵀ e`.
-struct Gain {
-    /// `Q_uu⁻¹ H_uᵀ` (nu × p).
-    kr: DMatrix<f64>,
-    /// `Q_uu⁻¹ Gᵀ` (nu × nx).
-    ke: DMatrix<f64>,
-    /// `(H_x − H_u L)ᵀ` (nx × p).
-    mt: DMatrix<f64>,
-    /// `(A − G L)ᵀ` (nx × nx).
-    phit: DMatrix<f64>,
-}
-
-impl Gain {
-    fn of(ric: &Riccati, p: usize) -> Gain {
-        let q = ric.k.ncols();
-        Gain {
-            kr: ric.k.columns(0, p).into_owned(),
-            ke: ric.k.columns(p, q - p).into_owned(),
-            mt: ric.closed.rows(0, p).transpose(),
-            phit: ric.closed.rows(p, q - p).transpose(),
+    /// The multiplier of the force prior of every direction at sample `k`
+    /// (the group weights of the Riccati step).
+    fn group_weights(&self, k: usize, out: &mut [f64]) {
+        for (c, o) in out.iter_mut().enumerate() {
+            *o = self.lam_k.as_ref().map_or(1.0, |m| m[(c, k)]);
         }
+    }
+
+    /// Whether the backward pass keeps checkpoints rather than gains.
+    fn checkpointed(&self) -> bool {
+        self.block < self.len
     }
 }
 
+/// The data part of the backward step at sample `k` from `pn = P_{k+1}`
+/// (the step `st` taken at it): `e = p' − P' c_k`, `v = [r_k; e]`,
+/// `ω_k = F⁻¹ v`, `p_k = closedᵀ v` (projected off the unobservable
+/// subspace).
+fn data_step(
+    sp: &Scaled,
+    st: &Grouped,
+    k: usize,
+    pn: &DMatrix<f64>,
+    pv: &mut DVector<f64>,
+    omega: &mut DMatrix<f64>,
+) {
+    let p_out = st.p;
+    let mut v = DVector::zeros(p_out + sp.nx);
+    v.rows_mut(0, p_out).copy_from(&sp.target.column(k));
+    if k + 1 < sp.len {
+        let mut e = pv.clone();
+        e.gemv(-1.0, pn, &sp.c.column(k), 1.0);
+        v.rows_mut(p_out, sp.nx).copy_from(&e);
+    }
+    omega.set_column(k, &st.feed(&v));
+    pv.gemv_tr(1.0, &st.closed, &v, 0.0);
+    project_vector(&sp.null, pv);
+}
+
 fn backward(sp: &Scaled) -> Result<Backward> {
-    let (nx, nu, len) = (sp.nx, sp.nu, sp.len);
-    let p_out = sp.hx.nrows();
-    let mut ric = Riccati::new(sp.stage.clone());
+    let (nx, len, block) = (sp.nx, sp.len, sp.block);
+    let mut st = sp.grouped.clone();
     let mut p = DMatrix::zeros(nx, nx);
     let mut pv = DVector::zeros(nx);
-    let mut lff = DMatrix::zeros(nu, len);
-    let mut transient: Vec<DMatrix<f64>> = Vec::new();
-    let mut diag = vec![0.0; nu];
+    let mut omega = DMatrix::zeros(st.gain_rows(), len);
+    let mut stored: Vec<DMatrix<f64>> = Vec::new();
+    let mut checkpoints = vec![None; len.div_ceil(block)];
+    let mut w = vec![0.0; sp.groups];
     let mut calm = 0usize;
     let mut k = len;
     // transient: full Riccati steps until P stops changing
     while k > 0 {
         k -= 1;
-        sp.prior_at(k, &mut diag);
-        if !ric.step(&p, Some(&diag)) {
+        if sp.checkpointed() && (k + 1 == len || (k + 1) % block == 0) {
+            checkpoints[k / block] = Some(p.clone());
+        }
+        sp.group_weights(k, &mut w);
+        if !st.step(&p, &w) {
             return Err(not_definite(k));
         }
-        let gain = Gain::of(&ric, p_out);
-        project_matrix(&sp.null, &mut ric.p);
-        let e = if k + 1 < len {
-            &pv - &p * sp.c.column(k)
-        } else {
-            DVector::zeros(nx)
-        };
-        let rk = sp.target.column(k);
-        lff.set_column(k, &(&gain.kr * rk + &gain.ke * &e));
-        pv = &gain.mt * rk + &gain.phit * &e;
-        project_vector(&sp.null, &mut pv);
-        calm = if rel_change(&ric.p, &p, RelativeTo::Larger) <= RICCATI_TOL {
+        project_matrix(&sp.null, &mut st.pm);
+        data_step(sp, &st, k, &p, &mut pv, &mut omega);
+        calm = if rel_change(&st.pm, &p, RelativeTo::Larger) <= RICCATI_TOL {
             calm + 1
         } else {
             0
         };
-        std::mem::swap(&mut p, &mut ric.p);
-        transient.push(ric.l.clone());
+        std::mem::swap(&mut p, &mut st.pm);
+        if !sp.checkpointed() {
+            stored.push(st.t.clone());
+        }
         if calm >= 3 && sp.lam_k.is_none() {
             break;
         }
@@ -533,54 +592,49 @@ fn backward(sp: &Scaled) -> Result<Backward> {
     let mut steady = None;
     if j0 > 0 {
         // steady state: P_k = P for every k < j0
-        sp.prior_at(0, &mut diag);
-        if !ric.step(&p, Some(&diag)) {
+        sp.group_weights(0, &mut w);
+        if !st.step(&p, &w) {
             return Err(not_definite(j0 - 1));
         }
-        let gain = Gain::of(&ric, p_out);
-        steady_backward(sp, &gain, &p, j0, &mut pv, &mut lff);
-        steady = Some(ric.l.clone());
+        for k in (0..j0).rev() {
+            data_step(sp, &st, k, &p, &mut pv, &mut omega);
+        }
+        steady = Some(st.t.clone());
     }
-    transient.reverse();
+    stored.reverse();
     Ok(Backward {
         j0,
-        transient,
+        stored,
+        checkpoints,
         steady,
-        lff,
+        omega,
         p0: p,
         pv0: pv,
     })
 }
 
-/// The steady part of the backward pass, samples `j0 − 1 … 0`, with the
-/// gains at `P`: `l_k = K_r r_k + K_e e`, `p_k = M r_k + Φᵀ e`,
-/// `e = p' − P c_k`.
-fn steady_backward(
-    sp: &Scaled,
-    gain: &Gain,
-    p: &DMatrix<f64>,
-    j0: usize,
-    pv: &mut DVector<f64>,
-    lff: &mut DMatrix<f64>,
-) {
-    let (nx, nu) = (sp.nx, sp.nu);
-    let mut e = DVector::zeros(nx);
-    let mut pc = DVector::zeros(nx);
-    let mut lk = DVector::zeros(nu);
-    let mut pnew = DVector::zeros(nx);
-    for k in (0..j0).rev() {
-        pc.gemv(1.0, p, &sp.c.column(k), 0.0);
-        e.copy_from(pv);
-        e -= &pc;
-        let rk = sp.target.column(k);
-        lk.gemv(1.0, &gain.kr, &rk, 0.0);
-        lk.gemv(1.0, &gain.ke, &e, 1.0);
-        lff.set_column(k, &lk);
-        pnew.gemv(1.0, &gain.mt, &rk, 0.0);
-        pnew.gemv(1.0, &gain.phit, &e, 1.0);
-        std::mem::swap(pv, &mut pnew);
-        project_vector(&sp.null, pv);
+/// The gains `T_k` of the block holding sample `k` (samples `lo..e`,
+/// `lo` not below `j0`), recomputed from the checkpoint at its end by the
+/// same steps as the backward pass, so they equal the gains it had.
+fn block_gains(sp: &Scaled, bw: &Backward, k: usize) -> Result<(usize, Vec<DMatrix<f64>>)> {
+    let b = k / sp.block;
+    let (lo, e) = ((b * sp.block).max(bw.j0), ((b + 1) * sp.block).min(sp.len));
+    let mut p = bw.checkpoints[b]
+        .clone()
+        .expect("a checkpoint at the end of every transient block");
+    let mut st = sp.grouped.clone();
+    let mut w = vec![0.0; sp.groups];
+    let mut gains = vec![DMatrix::zeros(0, 0); e - lo];
+    for kk in (lo..e).rev() {
+        sp.group_weights(kk, &mut w);
+        if !st.step(&p, &w) {
+            return Err(not_definite(kk));
+        }
+        gains[kk - lo] = st.t.clone();
+        project_matrix(&sp.null, &mut st.pm);
+        std::mem::swap(&mut p, &mut st.pm);
     }
+    Ok((lo, gains))
 }
 
 /// Rounding of the initial-state system `P_0 + P_prior` relative to its
@@ -621,7 +675,9 @@ fn initial_state(mut h: DMatrix<f64>, rhs: &DVector<f64>) -> Result<(DVector<f64
 }
 
 /// The forward pass: scaled states (nx × N), controls (nu × N) and the
-/// initial-state directions left to the prior ([`initial_state`]).
+/// initial-state directions left to the prior ([`initial_state`]). The
+/// control is `u_k = Λ_k⁻¹ Zᵀ (ω_k − T_k x_k)`, or `l_k − L_k x_k` when
+/// the step is taken in the control space ([`crate::riccati::grouped`]).
 fn forward(sp: &Scaled, bw: &Backward) -> Result<(DMatrix<f64>, DMatrix<f64>, usize)> {
     let (nx, nu, len) = (sp.nx, sp.nu, sp.len);
     let mut h = bw.p0.clone();
@@ -634,15 +690,33 @@ fn forward(sp: &Scaled, bw: &Backward) -> Result<(DMatrix<f64>, DMatrix<f64>, us
     let mut x = x0;
     let mut u = DVector::zeros(nu);
     let mut xn = DVector::zeros(nx);
+    let mut lam = vec![0.0; nu];
+    let mut dev = DVector::zeros(bw.omega.nrows());
+    let (mut lo, mut gains) = (0usize, Vec::new());
     for k in 0..len {
         xs.set_column(k, &x);
-        let l = if k < bw.j0 {
+        let t = if k < bw.j0 {
             bw.steady.as_ref().expect("steady gain exists below j0")
+        } else if !sp.checkpointed() {
+            &bw.stored[k - bw.j0]
         } else {
-            &bw.transient[k - bw.j0]
+            if k < lo || k >= lo + gains.len() {
+                (lo, gains) = block_gains(sp, bw, k)?;
+            }
+            &gains[k - lo]
         };
-        u.copy_from(&bw.lff.column(k));
-        u.gemv(-1.0, l, &x, 1.0);
+        if sp.grouped.direct {
+            u.copy_from(&bw.omega.column(k));
+            u.gemv(-1.0, t, &x, 1.0);
+        } else {
+            dev.copy_from(&bw.omega.column(k));
+            dev.gemv(-1.0, t, &x, 1.0);
+            u.gemv(1.0, &sp.zt, &dev, 0.0);
+            sp.prior_at(k, &mut lam);
+            for (ui, li) in u.iter_mut().zip(&lam) {
+                *ui /= li;
+            }
+        }
         us.set_column(k, &u);
         if k + 1 < len {
             xn.gemv(1.0, &sp.a, &x, 0.0);
@@ -858,12 +932,14 @@ mod tests {
         let res = reconstruct(&sm, &known, &measured, &channels, &s).unwrap();
         assert!(res.status.starts_with("solved"), "{}", res.status);
         let varying = DMatrix::from_fn(n, len, |i, k| 0.3 + ((i * 7 + k * 3) % 5) as f64);
-        for (weights, direct) in [None, Some(varying)]
+        for ((weights, block), direct) in [None, Some(varying)]
             .into_iter()
-            .flat_map(|w| [(w.clone(), false), (w, true)])
+            .flat_map(|w| [(w.clone(), len), (w, 3)])
+            .flat_map(|c| [(c.clone(), false), (c, true)])
         {
-            // the sweep, with optional time-varying weights, both forms
-            // of the Riccati step
+            // the sweep, with optional time-varying weights, every gain
+            // stored or checkpointed every 3 samples, the step in the
+            // output space or in the control space
             let mut sp = Scaled::new(
                 &sm,
                 &lm,
@@ -875,7 +951,8 @@ mod tests {
             )
             .unwrap();
             sp.lam_k = weights.clone();
-            sp.stage.direct = direct;
+            sp.block = block;
+            sp.grouped.direct = direct;
             let bw = backward(&sp).unwrap();
             let (mut xs, mut us, _) = forward(&sp, &bw).unwrap();
             for i in 0..2 * n {
@@ -884,6 +961,79 @@ mod tests {
             us *= sp.df;
             let mult = |i: usize, k: usize| weights.as_ref().map_or(1.0, |w| w[(i % n, k)]);
             check_dense(&sm, &lm, &known, &measured, &channels, &s, &xs, &us, &mult);
+        }
+    }
+
+    /// Gains recomputed block by block from checkpoints give the estimate
+    /// of gains stored per sample, with the reweighting passes (no steady
+    /// state) and without (a steady state inside a block), for blocks that
+    /// do and do not divide the record.
+    #[test]
+    fn checkpointed_gains_give_the_stored_estimate() {
+        let n = 3;
+        let sm = chain(n);
+        let len = 1201;
+        let known = DMatrix::from_fn(n, len, |i, k| {
+            if i == 2 {
+                (k as f64 * 0.3).sin() + 0.2 * (k as f64 * 1.1).cos()
+            } else {
+                0.0
+            }
+        });
+        let xs = sm.simulate(&DVector::zeros(2 * n), &known);
+        let channels = vec![
+            (Quantity::Accel, 0),
+            (Quantity::Accel, 1),
+            (Quantity::Disp, 2),
+        ];
+        let (cy, dy) = sm.outputs(&channels).unwrap();
+        let mut measured = &cy * &xs + &dy * &known;
+        for (i, v) in measured.iter_mut().enumerate() {
+            *v *= 1.0 + 0.05 * ((i * 7919) % 13) as f64 / 13.0;
+        }
+        for passes in [0, 2] {
+            let s = LiftedSettings {
+                resolution: 4,
+                reweight_passes: passes,
+                ..Default::default()
+            };
+            let lm = lift(&sm, s.resolution).unwrap();
+            let run = |block: usize| {
+                let mut sp = Scaled::new(
+                    &sm,
+                    &lm,
+                    &known,
+                    &measured,
+                    &channels,
+                    &DMatrix::identity(n, n),
+                    &s,
+                )
+                .unwrap();
+                sp.block = block;
+                let mut bw = backward(&sp).unwrap();
+                let (mut xs, mut us, _) = forward(&sp, &bw).unwrap();
+                for _ in 0..passes {
+                    sp.lam_k = Some(group_l1_weights(&us, n, s.resolution, s.reweight_floor));
+                    bw = backward(&sp).unwrap();
+                    (xs, us, _) = forward(&sp, &bw).unwrap();
+                }
+                (xs, us, bw.j0, bw.stored.len(), bw.checkpoints.len())
+            };
+            let (xs0, us0, j0, stored, _) = run(len);
+            assert_eq!(stored, len - j0, "every transient gain stored");
+            if passes == 0 {
+                assert!(j0 > 100, "a steady state on this record: j0 = {j0}");
+            }
+            for block in [7, 50, 64] {
+                let (xs1, us1, j1, stored1, cps) = run(block);
+                assert_eq!((j1, stored1, cps), (j0, 0, len.div_ceil(block)));
+                let dx = (&xs1 - &xs0).amax() / xs0.amax();
+                let du = (&us1 - &us0).amax() / us0.amax();
+                assert!(
+                    dx <= 1e-10 && du <= 1e-10,
+                    "passes {passes}, block {block}: states {dx:e}, forces {du:e}"
+                );
+            }
         }
     }
 

@@ -2,15 +2,19 @@
 //! ([`crate::horizon`], on the reduced system) and the lifted one
 //! ([`crate::identify::lifted`], on the sub-sampled model): one step of
 //! the backward recursion of a linear–quadratic stage and its fixed point
-//! ([`step`]), the small dense kernels they run on ([`dense`]), exact
+//! ([`step`]), the step of a stage with output costs and grouped control
+//! weights solved in the output space ([`grouped`], the lifted
+//! smoother's), the small dense kernels they run on ([`dense`]), exact
 //! symmetrization of the iterates `P_k` (rounding leaves the two
 //! triangles of `P − YᵀY` apart, and the recursion would amplify the
 //! skew part), and the relative change between iterates by which each
 //! sweep decides when to hold its gain.
 
 pub(crate) mod dense;
+pub(crate) mod grouped;
 pub(crate) mod step;
 
+pub(crate) use grouped::Grouped;
 pub(crate) use step::{fixed_point, stein, Riccati, Stage};
 
 use nalgebra::DMatrix;

@@ -23,21 +23,9 @@
 //! with 8 forces (22 reduced states) about 24 000 multiply–adds in four
 //! fused products and two triangular solves, with no allocation.
 //!
-//! **Output form.** When the costs are outputs, `Q = H_xᵀH_x`,
-//! `S = H_uᵀH_x`, `R = H_uᵀH_u + Λ` (`Λ` diagonal, the step's `D_k`:
-//! [`Stage::with_outputs`], the lifted smoother), the same step is taken
-//! with `Z = [H_u; B]`, `Y = [H_x; A]`, `S_P = diag(I, P')`:
-//! `K = Q_uu⁻¹ Zᵀ`, `L = K S_P Y`, `P = YᵀS_PY − (S_PY)ᵀ Z L`, with `Q_uu`
-//! factored directly when `m < p + n` and otherwise through the
-//! push-through identity `Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S_P M)⁻¹`,
-//! `M = Z Λ⁻¹ Zᵀ` (a solve of size `p + n` whatever `m`). With many
-//! controls against few outputs (72 against 21 for the F-16 modal model
-//! with a force at every coordinate) `Q_uu` is `Λ` plus a matrix of rank
-//! `p + n` ~10⁷ times larger; its Cholesky factor then leaves a rounding
-//! floor of ~10⁻¹² in the change of `P` between steps, where the
-//! push-through form stays below 10⁻¹³ (measured on the F-16 Level-7
-//! record), and the lifted smoother's test for holding its gain needs
-//! the latter.
+//! A stage whose costs are outputs and whose controls share their
+//! weights by groups (the lifted smoother's) has its own step, solved in
+//! the output space: [`super::grouped`].
 //!
 //! The optimal control is `u_k = −L x_k + l_k`; the vector pass
 //! (`l_k`, `p_k`) belongs to each smoother, since their data terms differ.
@@ -80,25 +68,6 @@ pub(crate) struct Stage {
     q: DMatrix<f64>,
     s: DMatrix<f64>,
     r: DMatrix<f64>,
-    /// The costs written as outputs, when they are.
-    outputs: Option<Outputs>,
-    /// Output form: `Q_uu` factored directly (m × m) rather than through
-    /// the push-through identity (size p + n); by default when
-    /// `m < p + n`.
-    pub direct: bool,
-}
-
-/// A stage whose costs are outputs: `Q = H_xᵀH_x`, `S = H_uᵀH_x`,
-/// `R = H_uᵀH_u + Λ` with `Λ` the step's diagonal (> 0).
-#[derive(Debug, Clone)]
-struct Outputs {
-    /// Output rows p.
-    p: usize,
-    /// `Z = [H_u; B]` ((p + n) × m) and `Zᵀ`.
-    z: DMatrix<f64>,
-    zt: DMatrix<f64>,
-    /// `Y = [H_x; A]` ((p + n) × n).
-    y: DMatrix<f64>,
 }
 
 impl Stage {
@@ -132,42 +101,7 @@ impl Stage {
             q,
             s,
             r,
-            outputs: None,
-            direct: true,
         }
-    }
-
-    /// The stage `x⁺ = A x + B u` (no held rows) whose cost is the output
-    /// `‖H_x x + H_u u − r‖²` plus `uᵀΛu`, `Λ` the diagonal given to each
-    /// step. The step then uses the output form (module docs).
-    pub fn with_outputs(
-        a: &DMatrix<f64>,
-        b: &DMatrix<f64>,
-        hx: &DMatrix<f64>,
-        hu: &DMatrix<f64>,
-    ) -> Stage {
-        let (p, n, m) = (hx.nrows(), a.ncols(), b.ncols());
-        let mut st = Stage::new(
-            a,
-            b,
-            hx.transpose() * hx,
-            hu.transpose() * hx,
-            hu.transpose() * hu,
-        );
-        let mut z = DMatrix::zeros(p + n, m);
-        z.rows_mut(0, p).copy_from(hu);
-        z.rows_mut(p, n).copy_from(b);
-        let mut y = DMatrix::zeros(p + n, n);
-        y.rows_mut(0, p).copy_from(hx);
-        y.rows_mut(p, n).copy_from(a);
-        st.direct = m < p + n;
-        st.outputs = Some(Outputs {
-            p,
-            zt: z.transpose(),
-            z,
-            y,
-        });
-        st
     }
 }
 
@@ -184,11 +118,6 @@ pub(crate) struct Riccati {
     pub xg: DMatrix<f64>,
     /// Cholesky factor `C` of `Q_uu` (m × m, lower; covariance form).
     pub c: DMatrix<f64>,
-    /// Output form: `K = Q_uu⁻¹ Zᵀ` (m × (p + n)).
-    pub k: DMatrix<f64>,
-    /// Output form: the closed loop of the outputs and the state,
-    /// `Y − Z L = [H_x − H_u L; A − B L]` ((p + n) × n).
-    pub closed: DMatrix<f64>,
     /// `[P'A, P'B]` (n × (n + m)).
     w: DMatrix<f64>,
     /// `Bᵀ [P'A, P'B]` (m × (n + m)).
@@ -207,8 +136,6 @@ impl Riccati {
             l: DMatrix::zeros(m, n),
             xg: DMatrix::zeros(m, n),
             c: DMatrix::zeros(m, m),
-            k: DMatrix::zeros(0, 0),
-            closed: DMatrix::zeros(0, 0),
             w: DMatrix::zeros(n, n + m),
             hr: DMatrix::zeros(m, n + m),
             yx: DMatrix::zeros(m, 2 * n),
@@ -220,10 +147,6 @@ impl Riccati {
     /// Four products and two triangular solves (the products are fused:
     /// at these sizes a call costs more than its flops).
     pub fn step(&mut self, pn: &DMatrix<f64>, diag: Option<&[f64]>) -> bool {
-        if self.stage.outputs.is_some() {
-            let d = diag.expect("an output-form stage takes its Λ from the step");
-            return self.step_outputs(pn, d);
-        }
         let st = &self.stage;
         let (n, m, top) = (st.n, st.m, st.top);
         let pv = view(pn);
@@ -282,55 +205,6 @@ impl Riccati {
         self.l.copy_from(&self.yx.columns(0, n));
         solve_lower_t(&self.c, view_mut(&mut self.l));
         self.xg.copy_from(&self.yx.columns(n, n));
-        true
-    }
-
-    /// The step of an output-form stage: `K = Q_uu⁻¹ Zᵀ`, `L = K S Y`,
-    /// `P = YᵀSY − (SY)ᵀ Z L` with `S = diag(I, P')`; `Q_uu = Λ + ZᵀSZ`
-    /// factored directly, or through `Q_uu⁻¹ Zᵀ = Λ⁻¹ Zᵀ (I + S M)⁻¹`,
-    /// `M = Z Λ⁻¹ Zᵀ`, a solve of size `p + n` whatever `m` is.
-    fn step_outputs(&mut self, pn: &DMatrix<f64>, lam: &[f64]) -> bool {
-        let (st, m) = (&self.stage, self.stage.m);
-        let o = st.outputs.as_ref().expect("output form");
-        let (p, q) = (o.p, o.z.nrows());
-        let kmat = if st.direct {
-            // Zᵀ S = [H_uᵀ, Bᵀ P']
-            let mut zts = o.zt.clone();
-            let gp = o.zt.columns(p, q - p) * pn;
-            zts.columns_mut(p, q - p).copy_from(&gp);
-            let mut quu = &zts * &o.z;
-            symmetrize(&mut quu);
-            for (i, li) in lam.iter().enumerate() {
-                quu[(i, i)] += li;
-            }
-            quu.cholesky().map(|c| c.solve(&o.zt))
-        } else {
-            let mut zl = o.z.clone();
-            for (i, li) in lam.iter().enumerate().take(m) {
-                zl.column_mut(i).scale_mut(1.0 / li);
-            }
-            let mm = &zl * &o.zt;
-            let mut ism = mm.clone();
-            let low = pn * mm.rows(p, q - p);
-            ism.rows_mut(p, q - p).copy_from(&low);
-            for i in 0..q {
-                ism[(i, i)] += 1.0;
-            }
-            // K = ((I + S M)^{-T} Λ⁻¹ Z)ᵀ
-            ism.transpose().lu().solve(&zl).map(|k| k.transpose())
-        };
-        let Some(kmat) = kmat else {
-            return false;
-        };
-        let mut sy = o.y.clone();
-        let pa = pn * &st.a_top;
-        sy.rows_mut(p, q - p).copy_from(&pa);
-        self.l = &kmat * &sy;
-        let zlm = &o.z * &self.l;
-        self.p = o.y.transpose() * &sy - sy.transpose() * &zlm;
-        symmetrize(&mut self.p);
-        self.closed = &o.y - &zlm;
-        self.k = kmat;
         true
     }
 
@@ -491,16 +365,6 @@ mod tests {
         let mut kg = ric.xg.clone();
         solve_lower_t(&ric.c, view_mut(&mut kg));
         assert!((kg - &k).amax() < 1e-13 * k.amax());
-        // the output form of the same stage, both factorizations
-        for direct in [true, false] {
-            let mut st = Stage::with_outputs(&a, &b, &hx, &hu);
-            st.direct = direct;
-            let mut out = Riccati::new(st);
-            assert!(out.step(&pn, Some(&d)));
-            assert!((&out.l - &l).amax() < 1e-12 * l.amax(), "direct {direct}");
-            assert!((&out.p - &p).amax() < 1e-12 * p.amax(), "direct {direct}");
-            assert!((out.k.columns(2, 3) - &k).amax() < 1e-12 * k.amax());
-        }
         let mut phi = DMatrix::zeros(3, 3);
         ric.closed_loop(&mut phi);
         assert!((phi - (&a - &b * &l)).amax() < 1e-13);
