@@ -224,6 +224,7 @@ pub fn diagnose_calibrated(
     )?;
     let ctx = Context {
         declared,
+        low_level: !linear_records.is_empty(),
         rec,
         validation,
         sensors,
@@ -303,6 +304,9 @@ struct RefinedPath {
 /// The inputs of the calibrated diagnosis its steps share.
 struct Context<'a> {
     declared: &'a Model,
+    /// The linear part was calibrated on low-level records (not biased by
+    /// the effects on the record diagnosed).
+    low_level: bool,
     rec: &'a Record,
     validation: Option<&'a Record>,
     sensors: Option<&'a [usize]>,
@@ -433,8 +437,20 @@ impl Context<'_> {
         (self.progress)("the declared model's errors");
         let declared_errors = d.prepared.comparison.errors(self.declared, sim0).0;
         let declared_validation = vcmp.map(|c| c.errors(self.declared, sim0).0);
-        let (mut note, mut std) =
-            refine_once(&mut d, self.cal, self.settings, vcmp, self.progress)?;
+        // on a linear part calibrated on low-level records, a diagnosis at
+        // the noise leaves the refinement nothing to win
+        let (mut note, mut std) = if self.low_level && self.at_noise(&d) {
+            (
+                format!(
+                    "not refined: the diagnosis on the linear part calibrated on the low-level records explains the record up to the noise ({} ≤ {AT_NOISE} × {})",
+                    pct(d.after.relative_error),
+                    pct(Some(d.noise_level(self.settings)))
+                ),
+                vec![],
+            )
+        } else {
+            refine_once(&mut d, self.cal, self.settings, vcmp, self.progress)?
+        };
         if self.cal.open_loop {
             (self.progress)("refine every parameter by the open-loop error");
             let it = self.cal.open_loop_iterations;
