@@ -14,7 +14,11 @@
 //! Before timing, each diagnosis is run once and its result, simulations
 //! and stage timings are printed.
 //!
-//! Run: `cargo bench --bench diagnose`
+//! Run: `cargo bench --bench diagnose` (a name after `--` runs only the
+//! groups it matches, e.g. `-- diagnose_calibrated`). With
+//! `TACIT_BENCH_ONCE=1` each diagnosis is run once, its stages printed with
+//! the process's CPU time and the wall time spent in each, and nothing is
+//! timed.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
@@ -26,7 +30,57 @@ use tacit::model::Model;
 use tacit::record::Record;
 use tacit::simulate::{simulate_record, RecordSpec};
 
+/// The first argument that is not an option: criterion's filter.
+fn filter() -> Option<String> {
+    std::env::args().skip(1).find(|a| !a.starts_with('-'))
+}
+
+/// Whether the group `name` runs under the command line's filter.
+fn wanted(name: &str) -> bool {
+    filter().is_none_or(|f| name.contains(&f) || f.contains(name))
+}
+
+/// Run once with the stages printed, nothing timed (`TACIT_BENCH_ONCE`).
+fn once() -> bool {
+    std::env::var_os("TACIT_BENCH_ONCE").is_some()
+}
+
+/// The process's user + system CPU time, s (Linux: /proc/self/stat, in
+/// clock ticks of 1/100 s); 0 elsewhere.
+fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    // the fields after the command name (in parentheses)
+    let rest = stat.rsplit(')').next().unwrap_or("");
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let tick = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (tick(11) + tick(12)) / 100.0
+}
+
+/// A progress callback printing each stage with the CPU and wall time
+/// since the previous one.
+fn stage_printer() -> impl Fn(&str) {
+    let last = std::cell::Cell::new((cpu_seconds(), std::time::Instant::now()));
+    let start = last.get();
+    move |stage: &str| {
+        let (c0, w0) = last.get();
+        let (c, w) = (cpu_seconds(), std::time::Instant::now());
+        eprintln!(
+            "  [{:7.2} s cpu, {:7.2} s wall] +{:6.2} s cpu {:6.2} s wall before: {stage}",
+            c - start.0,
+            (w - start.1).as_secs_f64(),
+            c - c0,
+            (w - w0).as_secs_f64()
+        );
+        last.set((c, w));
+    }
+}
+
 fn bench(c: &mut Criterion) {
+    if !wanted("diagnose/lanl8dof_bumper_with_validation") {
+        return;
+    }
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let model = Model::from_file(&root.join("data/lanl8dof.toml")).unwrap();
     let rec = tacit::record::read(&root.join("data/lanl8dof-bumper.h5")).unwrap();
@@ -60,6 +114,9 @@ fn testbed_record(model: &Model, seed: u64) -> Record {
 }
 
 fn bench_calibrated(c: &mut Criterion) {
+    if !wanted("diagnose_calibrated/testbed_with_linear_record_and_validation") {
+        return;
+    }
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let read = |f: &str| Model::from_file(&root.join("data").join(f)).unwrap();
     let (declared, truth, linear) = (
@@ -71,7 +128,7 @@ fn bench_calibrated(c: &mut Criterion) {
     let val = testbed_record(&truth, 34);
     let low = vec![testbed_record(&linear, 5)];
     let (settings, cal) = (DiagnoseSettings::default(), CalibratedSettings::default());
-    let run = || {
+    let run_with = |progress: &dyn Fn(&str)| {
         diagnose_calibrated(
             &declared,
             &rec,
@@ -80,10 +137,19 @@ fn bench_calibrated(c: &mut Criterion) {
             None,
             &settings,
             &cal,
-            &|_| {},
+            progress,
         )
         .unwrap()
     };
+    if once() {
+        let printer = stage_printer();
+        let d = run_with(&printer);
+        printer("end");
+        print_result(&d);
+        print_calibration(&d);
+        return;
+    }
+    let run = || run_with(&|_| {});
     print_result(&run());
     let mut g = c.benchmark_group("diagnose_calibrated");
     g.sample_size(10);
@@ -117,6 +183,16 @@ fn print_result(d: &Diagnosis) {
         d.trace_simulations,
         stages.join(", ")
     );
+}
+
+/// The calibrated diagnosis's choice and refinement, in words.
+fn print_calibration(d: &Diagnosis) {
+    if let Some(c) = &d.calibration {
+        eprintln!("choice: {}\nrefinement: {}", c.choice, c.refinement);
+    }
+    for e in &d.effects {
+        eprintln!("effect {}: {:?}", e.label, e.parameters);
+    }
 }
 
 criterion_group!(benches, bench, bench_calibrated);
