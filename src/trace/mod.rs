@@ -16,7 +16,6 @@
 
 pub mod candidates;
 pub mod regress;
-pub mod shape;
 
 pub use candidates::{Candidate, EffectKind};
 pub use regress::{acts_along, trace, RankedEffect, TraceInput, TraceResult, TraceSettings};

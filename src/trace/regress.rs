@@ -465,7 +465,7 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
                 scored.insert(0, s);
             }
         }
-        smooth_first(&mut scored, &pays, input);
+        smooth_first(&mut scored, &pays);
         if round == 0 {
             ranking = scored.iter().map(|s| s.effect.clone()).collect();
         }
@@ -519,69 +519,29 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
     }
 }
 
-/// A clearance and the cubic spring on the same pair, one ranked first
-/// and the other paying, are ordered by the restoring-force shape: both
-/// are odd stiffening laws, and on the linear model's reconstructed states
-/// the response regression does not tell them apart (measured: on a
-/// clearance record the cubic removed 34.8 %, the clearance 33.8 %; on a
-/// cubic record the clearance came first). The identified force along the
-/// pair, fitted by each law ([`super::shape::force_misfit`]), puts the
-/// clearance first when it explains at least [`SHAPE_RATIO`] times the
-/// share of that force the cubic explains; otherwise the cubic (one
-/// parameter less) comes first, and the loop fits the clearance when the
-/// cubic's fit leaves the error far from the noise (`crate::diagnose`'s
-/// alternative of a fitted effect).
-fn smooth_first(
-    scored: &mut Vec<Scored>,
-    pays: &dyn Fn(&RankedEffect) -> bool,
-    input: &TraceInput<'_>,
-) {
+/// A clearance ahead of the cubic spring on the same pair gives its place
+/// to the cubic when the cubic pays: both are odd stiffening laws, and on
+/// the linear model's reconstructed states the regression does not tell
+/// them apart (measured: on a clearance record the cubic removed 34.8 %,
+/// the clearance 33.8 %; on a cubic record the clearance came first).
+/// The cubic has one parameter less; the loop fits the clearance when the
+/// cubic's fit leaves the error far from the noise
+/// (`crate::diagnose`'s alternative of a fitted effect).
+fn smooth_first(scored: &mut Vec<Scored>, pays: &dyn Fn(&RankedEffect) -> bool) {
     let Some(first) = scored.first() else {
         return;
     };
-    let other = match first.effect.candidate.kind {
-        EffectKind::Clearance => EffectKind::Cubic,
-        EffectKind::Cubic => EffectKind::Clearance,
-        _ => return,
-    };
+    if first.effect.candidate.kind != EffectKind::Clearance {
+        return;
+    }
     let pair = sorted_pair(&first.effect.candidate);
-    let Some(i) = scored.iter().position(|s| {
-        s.effect.candidate.kind == other
+    if let Some(i) = scored.iter().position(|s| {
+        s.effect.candidate.kind == EffectKind::Cubic
             && sorted_pair(&s.effect.candidate) == pair
             && pays(&s.effect)
-    }) else {
-        return;
-    };
-    let (clearance, cubic) = if other == EffectKind::Cubic {
-        (&scored[0].effect.candidate, &scored[i].effect.candidate)
-    } else {
-        (&scored[i].effect.candidate, &scored[0].effect.candidate)
-    };
-    let clearance_first = shape_prefers(clearance, cubic, input);
-    if clearance_first == (other == EffectKind::Clearance) {
+    }) {
         let s = scored.remove(i);
         scored.insert(0, s);
-    }
-}
-
-/// How many times the share of the identified force the cubic explains
-/// the clearance must explain to stay ahead of it ([`smooth_first`]): the
-/// clearance has one parameter more (its gap), so it must do clearly
-/// better, not merely as well.
-pub const SHAPE_RATIO: f64 = 1.5;
-
-/// The identified force along the pair is explained clearly better by the
-/// law of `gapped` than by that of `smooth`: its share at least
-/// [`SHAPE_RATIO`] times the smooth law's, and at least 1 %; false
-/// without an identified force.
-fn shape_prefers(gapped: &Candidate, smooth: &Candidate, input: &TraceInput<'_>) -> bool {
-    let Some(f) = input.identified_force else {
-        return false;
-    };
-    let explained = |c: &Candidate| super::shape::force_misfit(c, f, input.states).map(|m| 1.0 - m);
-    match (explained(gapped), explained(smooth)) {
-        (Some(a), Some(b)) => a >= 0.01 && a >= SHAPE_RATIO * b,
-        _ => false,
     }
 }
 
