@@ -382,6 +382,22 @@ fn truth_cell(c: &Case) -> String {
     t.join("; ")
 }
 
+/// The first ranking and the rounds of the diagnosis reported, on stderr.
+fn explain(d: &tacit::diagnose::Diagnosis) {
+    for r in d.ranking.iter().take(8) {
+        eprintln!(
+            "  ranked {}: explained {:.3}, bic {:.1}, {:?}",
+            r.label, r.residual_explained, r.bic_change, r.parameters
+        );
+    }
+    for r in &d.rounds {
+        eprintln!(
+            "  round {:?}: {:?}; fit {:?}; alternative {:?}",
+            r.proposed, r.decision, r.fit, r.alternative
+        );
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let arg = |k: &str| {
@@ -395,6 +411,15 @@ fn main() {
     // `--variants no` or `--variants yes`: only the diagnoses without or
     // with the linear record
     let variants = arg("--variants");
+    // `--progress`: the diagnosis's steps, its rounds and first ranking on
+    // stderr
+    let verbose = args.iter().any(|a| a == "--progress");
+    let t0 = std::time::Instant::now();
+    let progress = |m: &str| {
+        if verbose {
+            eprintln!("[{:7.1} s] {m}", t0.elapsed().as_secs_f64());
+        }
+    };
     let settings = DiagnoseSettings::default();
     println!("| record | truth | sensors | noise (measured) | linear record | found | parameters | error before → after | validation before → after | corrections significant | checks | time |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
@@ -423,7 +448,7 @@ fn main() {
                 None,
                 &settings,
                 &CalibratedSettings::default(),
-                &|_| {},
+                &progress,
             );
             let d = match d {
                 Ok(d) => d,
@@ -438,6 +463,9 @@ fn main() {
             };
             if let Some(cal) = &d.calibration {
                 eprintln!("{}: {}; {}", c.name, cal.refinement, cal.choice);
+            }
+            if verbose {
+                explain(&d);
             }
             let sig: Vec<String> = d
                 .calibration
