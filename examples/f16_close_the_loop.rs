@@ -151,6 +151,20 @@ fn main() -> anyhow::Result<()> {
             (a.interface_linear, a.interface_damper),
             &settings,
         )?;
+        println!(
+            "interface fit: k3 {:.4e} N/m^3, c2 {:.4e} N s^2/m^2, c3 {:.4e} N s^3/m^3; {:?} after {} iterations",
+            fit.k3, fit.c2, fit.c3, fit.termination, fit.iterations
+        );
+        for p in &fit.parameters {
+            println!(
+                "  {}: start {:.4e}, fitted {:.4e} ({:+.1} % of nominal){}",
+                p.name,
+                p.start,
+                p.value,
+                p.percent_change,
+                if p.at_bound { ", at its bound" } else { "" }
+            );
+        }
         for (file, before, after) in &fit.errors {
             println!("interface model on {file}: Level-1 model {before:.3?}, interface model {after:.3?} m/s^2");
         }

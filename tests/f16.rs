@@ -214,7 +214,11 @@ fn held_interface_fit_keeps_level1_and_improves_level5() {
         linear: f16::LinearPart::Held,
         ratios_near_hz: vec![5.2, 7.3],
     };
-    let fitted = f16::interface_fit(&model, &est, &spec, s.substeps).unwrap();
+    let fit = f16::interface_fit(&model, &est, &spec, s.substeps).unwrap();
+    for p in &fit.parameters {
+        assert!(!p.at_bound, "{} held at its bound: {}", p.name, p.value);
+    }
+    let fitted = fit.model;
     assert_eq!(fitted.springs, model.springs);
     assert_eq!(fitted.damping, model.damping);
     let k3 = fitted.cubics.last().unwrap().k3;

@@ -437,13 +437,14 @@ pub struct InterfaceSpec {
 /// coefficients fitted by open-loop output error on the whole record from
 /// rest. With [`LinearPart::Free`] the coupling spring between the two
 /// points (when the model has one) and the modal damping ratios of
-/// `spec.ratios_near_hz` are fitted with them.
+/// `spec.ratios_near_hz` are fitted with them. Returns the whole fit: the
+/// model in `.model`, with how the fit ended and its iterations.
 pub fn interface_fit(
     model: &Model,
     rec: &Record,
     spec: &InterfaceSpec,
     substeps: usize,
-) -> Result<Model> {
+) -> Result<crate::update::FitResult> {
     use crate::model::{Cubic, CubicDamper, QuadraticDamper};
     use crate::update::{
         self, optimize::FitSettings, param::Parameter, param::Target, problem::Problem,
@@ -454,7 +455,9 @@ pub fn interface_fit(
         dofs: pair.to_vec(),
         k3: starts.0,
     });
-    // the held linear part needs more of the effects to reach the record
+    // the held linear part needs more of the effects to reach the record;
+    // k3 free in sign and size on either side of its start (a start of
+    // either sign)
     let (k3_up, c_up) = match linear {
         LinearPart::Held => (20.0, 200.0),
         LinearPart::Free => (5.0, 20.0),
@@ -478,7 +481,7 @@ pub fn interface_fit(
     };
     let mut params = vec![
         Parameter::relative(&m, Target::CubicK3(m.cubics.len() - 1))?
-            .with_relative_bounds(-1.0, k3_up),
+            .with_relative_bounds(-k3_up, k3_up),
         Parameter::relative(&m, damper)?.with_relative_bounds(-0.999, c_up),
     ];
     let spring = if linear == LinearPart::Free {
@@ -521,7 +524,7 @@ pub fn interface_fit(
         vec![0.0; n],
     )?;
     p.sim.substeps = substeps;
-    Ok(update::fit(&p, &FitSettings::default())?.model)
+    update::fit(&p, &FitSettings::default())
 }
 
 /// RMS of the relative velocity between the two DOFs of `pair` (from 1)
@@ -574,6 +577,14 @@ pub struct InterfaceFit {
     /// Per record: file, the Level-1 model's and the interface model's
     /// open-loop RMS error per channel (m/s², steady-state periods).
     pub errors: Vec<(String, Vec<f64>, Vec<f64>)>,
+    /// How the output-error fit ended (converged, iteration limit,
+    /// stalled with its reason).
+    pub termination: crate::update::Termination,
+    /// Accepted iterations of the fit.
+    pub iterations: usize,
+    /// The fitted parameters: start, value, bounds and whether a bound
+    /// holds them.
+    pub parameters: Vec<crate::update::FittedParameter>,
     /// Seconds of the fit.
     pub seconds: f64,
 }
@@ -601,7 +612,8 @@ pub fn interface_study(
         linear: part,
         ratios_near_hz: vec![5.2, 7.3],
     };
-    let m = interface_fit(&l1, &est, &spec, s.substeps)?;
+    let fitted = interface_fit(&l1, &est, &spec, s.substeps)?;
+    let m = fitted.model;
     let seconds = t.elapsed().as_secs_f64();
     let mut errors = vec![];
     for p in records {
@@ -627,6 +639,9 @@ pub fn interface_study(
         c3: m.cubic_dampers.last().map_or(0.0, |d| d.c3),
         coupling: coupling(&l1).zip(coupling(&m)),
         errors,
+        termination: fitted.termination,
+        iterations: fitted.iterations,
+        parameters: fitted.parameters,
         seconds,
     };
     Ok((fit, m))
