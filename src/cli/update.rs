@@ -208,7 +208,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 }
 
 fn build_problem(a: &Args, model: &Model, rec: &Record) -> anyhow::Result<Problem> {
-    let params = free_parameters(&a.free, model)?;
+    let params = update::parse_free(&a.free, model)?;
     let quantities = parse_quantities(&a.data)?;
     if let Some(d) = &a.dofs {
         super::check_dofs(&d.0, model.ndof(), "--dofs")?;
@@ -244,83 +244,6 @@ fn build_problem(a: &Args, model: &Model, rec: &Record) -> anyhow::Result<Proble
         ..Default::default()
     };
     Ok(p)
-}
-
-/// The free parameters: the element kinds and matrix scales named here
-/// (`cgap<i>`, `kcl<i>`, `rfriction<i>`, `stiffness_scale`,
-/// `mass_scale`), the rest by [`update::parse_free`].
-fn free_parameters(spec: &str, model: &Model) -> anyhow::Result<Vec<update::Parameter>> {
-    let mut own = vec![];
-    let mut rest = vec![];
-    for raw in spec.split(',').map(str::trim).filter(|r| !r.is_empty()) {
-        match extra_target(raw, model)? {
-            Some(t) => own.push(t),
-            None => rest.push(raw),
-        }
-    }
-    let mut params = if rest.is_empty() && !own.is_empty() {
-        vec![]
-    } else {
-        update::parse_free(&rest.join(","), model)?
-    };
-    for t in own {
-        let p = update::Parameter::relative(model, t)?;
-        if params.iter().any(|q| q.target == t) {
-            anyhow::bail!("--free: {} is given twice", p.name);
-        }
-        params.push(p);
-    }
-    Ok(params)
-}
-
-/// A parameter name [`update::parse_free`] does not read, or `None`.
-fn extra_target(raw: &str, model: &Model) -> anyhow::Result<Option<update::Target>> {
-    use update::Target;
-    let lower = raw.to_ascii_lowercase();
-    let scales = model.matrices.as_ref().is_some_and(|l| l.by_scales);
-    match lower.as_str() {
-        "stiffness_scale" | "mass_scale" if !scales => anyhow::bail!(
-            "--free {raw}: only a model from matrices has a {lower} (model {} is not one)",
-            model.name
-        ),
-        "stiffness_scale" => return Ok(Some(Target::StiffnessScale)),
-        "mass_scale" => return Ok(Some(Target::MassScale)),
-        _ => {}
-    }
-    type Make = fn(usize) -> Target;
-    let kinds: [(&str, usize, Make, &str); 3] = [
-        (
-            "cgap",
-            model.clearances.len(),
-            Target::ClearanceGap,
-            "clearances",
-        ),
-        (
-            "kcl",
-            model.clearances.len(),
-            Target::ClearanceStiffness,
-            "clearances",
-        ),
-        (
-            "rfriction",
-            model.relative_frictions.len(),
-            Target::RelativeFrictionLevel,
-            "relative friction elements",
-        ),
-    ];
-    for (prefix, count, make, what) in kinds {
-        let Some(i) = lower
-            .strip_prefix(prefix)
-            .and_then(|s| s.parse::<usize>().ok())
-        else {
-            continue;
-        };
-        if i == 0 || i > count {
-            anyhow::bail!("--free {raw}: the model has {count} {what} (numbered from 1)");
-        }
-        return Ok(Some(make(i - 1)));
-    }
-    Ok(None)
 }
 
 /// Where a parameter acts, by point label on a model that names its

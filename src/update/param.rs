@@ -564,6 +564,16 @@ fn parse_one(raw: &str, model: &Model) -> Result<Vec<Target>> {
         }
         "masses" => return Ok((0..model.ndof()).map(Target::Mass).collect()),
         "zeta" | "damping" => return Ok(vec![Target::DampingRatio]),
+        "stiffness_scale" | "mass_scale"
+            if !model.matrices.as_ref().is_some_and(|l| l.by_scales) =>
+        {
+            return Err(unknown(format!(
+                "only a model from matrices has a {lower} (model {} is not one)",
+                model.name
+            )))
+        }
+        "stiffness_scale" => return Ok(vec![Target::StiffnessScale]),
+        "mass_scale" => return Ok(vec![Target::MassScale]),
         "cubic" | "cubics" => {
             if model.cubics.is_empty() {
                 return Err(unknown("the model has no cubic element".into()));
@@ -582,7 +592,7 @@ fn parse_one(raw: &str, model: &Model) -> Result<Vec<Target>> {
             .filter(|&i| i >= 1)
             .map(|i| i - 1)
     };
-    let checks: [Numbered; 5] = [
+    let checks: [Numbered; 8] = [
         ("m", model.ndof(), Target::Mass, "DOFs"),
         ("gap", model.contacts.len(), Target::ContactGap, "contacts"),
         (
@@ -603,6 +613,24 @@ fn parse_one(raw: &str, model: &Model) -> Result<Vec<Target>> {
             Target::CubicK3,
             "cubic elements",
         ),
+        (
+            "cgap",
+            model.clearances.len(),
+            Target::ClearanceGap,
+            "clearances",
+        ),
+        (
+            "kcl",
+            model.clearances.len(),
+            Target::ClearanceStiffness,
+            "clearances",
+        ),
+        (
+            "rfriction",
+            model.relative_frictions.len(),
+            Target::RelativeFrictionLevel,
+            "relative friction elements",
+        ),
     ];
     for (prefix, count, make, what) in checks {
         if let Some(i) = numbered(prefix) {
@@ -619,7 +647,7 @@ fn parse_one(raw: &str, model: &Model) -> Result<Vec<Target>> {
         .map(|(i, s)| s.label(i))
         .collect();
     Err(unknown(format!(
-        "not a parameter name; use a spring label ({}), a range k1..k4, m<i>, zeta, gap<i>, kc<i>, friction<i>, cubic<i> or cubic",
+        "not a parameter name; use a spring label ({}), a range k1..k4, m<i>, zeta, gap<i>, kc<i>, friction<i>, cubic<i>, cubic, cgap<i>, kcl<i>, rfriction<i>, stiffness_scale or mass_scale",
         labels.join(", ")
     )))
 }
