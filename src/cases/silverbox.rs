@@ -71,8 +71,125 @@ pub struct SilverboxResult {
     pub rms_estimation: (f64, f64),
     /// RMS of the test output over the samples scored, V.
     pub rms_output: f64,
+    /// What the final model's test error is made of.
+    pub breakdown: Breakdown,
     /// Seconds.
     pub elapsed_s: f64,
+}
+
+/// What an open-loop error is made of: by amplitude (equal blocks of the
+/// record) and by frequency (shares of the residual's mean square).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Breakdown {
+    /// Mean of the residual (measured − simulated), V.
+    pub mean: f64,
+    /// Per block of the scored samples, in order: the output's RMS and the
+    /// error's RMS, V.
+    pub blocks: Vec<(f64, f64)>,
+    /// Share of the residual's mean square in each band (low Hz, high Hz,
+    /// share in [0, 1]); the mean's share is [`Breakdown::mean_share`].
+    pub bands: Vec<(f64, f64, f64)>,
+    /// Share of the residual's mean square in its mean.
+    pub mean_share: f64,
+}
+
+impl Breakdown {
+    /// Lines for people, in mV and per cent.
+    pub fn describe(&self) -> String {
+        let blocks: Vec<String> = self
+            .blocks
+            .iter()
+            .map(|(y, e)| format!("{:.1}: {:.3}", 1e3 * y, 1e3 * e))
+            .collect();
+        let bands: Vec<String> = self
+            .bands
+            .iter()
+            .map(|(lo, hi, p)| format!("{lo:.0}–{hi:.0} Hz {:.1} %", 100.0 * p))
+            .collect();
+        format!(
+            "test error by block (output RMS mV: error RMS mV): {}\n\
+             test error's mean square by band: {}; mean {:.3} mV ({:.1} %)\n",
+            blocks.join(", "),
+            bands.join(", "),
+            1e3 * self.mean,
+            100.0 * self.mean_share
+        )
+    }
+}
+
+/// The bands of [`Breakdown::bands`], Hz: below the resonance, around it
+/// (the resonance near 70 Hz), the rest of the excitation band (up to
+/// 200 Hz) and above it (third harmonics, up to the Nyquist frequency).
+pub const BANDS: [(f64, f64); 5] = [
+    (0.0, 10.0),
+    (10.0, 65.0),
+    (65.0, 75.0),
+    (75.0, 200.0),
+    (200.0, 305.2),
+];
+
+/// The breakdown of `y − pred` (both over the scored samples) into
+/// `nblocks` equal blocks and the bands `bands` at sample rate `fs`.
+pub fn breakdown(
+    y: &[f64],
+    pred: &[f64],
+    fs: f64,
+    nblocks: usize,
+    bands: &[(f64, f64)],
+) -> Breakdown {
+    let r: Vec<f64> = y.iter().zip(pred).map(|(a, b)| a - b).collect();
+    let n = r.len().max(1);
+    let mean = r.iter().sum::<f64>() / n as f64;
+    let b = (r.len() / nblocks.max(1)).max(1);
+    let blocks = (0..nblocks)
+        .filter(|i| (i + 1) * b <= r.len())
+        .map(|i| {
+            let span = i * b..(i + 1) * b;
+            (
+                crate::signal::rms_of(&y[span.clone()]),
+                crate::signal::rms_of(&r[span]),
+            )
+        })
+        .collect();
+    let ms = r.iter().map(|v| v * v).sum::<f64>() / n as f64;
+    let power = spectrum(&r, mean);
+    let bands = bands
+        .iter()
+        .map(|&(lo, hi)| {
+            let p: f64 = power
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| {
+                    let f = *k as f64 * fs / n as f64;
+                    f >= lo && f < hi && *k > 0
+                })
+                .map(|(_, p)| p)
+                .sum();
+            (lo, hi, p / ms)
+        })
+        .collect();
+    Breakdown {
+        mean,
+        blocks,
+        bands,
+        mean_share: mean * mean / ms,
+    }
+}
+
+/// One-sided power of `r − mean` per frequency bin, scaled so that the
+/// bins sum to its mean square (Parseval).
+fn spectrum(r: &[f64], mean: f64) -> Vec<f64> {
+    use rustfft::{num_complex::Complex, FftPlanner};
+    let n = r.len();
+    let mut x: Vec<Complex<f64>> = r.iter().map(|v| Complex::new(v - mean, 0.0)).collect();
+    FftPlanner::new().plan_fft_forward(n).process(&mut x);
+    let scale = 1.0 / (n as f64 * n as f64);
+    (0..=n / 2)
+        .map(|k| {
+            let twice = k > 0 && 2 * k != n;
+            x[k].norm_sqr() * scale * if twice { 2.0 } else { 1.0 }
+        })
+        .collect()
 }
 
 impl SilverboxResult {
@@ -93,7 +210,7 @@ impl SilverboxResult {
         format!(
             "Silverbox, test segment (open-loop RMS error): linear {:.3} mV, after the loop {:.3} mV (test output RMS {:.1} mV)\n\
              estimation segment: linear {:.3} mV, final {:.3} mV\n\
-             diagnosis: {}\nlinear part: m = {:.5e}, k = {:.5e}, zeta = {:.5}\neffects: {}\ntime {:.1} s",
+             diagnosis: {}\nlinear part: m = {:.5e}, k = {:.5e}, zeta = {:.5}\neffects: {}\n{}time {:.1} s",
             1e3 * self.rms_linear,
             1e3 * self.rms_final,
             1e3 * self.rms_output,
@@ -104,6 +221,7 @@ impl SilverboxResult {
             p("k"),
             p("zeta1"),
             effects.join("; "),
+            self.breakdown.describe(),
             self.elapsed_s
         )
     }
@@ -187,7 +305,13 @@ pub fn run(path: &Path, s: &Settings, out: Option<&Path>) -> Result<SilverboxRes
         .as_ref()
         .ok_or_else(|| TacitError::Numerical("no calibrated test errors".into()))?;
     let y = &test.outputs[0].data[s.skip.min(test.len())..];
+    let pred = v.after.open_loop_prediction.as_ref().ok_or_else(|| {
+        TacitError::Numerical("the final model has no open-loop test prediction".into())
+    })?;
+    let pred: Vec<f64> = pred.row(0).iter().skip(s.skip).copied().collect();
+    let breakdown = breakdown(y, &pred, s.fs, 8, &BANDS);
     Ok(SilverboxResult {
+        breakdown,
         rms_linear: rms(linear_test)?,
         rms_final: rms(&v.after)?,
         rms_estimation: (rms(&cal_report.calibrated_errors)?, rms(&d.after)?),
@@ -196,4 +320,38 @@ pub fn run(path: &Path, s: &Settings, out: Option<&Path>) -> Result<SilverboxRes
         settings,
         diagnosis: d,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A residual made of a mean, a 70 Hz sine and a 250 Hz sine: the
+    /// shares are the parts' mean squares over the total, the blocks' error
+    /// RMS the whole's.
+    #[test]
+    fn breakdown_splits_a_known_residual() {
+        let fs = 1e7 / 16384.0;
+        let n = 8 * 4096;
+        let y: Vec<f64> = (0..n).map(|k| (k as f64 * 1e-3).sin()).collect();
+        let t = |k: usize| k as f64 / fs;
+        let w = |f: f64, k: usize| (2.0 * std::f64::consts::PI * f * t(k)).sin();
+        let r: Vec<f64> = (0..n)
+            .map(|k| 0.1 + 0.3 * w(70.0, k) + 0.2 * w(250.0, k))
+            .collect();
+        let pred: Vec<f64> = y.iter().zip(&r).map(|(a, b)| a - b).collect();
+        let b = breakdown(&y, &pred, fs, 8, &BANDS);
+        let ms = 0.01 + 0.09 / 2.0 + 0.04 / 2.0;
+        assert!((b.mean - 0.1).abs() < 1e-3, "{}", b.mean);
+        assert!((b.mean_share - 0.01 / ms).abs() < 2e-3, "{}", b.mean_share);
+        assert!((b.bands[2].2 - 0.045 / ms).abs() < 1e-2, "{:?}", b.bands);
+        assert!((b.bands[4].2 - 0.02 / ms).abs() < 1e-2, "{:?}", b.bands);
+        assert!(b.bands[0].2 < 1e-3 && b.bands[3].2 < 1e-2, "{:?}", b.bands);
+        let total: f64 = b.bands.iter().map(|x| x.2).sum::<f64>() + b.mean_share;
+        assert!((total - 1.0).abs() < 1e-6, "{total}");
+        assert_eq!(b.blocks.len(), 8);
+        for (_, e) in &b.blocks {
+            assert!((e - ms.sqrt()).abs() < 5e-3, "{e}");
+        }
+    }
 }

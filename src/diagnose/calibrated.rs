@@ -474,6 +474,21 @@ impl Context<'_> {
                 super::open_loop::refine(&mut d, &self.cal.calibration, self.settings, it, vcmp)?;
             note = format!("{note}; {n}");
             std = est.unwrap_or(std);
+            for alt in super::laws::damper_swaps(&d) {
+                let mut trial = d.clone();
+                (trial.model, trial.added, trial.effects) = (alt.model, alt.added, alt.effects);
+                let (n, est) = super::open_loop::refine(
+                    &mut trial,
+                    &self.cal.calibration,
+                    self.settings,
+                    it,
+                    vcmp,
+                )?;
+                note = format!("{note}; {}: {n}", alt.what);
+                if let Some(est) = est {
+                    (d, std) = (trial, est);
+                }
+            }
         }
         update_effects(&mut d, &std, &self.cal.calibration);
         let start_errors = std::mem::replace(&mut d.before, declared_errors);

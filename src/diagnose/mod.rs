@@ -55,6 +55,7 @@ pub mod errors;
 mod figures;
 mod fit;
 pub mod joint;
+mod laws;
 pub mod noise;
 mod open_loop;
 mod outcome;

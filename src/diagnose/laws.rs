@@ -1,0 +1,170 @@
+//! The other law of a nonlinear damper, tried at the open-loop
+//! refinement.
+//!
+//! The trace ranks the quadratic damper `c₂ ν|ν|` and the cubic one
+//! `c₃ ν³` on the same place by a regression on the reconstructed states,
+//! and the loop fits the first by multiple shooting over segments of a few
+//! periods. The two laws differ most at the largest velocities, which a
+//! short segment rarely holds and the open-loop error over the whole
+//! record weighs. So when the open-loop refinement runs, each nonlinear
+//! damper found is also tried in the other law: put in its place at the
+//! coefficient that dissipates the same mean power on the reconstructed
+//! relative velocities ([`equal_power`]), every parameter refined again by
+//! the open-loop error, and the law kept whose error on the record (never
+//! the validation record's) is lower.
+
+use super::effects::AddedEffect;
+use super::{Diagnosis, EffectReport};
+use crate::model::elements::{CubicDamper, QuadraticDamper};
+use crate::model::Model;
+use crate::trace::EffectKind;
+use crate::update::Target;
+use nalgebra::DMatrix;
+
+/// A diagnosis's model with one nonlinear damper in the other law.
+#[derive(Debug, Clone)]
+pub(super) struct Swapped {
+    /// The model with the damper replaced.
+    pub model: Model,
+    /// The effects' bookkeeping, the replaced one in its place.
+    pub added: Vec<AddedEffect>,
+    /// The effects' reports, the replaced one relabelled.
+    pub effects: Vec<EffectReport>,
+    /// In words: which damper, from which law to which, at what start.
+    pub what: String,
+}
+
+/// Every nonlinear damper of `d` in the other law (module docs); empty
+/// when there is none or the reconstructed velocities at one are zero.
+pub(super) fn damper_swaps(d: &Diagnosis) -> Vec<Swapped> {
+    let states = &d.prepared.recon.states;
+    (0..d.added.len())
+        .filter_map(|i| swap(&d.model, &d.added, &d.effects, i, states))
+        .collect()
+}
+
+/// The damper law that replaces `kind`, with the exponents of the old and
+/// the new law's force in the velocity.
+fn other(kind: EffectKind) -> Option<(EffectKind, i32, i32)> {
+    match kind {
+        EffectKind::CubicDamping => Some((EffectKind::QuadraticDamping, 3, 2)),
+        EffectKind::QuadraticDamping => Some((EffectKind::CubicDamping, 2, 3)),
+        _ => None,
+    }
+}
+
+/// The coefficient of `|ν|^to` that dissipates the same mean power as
+/// `coef |ν|^from` on the velocities `nu`: `coef ⟨|ν|^(from+1)⟩ /
+/// ⟨|ν|^(to+1)⟩`; None when it is not finite and positive.
+pub(super) fn equal_power(coef: f64, from: i32, to: i32, nu: &[f64]) -> Option<f64> {
+    let moment = |p: i32| nu.iter().map(|v| v.abs().powi(p)).sum::<f64>();
+    let c = coef * moment(from + 1) / moment(to + 1);
+    Some(c).filter(|c| c.is_finite() && *c > 0.0)
+}
+
+/// `model` with effect `i` of `added` (a nonlinear damper) in the other
+/// law, or None for any other effect.
+fn swap(
+    model: &Model,
+    added: &[AddedEffect],
+    effects: &[EffectReport],
+    i: usize,
+    states: &DMatrix<f64>,
+) -> Option<Swapped> {
+    let e = &added[i];
+    let (kind, from, to) = other(e.candidate.kind)?;
+    let target = *e.targets.first()?;
+    let coef = target.get(model).ok()?;
+    let n = states.nrows() / 2;
+    let nu: Vec<f64> = (0..states.ncols())
+        .map(|k| e.candidate.delta_rate(states, n, k))
+        .collect();
+    let start = equal_power(coef, from, to, &nu)?;
+    let mut m = model.clone();
+    let mut added = added.to_vec();
+    let dofs: Vec<usize> = e.candidate.dofs.iter().map(|d| d + 1).collect();
+    let new_target = match target {
+        Target::DamperC3(j) => {
+            m.cubic_dampers.remove(j);
+            shift(&mut added, |t| matches!(t, Target::DamperC3(x) if *x > j));
+            m.quadratic_dampers
+                .push(QuadraticDamper { dofs, c2: start });
+            Target::DamperC2(m.quadratic_dampers.len() - 1)
+        }
+        Target::DamperC2(j) => {
+            m.quadratic_dampers.remove(j);
+            shift(&mut added, |t| matches!(t, Target::DamperC2(x) if *x > j));
+            m.cubic_dampers.push(CubicDamper { dofs, c3: start });
+            Target::DamperC3(m.cubic_dampers.len() - 1)
+        }
+        _ => return None,
+    };
+    let name = if kind == EffectKind::CubicDamping {
+        "c3"
+    } else {
+        "c2"
+    };
+    let old_label = e.label.clone();
+    let a = &mut added[i];
+    a.candidate.kind = kind;
+    a.targets = vec![new_target];
+    a.names = vec![name.into()];
+    a.traced = vec![start];
+    a.label = m.label_at_points(&a.candidate.label(), &a.candidate.dofs);
+    let mut effects = effects.to_vec();
+    if let Some(r) = effects.get_mut(i) {
+        r.kind = kind;
+        r.label = a.label.clone();
+        r.parameters = [(name.to_string(), start)].into_iter().collect();
+        r.std_errors.clear();
+        r.group_estimates.clear();
+    }
+    let what = format!(
+        "{old_label} tried as {} (start {name} = {start:.4e}, the same mean power on the reconstructed velocities)",
+        a.label
+    );
+    Some(Swapped {
+        model: m,
+        added,
+        effects,
+        what,
+    })
+}
+
+/// Lower by one the index of every target of `added` that `after` picks
+/// (the element before it in its list was removed).
+fn shift(added: &mut [AddedEffect], after: impl Fn(&Target) -> bool) {
+    for t in added.iter_mut().flat_map(|a| a.targets.iter_mut()) {
+        if after(t) {
+            *t = match *t {
+                Target::DamperC2(x) => Target::DamperC2(x - 1),
+                Target::DamperC3(x) => Target::DamperC3(x - 1),
+                other => other,
+            };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// On a sine of amplitude V, ⟨|ν|⁴⟩/⟨|ν|³⟩ = (3/8) V⁴ / ((4/(3π)) V³)
+    /// = 9π V / 32: the quadratic damper dissipating as the cubic one has
+    /// c₂ = c₃ · 9π V / 32.
+    #[test]
+    fn equal_power_on_a_sine_matches_the_closed_form() {
+        let v = 0.7;
+        let nu: Vec<f64> = (0..100_000)
+            .map(|k| v * (2.0 * std::f64::consts::PI * k as f64 / 100_000.0).sin())
+            .collect();
+        let c2 = equal_power(2.0, 3, 2, &nu).unwrap();
+        let want = 2.0 * 9.0 * std::f64::consts::PI * v / 32.0;
+        assert!((c2 / want - 1.0).abs() < 1e-6, "{c2} vs {want}");
+        // and back
+        let c3 = equal_power(c2, 2, 3, &nu).unwrap();
+        assert!((c3 / 2.0 - 1.0).abs() < 1e-12, "{c3}");
+        assert!(equal_power(1.0, 3, 2, &[0.0; 10]).is_none());
+        assert!(equal_power(-1.0, 3, 2, &nu).is_none());
+    }
+}
