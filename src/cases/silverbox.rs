@@ -71,8 +71,9 @@ pub struct SilverboxResult {
     pub rms_estimation: (f64, f64),
     /// RMS of the test output over the samples scored, V.
     pub rms_output: f64,
-    /// What the final model's test error is made of.
-    pub breakdown: Breakdown,
+    /// What the final model's error is made of: on the test segment and
+    /// on the estimation segment.
+    pub breakdown: (Breakdown, Breakdown),
     /// Seconds.
     pub elapsed_s: f64,
 }
@@ -95,7 +96,7 @@ pub struct Breakdown {
 
 impl Breakdown {
     /// Lines for people, in mV and per cent.
-    pub fn describe(&self) -> String {
+    pub fn describe(&self, what: &str) -> String {
         let blocks: Vec<String> = self
             .blocks
             .iter()
@@ -107,8 +108,8 @@ impl Breakdown {
             .map(|(lo, hi, p)| format!("{lo:.0}–{hi:.0} Hz {:.1} %", 100.0 * p))
             .collect();
         format!(
-            "test error by block (output RMS mV: error RMS mV): {}\n\
-             test error's mean square by band: {}; mean {:.3} mV ({:.1} %)\n",
+            "{what} error by block (output RMS mV: error RMS mV): {}\n\
+             {what} error's mean square by band: {}; mean {:.3} mV ({:.1} %)\n",
             blocks.join(", "),
             bands.join(", "),
             1e3 * self.mean,
@@ -210,7 +211,7 @@ impl SilverboxResult {
         format!(
             "Silverbox, test segment (open-loop RMS error): linear {:.3} mV, after the loop {:.3} mV (test output RMS {:.1} mV)\n\
              estimation segment: linear {:.3} mV, final {:.3} mV\n\
-             diagnosis: {}\nlinear part: m = {:.5e}, k = {:.5e}, zeta = {:.5}\neffects: {}\n{}time {:.1} s",
+             diagnosis: {}\nlinear part: m = {:.5e}, k = {:.5e}, zeta = {:.5}\neffects: {}\n{}{}time {:.1} s",
             1e3 * self.rms_linear,
             1e3 * self.rms_final,
             1e3 * self.rms_output,
@@ -221,7 +222,8 @@ impl SilverboxResult {
             p("k"),
             p("zeta1"),
             effects.join("; "),
-            self.breakdown.describe(),
+            self.breakdown.0.describe("test"),
+            self.breakdown.1.describe("estimation"),
             self.elapsed_s
         )
     }
@@ -250,6 +252,16 @@ fn rms(set: &diagnose::ErrorSet) -> Result<f64> {
         .copied()
         .flatten()
         .ok_or_else(|| TacitError::Numerical(format!("no open-loop error: {}", set.status)))
+}
+
+/// The breakdown of the open-loop error of `set` on the scored samples `y`.
+fn of_errors(set: &diagnose::ErrorSet, y: &[f64], s: &Settings) -> Result<Breakdown> {
+    let pred = set
+        .open_loop_prediction
+        .as_ref()
+        .ok_or_else(|| TacitError::Numerical(format!("no open-loop prediction: {}", set.status)))?;
+    let pred: Vec<f64> = pred.row(0).iter().skip(s.skip).copied().collect();
+    Ok(breakdown(y, &pred, s.fs, 8, &BANDS))
 }
 
 /// The whole study; the report goes to `out` when given.
@@ -305,11 +317,10 @@ pub fn run(path: &Path, s: &Settings, out: Option<&Path>) -> Result<SilverboxRes
         .as_ref()
         .ok_or_else(|| TacitError::Numerical("no calibrated test errors".into()))?;
     let y = &test.outputs[0].data[s.skip.min(test.len())..];
-    let pred = v.after.open_loop_prediction.as_ref().ok_or_else(|| {
-        TacitError::Numerical("the final model has no open-loop test prediction".into())
-    })?;
-    let pred: Vec<f64> = pred.row(0).iter().skip(s.skip).copied().collect();
-    let breakdown = breakdown(y, &pred, s.fs, 8, &BANDS);
+    let breakdown = (
+        of_errors(&v.after, y, s)?,
+        of_errors(&d.after, &est.outputs[0].data[s.skip.min(est.len())..], s)?,
+    );
     Ok(SilverboxResult {
         breakdown,
         rms_linear: rms(linear_test)?,

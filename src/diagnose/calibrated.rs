@@ -468,27 +468,9 @@ impl Context<'_> {
             refine_once(&mut d, self.cal, self.settings, vcmp, self.progress)?
         };
         if self.cal.open_loop {
-            (self.progress)("refine every parameter by the open-loop error");
-            let it = self.cal.open_loop_iterations;
-            let (n, est) =
-                super::open_loop::refine(&mut d, &self.cal.calibration, self.settings, it, vcmp)?;
+            let (n, est) = self.open_loop(&mut d, vcmp)?;
             note = format!("{note}; {n}");
             std = est.unwrap_or(std);
-            for alt in super::laws::damper_swaps(&d) {
-                let mut trial = d.clone();
-                (trial.model, trial.added, trial.effects) = (alt.model, alt.added, alt.effects);
-                let (n, est) = super::open_loop::refine(
-                    &mut trial,
-                    &self.cal.calibration,
-                    self.settings,
-                    it,
-                    vcmp,
-                )?;
-                note = format!("{note}; {}: {n}", alt.what);
-                if let Some(est) = est {
-                    (d, std) = (trial, est);
-                }
-            }
         }
         update_effects(&mut d, &std, &self.cal.calibration);
         let start_errors = std::mem::replace(&mut d.before, declared_errors);
@@ -505,6 +487,36 @@ impl Context<'_> {
             kept: !std.is_empty(),
             std,
         })
+    }
+
+    /// The open-loop refinement of `d` ([`super::open_loop`]), then each
+    /// nonlinear damper in the other law ([`super::laws`]), the lower
+    /// record error kept; the notes and, when one was kept, the
+    /// parameters with their standard errors.
+    fn open_loop(
+        &self,
+        d: &mut Diagnosis,
+        vcmp: Option<&super::Comparison>,
+    ) -> Result<(String, Option<Vec<Estimated>>)> {
+        (self.progress)("refine every parameter by the open-loop error");
+        let it = self.cal.open_loop_iterations;
+        let cal = &self.cal.calibration;
+        let t = std::time::Instant::now();
+        let (mut note, mut std) = super::open_loop::refine(d, cal, self.settings, it, vcmp)?;
+        super::state::add_time(&mut d.timings, "open_loop_refinement", t);
+        let t = std::time::Instant::now();
+        for alt in super::laws::damper_swaps(d) {
+            (self.progress)("try the other law of a nonlinear damper");
+            let mut trial = d.clone();
+            (trial.model, trial.added, trial.effects) = (alt.model, alt.added, alt.effects);
+            let (n, est) = super::open_loop::refine(&mut trial, cal, self.settings, it, vcmp)?;
+            note = format!("{note}; {}: {n}", alt.what);
+            if est.is_some() {
+                (*d, std) = (trial, est);
+            }
+        }
+        super::state::add_time(&mut d.timings, "damper_laws", t);
+        Ok((note, std))
     }
 
     /// The calibration report of `p`; `chosen` says which diagnosis is

@@ -148,6 +148,64 @@ fn shift(added: &mut [AddedEffect], after: impl Fn(&Target) -> bool) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::diagnose::effects;
+    use crate::trace::{Candidate, RankedEffect};
+
+    fn ranked(kind: EffectKind, dofs: Vec<usize>, name: &str, v: f64) -> RankedEffect {
+        let c = Candidate::new(kind, dofs);
+        RankedEffect {
+            label: c.label(),
+            candidate: c,
+            parameters: vec![(name.into(), v)],
+            std_errors: vec![],
+            residual_explained: 0.3,
+            force_explained: None,
+            bic_change: -100.0,
+            hidden: vec![],
+        }
+    }
+
+    /// Two cubic dampers and a quadratic one on the testbed: the first
+    /// cubic swapped leaves the second's target moved down one place, puts
+    /// a quadratic damper last at the equal-power coefficient on the
+    /// pair's relative velocity, and touches nothing else.
+    #[test]
+    fn a_cubic_damper_becomes_quadratic_and_the_other_targets_follow() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let mut model = Model::from_file(std::path::Path::new(p)).unwrap();
+        let added: Vec<AddedEffect> = [
+            ranked(EffectKind::CubicDamping, vec![4, 5], "c3", 7.0),
+            ranked(EffectKind::QuadraticDamping, vec![1], "c2", 3.0),
+            ranked(EffectKind::CubicDamping, vec![1, 2], "c3", 5.0),
+        ]
+        .iter()
+        .map(|r| effects::add(&mut model, r))
+        .collect();
+        // relative velocity v5 − v6 = 0.3 sin(·) (states: 8 displacements,
+        // then 8 velocities)
+        let states = DMatrix::from_fn(16, 400, |i, k| match i {
+            12 => 0.3 * (0.05 * k as f64).sin(),
+            _ => 0.0,
+        });
+        let s = swap(&model, &added, &[], 0, &states).unwrap();
+        assert_eq!(s.model.cubic_dampers.len(), 1);
+        assert_eq!(s.model.cubic_dampers[0].c3, 5.0);
+        assert_eq!(s.model.quadratic_dampers.len(), 2);
+        assert_eq!(s.model.quadratic_dampers[0].c2, 3.0);
+        assert_eq!(s.added[0].targets, vec![Target::DamperC2(1)]);
+        assert_eq!(s.added[0].candidate.kind, EffectKind::QuadraticDamping);
+        assert_eq!(s.added[1].targets, vec![Target::DamperC2(0)]);
+        assert_eq!(s.added[2].targets, vec![Target::DamperC3(0)]);
+        let nu: Vec<f64> = (0..400).map(|k| 0.3 * (0.05 * k as f64).sin()).collect();
+        let want = equal_power(7.0, 3, 2, &nu).unwrap();
+        let got = s.model.quadratic_dampers[1].c2;
+        assert!((got / want - 1.0).abs() < 1e-12, "{got} vs {want}");
+        assert_eq!(s.model.quadratic_dampers[1].dofs, vec![5, 6]);
+        // no velocity at the ground damper: nothing to swap; a stiffness
+        // change has no other law
+        assert!(swap(&model, &added, &[], 1, &states).is_none());
+        assert!(other(EffectKind::Stiffness).is_none());
+    }
 
     /// On a sine of amplitude V, ⟨|ν|⁴⟩/⟨|ν|³⟩ = (3/8) V⁴ / ((4/(3π)) V³)
     /// = 9π V / 32: the quadratic damper dissipating as the cubic one has
