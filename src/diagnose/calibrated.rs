@@ -505,16 +505,12 @@ impl Context<'_> {
         let (mut note, mut std) = super::open_loop::refine(d, cal, self.settings, it, vcmp)?;
         super::state::add_time(&mut d.timings, "open_loop_refinement", t);
         let t = std::time::Instant::now();
-        for alt in super::laws::damper_swaps(d) {
-            (self.progress)("try the other law of a nonlinear damper");
-            let mut trial = d.clone();
-            (trial.model, trial.added, trial.effects) = (alt.model, alt.added, alt.effects);
-            let (n, est) = super::open_loop::refine(&mut trial, cal, self.settings, it, vcmp)?;
-            note = format!("{note}; {}: {n}", alt.what);
-            if est.is_some() {
-                (*d, std) = (trial, est);
-            }
+        let refine = |t: &mut Diagnosis| super::open_loop::refine(t, cal, self.settings, it, vcmp);
+        let (notes, est) = super::laws::keep_better_laws(d, &refine, self.progress)?;
+        for n in notes {
+            note = format!("{note}; {n}");
         }
+        std = est.or(std);
         super::state::add_time(&mut d.timings, "damper_laws", t);
         Ok((note, std))
     }
