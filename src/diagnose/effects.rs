@@ -26,6 +26,12 @@ pub struct AddedEffect {
     pub traced: Vec<f64>,
     /// Nominal stiffness of the changed spring (stiffness effects), N/m.
     pub nominal: f64,
+    /// The model's viscous damping parameters freed beside a dissipative
+    /// effect ([`damping_targets`]; empty for the others): fitted with it,
+    /// never reported as its parameters, left as fitted when it is
+    /// switched off.
+    #[serde(skip)]
+    pub nuisance: Vec<Target>,
 }
 
 /// Add the effect of `r` to `model` at its traced values; returns the
@@ -136,6 +142,39 @@ pub fn add(model: &mut Model, r: &RankedEffect) -> AddedEffect {
         names: names.into_iter().map(String::from).collect(),
         traced,
         nominal,
+        nuisance: vec![],
+    }
+}
+
+/// The viscous damping parameters of `model` that a dissipative effect is
+/// fitted beside (friction, relative friction, a nonlinear damper): each
+/// mode's ratio of modal damping given per mode, the one ratio of modal
+/// damping given as one, the non-zero Rayleigh coefficients; none without
+/// damping. Friction's equivalent viscous damping differs from mode to
+/// mode (largest on the lowest), so a damping calibrated on a record with
+/// friction has absorbed part of it: with the damping held, the friction
+/// is underrated (and the effect beside it misfit); freed, the two share
+/// the dissipation by their shapes (amplitude-independent friction,
+/// velocity-proportional damping).
+pub fn damping_targets(model: &Model) -> Vec<Target> {
+    match &model.damping {
+        Damping::Modal { ratio: Some(z), .. } if *z > 0.0 => vec![Target::DampingRatio],
+        Damping::Modal {
+            ratio: None,
+            ratios,
+        } => (0..ratios.len())
+            .filter(|&i| ratios[i] > 0.0)
+            .map(Target::ModalRatio)
+            .collect(),
+        Damping::Rayleigh { alpha, beta } => [
+            (*alpha, Target::RayleighAlpha),
+            (*beta, Target::RayleighBeta),
+        ]
+        .into_iter()
+        .filter(|(v, _)| *v > 0.0)
+        .map(|(_, t)| t)
+        .collect(),
+        _ => vec![],
     }
 }
 
@@ -227,27 +266,32 @@ pub fn clearance_alternative(
 }
 
 /// Free parameters of an added effect for the time-domain fit, at the
-/// model's current values, with physical bounds.
+/// model's current values, with physical bounds: its damping nuisance
+/// parameters first ([`AddedEffect::nuisance`], a damping ratio or
+/// Rayleigh coefficient between 5 % and 10× its value), then its own (the
+/// last effect's own parameters are the problem's last).
 pub fn parameters(model: &Model, e: &AddedEffect) -> Result<Vec<Parameter>> {
-    e.targets
+    let nuisance = e
+        .nuisance
         .iter()
-        .map(|&t| {
-            let p = Parameter::relative(model, t)?;
-            Ok(match t {
-                Target::ContactGap(_) => p.with_relative_bounds(-0.8, 2.0),
-                Target::ContactStiffness(_) => p.with_relative_bounds(-0.98, 50.0),
-                Target::FrictionLevel(_) => p.with_relative_bounds(-0.99, 10.0),
-                Target::CubicK3(_) => p.with_relative_bounds(-0.95, 10.0),
-                Target::QuadraticK2(_) => p.with_relative_bounds(-0.95, 10.0),
-                Target::DamperC2(_) | Target::DamperC3(_) => p.with_relative_bounds(-0.95, 10.0),
-                Target::ClearanceGap(_) => p.with_relative_bounds(-0.8, 2.0),
-                Target::ClearanceStiffness(_) => p.with_relative_bounds(-0.98, 50.0),
-                Target::RelativeFrictionLevel(_) => p.with_relative_bounds(-0.99, 10.0),
-                Target::SpringStiffness(_) => p.with_relative_bounds(-0.9, 10.0),
-                _ => p,
-            })
+        .map(|&t| Ok(Parameter::relative(model, t)?.with_relative_bounds(-0.95, 10.0)));
+    let own = e.targets.iter().map(|&t| {
+        let p = Parameter::relative(model, t)?;
+        Ok(match t {
+            Target::ContactGap(_) => p.with_relative_bounds(-0.8, 2.0),
+            Target::ContactStiffness(_) => p.with_relative_bounds(-0.98, 50.0),
+            Target::FrictionLevel(_) => p.with_relative_bounds(-0.99, 10.0),
+            Target::CubicK3(_) => p.with_relative_bounds(-0.95, 10.0),
+            Target::QuadraticK2(_) => p.with_relative_bounds(-0.95, 10.0),
+            Target::DamperC2(_) | Target::DamperC3(_) => p.with_relative_bounds(-0.95, 10.0),
+            Target::ClearanceGap(_) => p.with_relative_bounds(-0.8, 2.0),
+            Target::ClearanceStiffness(_) => p.with_relative_bounds(-0.98, 50.0),
+            Target::RelativeFrictionLevel(_) => p.with_relative_bounds(-0.99, 10.0),
+            Target::SpringStiffness(_) => p.with_relative_bounds(-0.9, 10.0),
+            _ => p,
         })
-        .collect()
+    });
+    nuisance.chain(own).collect()
 }
 
 /// `model` with the effect `e` switched off (its other parameters and the

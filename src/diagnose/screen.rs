@@ -161,15 +161,15 @@ fn companion_gain(
     strides: &[f64],
 ) -> Result<Predicted> {
     let mut params = vec![];
-    let mut extra = 0;
     for e in all {
-        let p = effects::parameters(trial, e)?;
-        extra = p.len();
-        params.extend(p);
+        params.extend(effects::parameters(trial, e)?);
     }
     let Some(last) = all.last() else {
         return Ok((None, 0, None));
     };
+    // the candidate's own parameters (the last ones); its damping
+    // nuisance parameters before them are free with and without it
+    let extra = last.targets.len();
     let mut problem = cmp.problem(trial, segs.to_vec(), sim);
     problem.parameters = params;
     // linearized where the candidate is no change at all (the traced

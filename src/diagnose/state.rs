@@ -12,7 +12,7 @@ use super::DiagnoseSettings;
 use crate::integrate::SimSettings;
 use crate::model::Model;
 use crate::record::Record;
-use crate::trace::RankedEffect;
+use crate::trace::{EffectKind, RankedEffect};
 use crate::update::shooting::Segment;
 use nalgebra::DMatrix;
 use std::cell::RefCell;
@@ -190,10 +190,20 @@ impl<'a> Context<'a> {
 }
 
 /// The current model with `best` added at its traced values, its
-/// bookkeeping, and every added effect with it last.
+/// bookkeeping, and every added effect with it last. A dissipative
+/// candidate carries the model's damping parameters as its nuisance
+/// parameters ([`effects::damping_targets`]) unless an effect found
+/// already frees the damping (its own nuisance or a damping change).
 pub(super) fn add_to(st: &State, best: &RankedEffect) -> (Model, AddedEffect, Vec<AddedEffect>) {
     let mut trial = st.current.clone();
-    let eff = effects::add(&mut trial, best);
+    let mut eff = effects::add(&mut trial, best);
+    let freed = st
+        .added
+        .iter()
+        .any(|a| !a.effect.nuisance.is_empty() || a.effect.candidate.kind == EffectKind::Damping);
+    if best.candidate.kind.dissipative() && !freed {
+        eff.nuisance = effects::damping_targets(&trial);
+    }
     let mut all: Vec<AddedEffect> = st.added.iter().map(|a| a.effect.clone()).collect();
     all.push(eff.clone());
     (trial, eff, all)

@@ -97,9 +97,11 @@ fn standard_errors(
     for (ei, k) in added.iter().enumerate() {
         match effects::parameters(model, &k.effect) {
             Ok(ps) => {
+                // its damping nuisance parameters first, never reported
+                let nuis = k.effect.nuisance.len();
                 for (pi, p) in ps.into_iter().enumerate() {
                     params.push(p);
-                    owner.push((ei, pi));
+                    owner.push((ei, pi.checked_sub(nuis).unwrap_or(usize::MAX - pi)));
                 }
             }
             Err(e) => ctx.tolerate(

@@ -44,6 +44,20 @@ impl EffectKind {
         )
     }
 
+    /// The effect dissipates energy along a law other than the viscous
+    /// damping's (friction to ground or between DOFs, a nonlinear damper):
+    /// it is fitted with the model's damping free beside it
+    /// ([`crate::diagnose::effects::damping_targets`]).
+    pub fn dissipative(self) -> bool {
+        matches!(
+            self,
+            EffectKind::Friction
+                | EffectKind::RelativeFriction
+                | EffectKind::QuadraticDamping
+                | EffectKind::CubicDamping
+        )
+    }
+
     /// Name as in reports.
     pub fn name(self) -> &'static str {
         match self {
