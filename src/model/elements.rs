@@ -724,13 +724,7 @@ pub fn jenkins_law(k: f64, fs: f64, d: f64, slip: f64) -> (f64, f64) {
 
 /// Total internal force of a set of elements with their states (`slips`,
 /// one per element, as the integrator carries them).
-pub fn internal_force_at(
-    elements: &[Element],
-    u: &[f64],
-    v: &[f64],
-    slips: &[f64],
-    f: &mut [f64],
-) {
+pub fn internal_force_at(elements: &[Element], u: &[f64], v: &[f64], slips: &[f64], f: &mut [f64]) {
     f.iter_mut().for_each(|x| *x = 0.0);
     for (e, &z) in elements.iter().zip(slips) {
         e.force_and_slope_at(u, v, z, f);
@@ -1087,8 +1081,9 @@ mod tests {
         let f: Vec<f64> = (a..=b).map(|s| sim.fint[(0, s)]).collect();
         let fmax = f.iter().fold(0.0f64, |x, y| x.max(y.abs()));
         approx::assert_relative_eq!(fmax, fs, max_relative = 1e-9);
-        let x = 0.5 * (u.iter().cloned().fold(f64::MIN, f64::max)
-            - u.iter().cloned().fold(f64::MAX, f64::min));
+        let x = 0.5
+            * (u.iter().cloned().fold(f64::MIN, f64::max)
+                - u.iter().cloned().fold(f64::MAX, f64::min));
         assert!(x > 2.0 * fs / k, "excursion {x}: the slider must slip");
         let area: f64 = (1..u.len())
             .map(|s| 0.5 * (f[s] + f[s - 1]) * (u[s] - u[s - 1]))
