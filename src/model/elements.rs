@@ -731,7 +731,8 @@ pub fn internal_force_at(elements: &[Element], u: &[f64], v: &[f64], slips: &[f6
     }
 }
 
-/// Total internal force of a set of elements.
+/// Total internal force of a set of elements (a Jenkins element at zero
+/// slip; [`internal_force_at`] takes the slips the integrator carries).
 pub fn internal_force(elements: &[Element], u: &[f64], v: &[f64], f: &mut [f64]) {
     f.iter_mut().for_each(|x| *x = 0.0);
     for e in elements {

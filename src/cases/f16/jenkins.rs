@@ -478,15 +478,15 @@ driving_point = "exc"
 [[modal.mode]]
 frequency_hz = 3.0
 damping = 0.02
-shape = [0.5, 0.3, 0.2]
+shape = [0.4, 0.3, 0.25]
 [[modal.mode]]
 frequency_hz = 5.0
 damping = 0.01
-shape = [0.2, -0.4, 0.3]
+shape = [0.3, -0.1, -0.3]
 [[modal.mode]]
 frequency_hz = 7.0
 damping = 0.01
-shape = [0.1, 0.3, -0.6]
+shape = [0.1, -0.4, 0.4]
 "#;
         let t: toml::Table = text.parse().unwrap();
         t["modal"].clone().try_into().unwrap()
