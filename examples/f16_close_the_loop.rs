@@ -24,7 +24,16 @@
 //! held|free` holds the Level-1 linear part (default) or fits the
 //! coupling spring and the wing bending and torsion damping with it;
 //! `--interface-damper quadratic|cubic` chooses the damper's law (default
-//! cubic).
+//! cubic). `--jenkins` fits the Level-1 model with a Jenkins element
+//! (stick–slip friction) between wing and payload taking part of their
+//! coupling spring, on the linear record and the estimation record
+//! together, by open-loop output error with finite differences, and
+//! scores it per channel and per frequency band on every level file in
+//! DIR (report.json `jenkins`, OUT/model-jenkins.toml);
+//! `--residual-damping Z|identified` sets the damping ratio of the
+//! residual mode above the band in that model (default 0.3),
+//! `--jenkins-elements N` puts N Jenkins elements in parallel (an Iwan
+//! model; default 1).
 
 use std::path::{Path, PathBuf};
 use tacit::cases::f16;
@@ -40,6 +49,9 @@ struct Args {
     interface_fit: bool,
     interface_linear: f16::LinearPart,
     interface_damper: f16::Damper,
+    jenkins: bool,
+    residual_damping: Option<f64>,
+    jenkins_elements: usize,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -54,6 +66,9 @@ fn args() -> anyhow::Result<Args> {
         interface_fit: false,
         interface_linear: f16::LinearPart::Held,
         interface_damper: f16::Damper::Cubic,
+        jenkins: false,
+        residual_damping: Some(0.3),
+        jenkins_elements: 1,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let mut it = argv.iter();
@@ -62,9 +77,26 @@ fn args() -> anyhow::Result<Args> {
             a.interface_fit = true;
             continue;
         }
+        if flag == "--jenkins" {
+            a.jenkins = true;
+            continue;
+        }
         let value = it
             .next()
             .ok_or_else(|| anyhow::anyhow!("{flag} needs a value"))?;
+        if flag == "--residual-damping" {
+            a.residual_damping = match value.as_str() {
+                "identified" => None,
+                v => Some(v.parse().map_err(|e| {
+                    anyhow::anyhow!("--residual-damping {v}: {e} (a ratio or identified)")
+                })?),
+            };
+            continue;
+        }
+        if flag == "--jenkins-elements" {
+            a.jenkins_elements = value.parse()?;
+            continue;
+        }
         if flag == "--min-gain" {
             a.min_gain = Some(value.parse()?);
             continue;
@@ -171,10 +203,62 @@ fn main() -> anyhow::Result<()> {
         std::fs::write(a.out.join("model-interface.toml"), model.to_toml_string())?;
         json["interface_fit"] = serde_json::to_value(&fit)?;
     }
+    if a.jenkins {
+        json["jenkins"] = jenkins_study(&a, &settings)?;
+    }
     std::fs::write(
         a.out.join("report.json"),
         serde_json::to_string_pretty(&json)?,
     )?;
     println!("report: {}", a.out.join("report.json").display());
     Ok(())
+}
+
+/// The Jenkins interface fitted and scored on every level file; prints its
+/// table and writes OUT/model-jenkins.toml.
+fn jenkins_study(a: &Args, settings: &f16::Settings) -> anyhow::Result<serde_json::Value> {
+    let levels: Vec<PathBuf> = (1..=7)
+        .map(|n| a.data.join(format!("F16Data_FullMSine_Level{n}.mat")))
+        .filter(|p| p.exists())
+        .collect();
+    let refs: Vec<&Path> = levels.iter().map(|p| p.as_path()).collect();
+    let spec = f16::jenkins::FitSpec {
+        upper_residual_damping: a.residual_damping,
+        elements: a.jenkins_elements,
+        substeps: settings.substeps,
+        warm_up: settings.warm_up,
+        ..Default::default()
+    };
+    let (st, model) = f16::jenkins::study(&a.linear, &a.estimate, &refs, &spec, settings)?;
+    let f = &st.fitted;
+    println!(
+        "jenkins interface {}-{}: k_J {:.4e} N/m of the coupling {:.4e} N/m, slip force {:.4e} N \
+         (slip at {:.3e} m), {} element(s); cost {:.4} -> {:.4}, {} after {} simulations, {:.1} s",
+        f.points[0],
+        f.points[1],
+        f.stiffness,
+        f.coupling,
+        f.slip_force,
+        f.slip_displacement,
+        f.elements,
+        f.cost.0,
+        f.cost.1,
+        f.termination,
+        f.simulations,
+        f.seconds
+    );
+    for x in &st.scores {
+        let file = Path::new(&x.record)
+            .file_name()
+            .map_or(x.record.clone(), |n| n.to_string_lossy().into_owned());
+        println!(
+            "  {file} {:<40} {:.3?} m/s^2; per band {:?}: {:.3?}",
+            x.model,
+            x.rms_per_channel,
+            f16::BANDS_HZ,
+            x.rms_per_band
+        );
+    }
+    std::fs::write(a.out.join("model-jenkins.toml"), model.to_toml_string())?;
+    Ok(serde_json::to_value(&st)?)
 }

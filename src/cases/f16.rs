@@ -22,6 +22,8 @@ use crate::record::{self, MatChannel, MatMapping, MatRate, Quantity, Record, War
 use serde::Serialize;
 use std::path::Path;
 
+pub mod jenkins;
+
 /// The points, in the order of the `Acceleration` rows.
 pub const POINTS: [&str; 3] = ["exc", "wing", "payload"];
 
@@ -146,6 +148,19 @@ pub fn rms_per_channel(
     warm_up: usize,
     substeps: usize,
 ) -> Result<Vec<f64>> {
+    let e = simulate_errors(model, rec, warm_up, substeps)?;
+    Ok(e.iter().map(|c| crate::signal::rms_of(c)).collect())
+}
+
+/// Open-loop simulation of `model` from rest under the record's force:
+/// per output channel, simulated minus measured acceleration (m/s²) at
+/// the samples after `warm_up`.
+pub fn simulate_errors(
+    model: &Model,
+    rec: &Record,
+    warm_up: usize,
+    substeps: usize,
+) -> Result<Vec<Vec<f64>>> {
     let n = rec.len();
     let nd = model.ndof();
     let force = crate::signal::force_matrix(rec, nd);
@@ -171,12 +186,46 @@ pub fn rms_per_channel(
             ));
         }
         let d = c.dof - 1;
-        let ss: f64 = (warm_up..n)
-            .map(|k| (run.a[(d, k)] - c.data[k]).powi(2))
-            .sum();
-        out.push((ss / (n - warm_up) as f64).sqrt());
+        out.push((warm_up..n).map(|k| run.a[(d, k)] - c.data[k]).collect());
     }
     Ok(out)
+}
+
+/// The frequency bands (Hz) of [`band_rms`] on this case: below the
+/// excited band, the rigid-body modes, wing bending, wing torsion, the
+/// modes above, and above the excited band.
+pub const BANDS_HZ: [(f64, f64); 6] = [
+    (0.0, 2.0),
+    (2.0, 4.5),
+    (4.5, 6.2),
+    (6.2, 8.5),
+    (8.5, 15.0),
+    (15.0, f64::INFINITY),
+];
+
+/// RMS of each signal in each frequency band (Hz; `[lo, hi)`), from its
+/// discrete Fourier transform at rate `fs` (Parseval: the squares of the
+/// bands sum to the square of the whole RMS).
+pub fn band_rms(signals: &[Vec<f64>], fs: f64, bands: &[(f64, f64)]) -> Vec<Vec<f64>> {
+    use rustfft::{num_complex::Complex, FftPlanner};
+    let mut planner = FftPlanner::<f64>::new();
+    signals
+        .iter()
+        .map(|x| {
+            let n = x.len();
+            let mut buf: Vec<Complex<f64>> = x.iter().map(|&v| Complex::new(v, 0.0)).collect();
+            planner.plan_fft_forward(n).process(&mut buf);
+            let mut ss = vec![0.0; bands.len()];
+            for (k, c) in buf.iter().enumerate() {
+                // bin k and its mirror n − k share the frequency
+                let f = k.min(n - k) as f64 * fs / n as f64;
+                if let Some(b) = bands.iter().position(|&(lo, hi)| f >= lo && f < hi) {
+                    ss[b] += c.norm_sqr();
+                }
+            }
+            ss.iter().map(|s| (s / (n * n) as f64).sqrt()).collect()
+        })
+        .collect()
 }
 
 /// Per-channel RMS errors, m/s², before, with the linear part calibrated,
@@ -645,4 +694,68 @@ pub fn interface_study(
         seconds,
     };
     Ok((fit, m))
+}
+
+/// One model scored on one record.
+#[derive(Debug, Clone, Serialize)]
+pub struct Scored {
+    /// The model's name.
+    pub model: String,
+    /// The record.
+    pub record: String,
+    /// Open-loop RMS error per channel over the steady-state periods, m/s².
+    pub rms_per_channel: Vec<f64>,
+    /// The same per frequency band of [`BANDS_HZ`]: `[channel][band]`.
+    pub rms_per_band: Vec<Vec<f64>>,
+}
+
+/// Score every model on every record (open loop from rest, RMS per channel
+/// and per band over the samples after `warm_up`).
+pub fn score(
+    models: &[(&str, &Model)],
+    records: &[&Record],
+    warm_up: usize,
+    substeps: usize,
+) -> Result<Vec<Scored>> {
+    let mut out = vec![];
+    for rec in records {
+        for (name, m) in models {
+            let e = simulate_errors(m, rec, warm_up, substeps)?;
+            out.push(Scored {
+                model: name.to_string(),
+                record: rec.source.display().to_string(),
+                rms_per_channel: e.iter().map(|c| crate::signal::rms_of(c)).collect(),
+                rms_per_band: band_rms(&e, rec.fs, &BANDS_HZ),
+            });
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn band_rms_puts_each_sine_in_its_band_and_keeps_the_total() {
+        let fs = 400.0;
+        // 0.05 Hz bins: both lines on a bin
+        let n = 8000;
+        // 7 Hz (torsion band) amplitude 2, 12 Hz amplitude 1, offset 0.5
+        let x: Vec<f64> = (0..n)
+            .map(|k| {
+                let t = k as f64 / fs;
+                0.5 + 2.0 * (2.0 * std::f64::consts::PI * 7.0 * t).sin()
+                    + (2.0 * std::f64::consts::PI * 12.0 * t).cos()
+            })
+            .collect();
+        let b = band_rms(std::slice::from_ref(&x), fs, &BANDS_HZ);
+        let b = &b[0];
+        approx::assert_relative_eq!(b[3], 2.0 / 2f64.sqrt(), max_relative = 1e-9);
+        approx::assert_relative_eq!(b[4], 1.0 / 2f64.sqrt(), max_relative = 1e-9);
+        approx::assert_relative_eq!(b[0], 0.5, max_relative = 1e-9);
+        assert!(b[1] < 1e-9 && b[2] < 1e-9 && b[5] < 1e-9, "{b:?}");
+        let total: f64 = b.iter().map(|v| v * v).sum::<f64>().sqrt();
+        approx::assert_relative_eq!(total, crate::signal::rms_of(&x), max_relative = 1e-12);
+    }
 }

@@ -176,6 +176,9 @@ pub struct Integrator {
     /// Batch the sub-steps without an active element (off only to test
     /// the batching against the plain recursion).
     batch_linear: bool,
+    /// Some element carries a state (a Jenkins element's slip), committed
+    /// at every accepted sub-step.
+    stateful: bool,
 }
 
 /// The state after a whole sample as an affine function of the state at
@@ -292,6 +295,7 @@ impl Integrator {
             .filter(|&e| matches!(elements[e], Element::Contact { .. }))
             .collect();
         let c_zero = c.iter().all(|&x| x == 0.0);
+        let stateful = elements.iter().any(Element::has_state);
         let contact_gaps = elements
             .iter()
             .filter_map(|e| match *e {
@@ -319,6 +323,7 @@ impl Integrator {
             c_zero,
             sample_map: std::sync::OnceLock::new(),
             batch_linear: true,
+            stateful,
         })
     }
 
@@ -429,7 +434,7 @@ impl Integrator {
                     self.g_of::<N>(&mut ws);
                 }
             }
-            elements::internal_force(&self.elements, &ws.u, &ws.v, &mut ws.fnl);
+            elements::internal_force_at(&self.elements, &ws.u, &ws.v, &ws.slips, &mut ws.fnl);
             out.store(&ws, k);
             done = k + 1;
         }
@@ -493,6 +498,12 @@ impl Integrator {
             a[i] = a0 * un + ws.z[i];
             v[i] = a1 * un + ws.w[i];
             u[i] = un;
+        }
+        // the Jenkins elements' slips committed at the accepted point
+        if self.stateful {
+            for (e, z) in self.elements.iter().zip(ws.slips.iter_mut()) {
+                *z = e.committed_slip(&ws.u, *z);
+            }
         }
     }
 
@@ -695,7 +706,7 @@ impl Integrator {
 
     /// g = C v + K u + f_int(u, v) at the current state (HHT only).
     fn g_of<const N: usize>(&self, ws: &mut Work) {
-        elements::internal_force(&self.elements, &ws.u, &ws.v, &mut ws.g);
+        elements::internal_force_at(&self.elements, &ws.u, &ws.v, &ws.slips, &mut ws.g);
         mat_vec_axpy::<N>(self.c.as_slice(), self.n, &ws.v, 1.0, &mut ws.g);
         mat_vec_axpy::<N>(self.k.as_slice(), self.n, &ws.u, 1.0, &mut ws.g);
     }
@@ -719,8 +730,9 @@ impl Integrator {
                 vn[i] = a1 * un[i] + ws.w[i];
             }
             fnl.fill(0.0);
-            for (e, s) in self.elements.iter().zip(ws.slopes.iter_mut()) {
-                *s = e.force_and_slope(un, vn, fnl);
+            let slopes = ws.slopes.iter_mut().zip(&ws.slips);
+            for (e, (s, &z)) in self.elements.iter().zip(slopes) {
+                *s = e.force_and_slope_at(un, vn, z, fnl);
             }
             // c1 > 0: max |c1 f| = c1 max |f| (rounding is monotone)
             scale = scale.max(c1 * max_abs::<N>(0.0, fnl, n));
@@ -943,6 +955,9 @@ struct Work {
     /// Slopes of the last Newton step's matrix and whether a step was
     /// taken in the current sub-step (the side check, the sensitivities).
     dir_slopes: Vec<f64>,
+    /// Committed internal state of each element (a Jenkins element's
+    /// slip, m; 0 for the elements without state).
+    slips: Vec<f64>,
     iterated: bool,
     /// Scratch of a batched sample: its inputs (5n) and the new state (3n).
     x5: Vec<f64>,
@@ -979,6 +994,7 @@ impl Work {
             jac_slopes: vec![0.0; n_elements],
             slopes: vec![0.0; n_elements],
             dir_slopes: vec![0.0; n_elements],
+            slips: vec![0.0; n_elements],
             iterated: false,
             x5: vec![0.0; 5 * n],
             y3: vec![0.0; 3 * n],

@@ -19,6 +19,18 @@
 //!   handling (side checks, batched open samples, sensitivities) applies.
 //! - Coulomb friction between two DOFs (relative sliding), regularised as
 //!   the friction against ground: `f = F tanh(ν / v_r)`.
+//! - Jenkins element between two DOFs or to ground: a spring `k` in series
+//!   with a Coulomb slider of slip force `F_s`, with an internal slip state
+//!   `z` (the slider's displacement). Force `f = k (δ − z)`, `|f| ≤ F_s`:
+//!   stuck (`ż = 0`, slope `k`) while the trial force `k (δ − z_n)` from
+//!   the last committed slip stays within `±F_s`, slipping beyond it
+//!   (`f = ±F_s`, slope 0, the slip moved so that `k (δ − z) = ±F_s`).
+//!   This is the return mapping of rate-independent plasticity (Simo &
+//!   Hughes, *Computational Inelasticity*, 1998, §1.4): the force is a
+//!   function of `δ` given the committed slip, and the slip is committed
+//!   once per accepted step ([`Element::committed_slip`]). Under an imposed
+//!   `δ = X sin ωt` with `X > F_s / k` the loop is a parallelogram of
+//!   area `4 F_s (X − F_s / k)` per cycle (Iwan 1966).
 
 use serde::{Deserialize, Serialize};
 
@@ -117,6 +129,19 @@ pub struct RelativeFriction {
     pub velocity: f64,
 }
 
+/// Jenkins element: a spring in series with a Coulomb slider (stick–slip
+/// friction with a finite stuck stiffness).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Jenkins {
+    /// `[i, j]` or `[i]` (to ground).
+    pub dofs: Vec<usize>,
+    /// Stiffness of the spring while the slider sticks, N/m (> 0).
+    pub stiffness: f64,
+    /// Slip force of the slider, N (>= 0).
+    pub slip_force: f64,
+}
+
 /// One nonlinear element in compiled, 0-based form for the integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Element {
@@ -187,6 +212,18 @@ pub enum Element {
         /// Regularisation velocity, m/s.
         vreg: f64,
     },
+    /// Jenkins element (spring `k` in series with a slider `F_s`); its slip
+    /// state is carried by the integrator.
+    Jenkins {
+        /// First DOF.
+        i: usize,
+        /// Second DOF.
+        j: Option<usize>,
+        /// Stuck stiffness, N/m.
+        k: f64,
+        /// Slip force, N.
+        fs: f64,
+    },
 }
 
 /// Gather the model's elements into compiled form.
@@ -238,6 +275,15 @@ pub fn compile(model: &super::Model) -> Vec<Element> {
     for c in &model.clearances {
         out.extend(clearance_contacts(c));
     }
+    for e in &model.jenkins {
+        let (i, j) = ends(&e.dofs);
+        out.push(Element::Jenkins {
+            i,
+            j,
+            k: e.stiffness,
+            fs: e.slip_force,
+        });
+    }
     out
 }
 
@@ -282,6 +328,8 @@ pub enum ElementList {
     RelativeFriction,
     /// `model.clearances` (two compiled contacts each).
     Clearance,
+    /// `model.jenkins`.
+    Jenkins,
 }
 
 /// Index in [`compile`]`(model)` of the (first) element compiled from entry
@@ -300,6 +348,7 @@ pub fn compiled_index(model: &super::Model, list: ElementList, index: usize) -> 
             model.relative_frictions.len(),
         ),
         (ElementList::Clearance, 2 * model.clearances.len()),
+        (ElementList::Jenkins, model.jenkins.len()),
     ];
     let before: usize = sizes
         .iter()
@@ -362,6 +411,13 @@ impl Element {
     /// into a tangent without evaluating the law again.
     #[inline(always)]
     pub fn force_and_slope(&self, u: &[f64], v: &[f64], f: &mut [f64]) -> f64 {
+        self.force_and_slope_at(u, v, 0.0, f)
+    }
+
+    /// [`Element::force_and_slope`] with a Jenkins element's committed slip
+    /// `slip` (m; ignored by the other elements, which have no state).
+    #[inline(always)]
+    pub fn force_and_slope_at(&self, u: &[f64], v: &[f64], slip: f64, f: &mut [f64]) -> f64 {
         match *self {
             Element::Contact { i, j, gap, k } => {
                 let p = rel(u, i, j) - gap;
@@ -402,7 +458,34 @@ impl Element {
                 scatter(f, i, Some(j), level * th);
                 level / vreg * (1.0 - th * th)
             }
+            Element::Jenkins { i, j, k, fs } => {
+                let (force, slope) = jenkins_law(k, fs, rel(u, i, j), slip);
+                scatter(f, i, j, force);
+                slope
+            }
         }
+    }
+
+    /// The slip to commit after an accepted step that ends at `u`, from the
+    /// slip `slip` committed before it (the return mapping: unchanged while
+    /// stuck, moved to `δ ∓ F_s / k` while slipping); `slip` itself for the
+    /// elements without state.
+    #[inline]
+    pub fn committed_slip(&self, u: &[f64], slip: f64) -> f64 {
+        match *self {
+            Element::Jenkins { i, j, k, fs } => {
+                let d = rel(u, i, j);
+                let (force, _) = jenkins_law(k, fs, d, slip);
+                d - force / k
+            }
+            _ => slip,
+        }
+    }
+
+    /// True for an element with an internal state the integrator carries
+    /// (the Jenkins element's slip).
+    pub fn has_state(&self) -> bool {
+        matches!(self, Element::Jenkins { .. })
     }
 
     /// Add `c_u slope` (displacement laws) or `c_v slope` (velocity laws:
@@ -416,7 +499,8 @@ impl Element {
         match *self {
             Element::Contact { i, j, .. }
             | Element::Cubic { i, j, .. }
-            | Element::Quadratic { i, j, .. } => scatter_tangent(t, n, i, j, cu * slope),
+            | Element::Quadratic { i, j, .. }
+            | Element::Jenkins { i, j, .. } => scatter_tangent(t, n, i, j, cu * slope),
             Element::Friction { d, .. } => t[d * n + d] += cv * slope,
             Element::QuadraticDamper { i, j, .. } | Element::CubicDamper { i, j, .. } => {
                 scatter_tangent(t, n, i, j, cv * slope)
@@ -447,7 +531,8 @@ impl Element {
             | Element::Cubic { i, j, .. }
             | Element::Quadratic { i, j, .. }
             | Element::QuadraticDamper { i, j, .. }
-            | Element::CubicDamper { i, j, .. } => (i, j),
+            | Element::CubicDamper { i, j, .. }
+            | Element::Jenkins { i, j, .. } => (i, j),
             Element::Friction { d, .. } => (d, None),
             Element::RelativeFriction { i, j, .. } => (i, Some(j)),
         }
@@ -466,7 +551,8 @@ impl Element {
             | Element::Cubic { i, j, .. }
             | Element::Quadratic { i, j, .. }
             | Element::QuadraticDamper { i, j, .. }
-            | Element::CubicDamper { i, j, .. } => (*i, *j) = (i2, j2),
+            | Element::CubicDamper { i, j, .. }
+            | Element::Jenkins { i, j, .. } => (*i, *j) = (i2, j2),
             Element::Friction { d, .. } => *d = i2,
             Element::RelativeFriction { i, j, .. } => (*i, *j) = (i2, j2?),
         }
@@ -609,7 +695,8 @@ impl Element {
         match *self {
             Element::Contact { i, j, .. }
             | Element::Cubic { i, j, .. }
-            | Element::Quadratic { i, j, .. } => scatter(y, i, j, cu * slope * rel(xu, i, j)),
+            | Element::Quadratic { i, j, .. }
+            | Element::Jenkins { i, j, .. } => scatter(y, i, j, cu * slope * rel(xu, i, j)),
             Element::Friction { d, .. } => y[d] += cv * slope * xv[d],
             Element::QuadraticDamper { i, j, .. } | Element::CubicDamper { i, j, .. } => {
                 scatter(y, i, j, cv * slope * rel(xv, i, j))
@@ -621,7 +708,31 @@ impl Element {
     }
 }
 
-/// Total internal force of a set of elements.
+/// The Jenkins law at relative displacement `d` from the committed slip
+/// `slip`: (force, `∂f/∂δ`). Stuck, `k (d − slip)` with slope `k`, while
+/// that trial force is within `±F_s` (the boundary included); `±F_s` with
+/// slope 0 beyond.
+#[inline(always)]
+pub fn jenkins_law(k: f64, fs: f64, d: f64, slip: f64) -> (f64, f64) {
+    let trial = k * (d - slip);
+    if trial.abs() <= fs {
+        (trial, k)
+    } else {
+        (fs.copysign(trial), 0.0)
+    }
+}
+
+/// Total internal force of a set of elements with their states (`slips`,
+/// one per element, as the integrator carries them).
+pub fn internal_force_at(elements: &[Element], u: &[f64], v: &[f64], slips: &[f64], f: &mut [f64]) {
+    f.iter_mut().for_each(|x| *x = 0.0);
+    for (e, &z) in elements.iter().zip(slips) {
+        e.force_and_slope_at(u, v, z, f);
+    }
+}
+
+/// Total internal force of a set of elements (a Jenkins element at zero
+/// slip; [`internal_force_at`] takes the slips the integrator carries).
 pub fn internal_force(elements: &[Element], u: &[f64], v: &[f64], f: &mut [f64]) {
     f.iter_mut().for_each(|x| *x = 0.0);
     for e in elements {
@@ -781,6 +892,9 @@ mod tests {
                     level: level + dq,
                     vreg,
                 },
+                // no parameter derivatives (finite differences of the
+                // simulation: its slip state has no recursion)
+                (e @ Element::Jenkins { .. }, _) => e,
             }
         };
         let cases = [
@@ -854,5 +968,128 @@ mod tests {
         u[4] = 0.3e-3;
         e.add_force(&u, &[0.0; 8], &mut f2);
         assert_eq!(f2, [0.0; 8]);
+    }
+
+    /// The force and loop area of a Jenkins element under an imposed
+    /// relative displacement `X sin(2π t/T)`, over the second cycle (`steps`
+    /// per cycle): (max |f|, ∮ f dδ by the trapezoidal rule).
+    fn jenkins_loop(k: f64, fs: f64, x: f64, steps: usize) -> (f64, f64) {
+        let e = Element::Jenkins {
+            i: 0,
+            j: Some(1),
+            k,
+            fs,
+        };
+        let (mut z, mut fmax, mut area) = (0.0, 0.0f64, 0.0);
+        let (mut d_prev, mut f_prev) = (0.0, 0.0);
+        for n in 1..=2 * steps {
+            let d = x * (2.0 * std::f64::consts::PI * n as f64 / steps as f64).sin();
+            let u = [d, 0.0];
+            let mut f = [0.0; 2];
+            let slope = e.force_and_slope_at(&u, &[0.0; 2], z, &mut f);
+            assert!(slope == k || slope == 0.0);
+            z = e.committed_slip(&u, z);
+            if n > steps {
+                fmax = fmax.max(f[0].abs());
+                area += 0.5 * (f[0] + f_prev) * (d - d_prev);
+            }
+            assert_eq!(f[1], -f[0]);
+            (d_prev, f_prev) = (d, f[0]);
+        }
+        (fmax, area)
+    }
+
+    #[test]
+    fn jenkins_loop_saturates_at_the_slip_force_with_the_closed_form_area() {
+        let (k, fs) = (2.0e4, 30.0);
+        for x in [2.0e-3, 5.0e-3, 2.0e-2] {
+            let (fmax, area) = jenkins_loop(k, fs, x, 20_000);
+            assert_eq!(fmax, fs, "X {x}");
+            // parallelogram: 4 F_s (X − F_s/k)
+            let exact = 4.0 * fs * (x - fs / k);
+            approx::assert_relative_eq!(area, exact, max_relative = 1e-3);
+        }
+        // below the slip displacement F_s/k it stays stuck: a line, no area
+        let (fmax, area) = jenkins_loop(k, fs, 0.9 * fs / k, 20_000);
+        approx::assert_relative_eq!(fmax, 0.9 * fs, max_relative = 1e-6);
+        assert!(area.abs() < 1e-12 * fs * fs / k, "area {area}");
+    }
+
+    #[test]
+    fn jenkins_law_sticks_then_slips_and_unloads_with_the_stuck_stiffness() {
+        let (k, fs) = (1.0e3, 2.0);
+        // loading from 0: stuck up to δ = 2 mm, then slipping at F_s
+        assert_eq!(jenkins_law(k, fs, 1.5e-3, 0.0), (1.5, k));
+        assert_eq!(jenkins_law(k, fs, 3.0e-3, 0.0), (2.0, 0.0));
+        let e = Element::Jenkins {
+            i: 0,
+            j: None,
+            k,
+            fs,
+        };
+        let z = e.committed_slip(&[3.0e-3], 0.0);
+        approx::assert_relative_eq!(z, 1.0e-3, max_relative = 1e-12);
+        // unloading by 1 mm from there: stuck, f = F_s − k · 1 mm
+        let (f, s) = jenkins_law(k, fs, 2.0e-3, z);
+        approx::assert_relative_eq!(f, 1.0, max_relative = 1e-12);
+        assert_eq!(s, k);
+        // reversed slip at −F_s once δ < z − F_s/k = −1 mm
+        assert_eq!(jenkins_law(k, fs, -1.5e-3, z), (-2.0, 0.0));
+        assert_eq!(e.committed_slip(&[2.0e-3], z), z);
+    }
+
+    #[test]
+    fn jenkins_in_the_integrator_dissipates_the_closed_form_energy() {
+        // a mass on a spring k0 and a Jenkins element to ground under a
+        // harmonic force: the simulated loop (u, f_int) saturates at ±F_s
+        // and its area equals 4 F_s (X − F_s/k), X its half-excursion
+        let (m, k0, k, fs) = (1.0, 4.0e3, 6.0e3, 3.0);
+        let model = crate::model::Model {
+            masses: vec![m],
+            springs: vec![crate::model::Spring {
+                dofs: vec![1],
+                stiffness: k0,
+                name: None,
+            }],
+            damping: crate::model::Damping::Rayleigh {
+                alpha: 10.0,
+                beta: 0.0,
+            },
+            jenkins: vec![Jenkins {
+                dofs: vec![1],
+                stiffness: k,
+                slip_force: fs,
+            }],
+            ..Default::default()
+        };
+        let (rate, f0, hz) = (2000.0, 12.0, 8.0);
+        let n = (24.0 * rate / hz) as usize;
+        let force = nalgebra::DMatrix::from_fn(1, n, |_, s| {
+            f0 * (2.0 * std::f64::consts::PI * hz * s as f64 / rate).sin()
+        });
+        let settings = crate::integrate::SimSettings {
+            substeps: 4,
+            ..Default::default()
+        };
+        let sim = crate::integrate::Integrator::new(&model, rate, settings)
+            .unwrap()
+            .run(force.as_view(), &[0.0], &[0.0]);
+        assert!(sim.completed());
+        // the last cycle
+        let per = (rate / hz) as usize;
+        let (a, b) = (n - per - 1, n - 1);
+        let u: Vec<f64> = (a..=b).map(|s| sim.u[(0, s)]).collect();
+        let f: Vec<f64> = (a..=b).map(|s| sim.fint[(0, s)]).collect();
+        let fmax = f.iter().fold(0.0f64, |x, y| x.max(y.abs()));
+        approx::assert_relative_eq!(fmax, fs, max_relative = 1e-9);
+        let x = 0.5
+            * (u.iter().cloned().fold(f64::MIN, f64::max)
+                - u.iter().cloned().fold(f64::MAX, f64::min));
+        assert!(x > 2.0 * fs / k, "excursion {x}: the slider must slip");
+        let area: f64 = (1..u.len())
+            .map(|s| 0.5 * (f[s] + f[s - 1]) * (u[s] - u[s - 1]))
+            .sum();
+        let exact = 4.0 * fs * (x - fs / k);
+        approx::assert_relative_eq!(area, exact, max_relative = 2e-2);
     }
 }

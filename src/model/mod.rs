@@ -20,7 +20,8 @@ use std::path::Path;
 use std::sync::Arc;
 
 pub use elements::{
-    Clearance, Contact, Cubic, CubicDamper, Friction, Quadratic, QuadraticDamper, RelativeFriction,
+    Clearance, Contact, Cubic, CubicDamper, Friction, Jenkins, Quadratic, QuadraticDamper,
+    RelativeFriction,
 };
 
 /// A linear spring between two DOFs, or from a DOF to ground.
@@ -131,6 +132,9 @@ pub struct Model {
         skip_serializing_if = "Vec::is_empty"
     )]
     pub relative_frictions: Vec<RelativeFriction>,
+    /// Jenkins elements (a spring in series with a Coulomb slider).
+    #[serde(default, rename = "jenkins", skip_serializing_if = "Vec::is_empty")]
+    pub jenkins: Vec<Jenkins>,
     /// Linear parameters marked free (`[free]`: `masses`, `springs`,
     /// `damping`, each true or false, defaults those of
     /// [`crate::calibrate::Freedom`]): their values are starting values,
@@ -304,7 +308,8 @@ impl Model {
             && self.quadratic_dampers.is_empty()
             && self.cubic_dampers.is_empty()
             && self.clearances.is_empty()
-            && self.relative_frictions.is_empty())
+            && self.relative_frictions.is_empty()
+            && self.jenkins.is_empty())
     }
 
     /// A copy without nonlinear elements.
@@ -318,6 +323,7 @@ impl Model {
             cubic_dampers: vec![],
             clearances: vec![],
             relative_frictions: vec![],
+            jenkins: vec![],
             ..self.clone()
         }
     }
@@ -485,6 +491,21 @@ impl Model {
                 return err(format!(
                     "relative_friction[{i}].velocity = {}: must be > 0",
                     f.velocity
+                ));
+            }
+        }
+        for (i, e) in self.jenkins.iter().enumerate() {
+            check_dofs(format!("jenkins[{i}]"), &e.dofs, true)?;
+            if !(e.stiffness.is_finite() && e.stiffness > 0.0) {
+                return err(format!(
+                    "jenkins[{i}].stiffness = {}: must be > 0",
+                    e.stiffness
+                ));
+            }
+            if !(e.slip_force.is_finite() && e.slip_force >= 0.0) {
+                return err(format!(
+                    "jenkins[{i}].slip_force = {}: must be >= 0",
+                    e.slip_force
                 ));
             }
         }

@@ -285,6 +285,9 @@ impl Integrator {
         let n = self.n;
         let err = |m: String| TacitError::Setting(format!("sensitivities: {m}"));
         let bad = |m: String| Err(err(m));
+        if self.stateful {
+            return bad("a Jenkins element's slip state has no derivative recursion here; take finite differences of the simulation".into());
+        }
         if force.nrows() != n || u0.len() < n || v0.len() < n {
             return bad(format!(
                 "force has {} rows, u0 {} and v0 {} values; the model has {n} DOFs",
