@@ -1144,6 +1144,56 @@ mod tests {
         MatrixModel::from_matrices("chain", m, k, None, table)
     }
 
+    /// A fixed-free chain of `n` unit masses and springs of 1e4, points
+    /// `p1`…`pn`, no damping model.
+    fn long_chain(n: usize, extra: &str) -> MatrixModel {
+        let m = ((n, n), (0..n).map(|i| (i, i, 1.0)).collect());
+        let mut k = vec![];
+        for i in 0..n {
+            k.push((i, i, if i + 1 < n { 2e4 } else { 1e4 }));
+            if i + 1 < n {
+                k.push((i, i + 1, -1e4));
+                k.push((i + 1, i, -1e4));
+            }
+        }
+        let pts: String = (0..n).map(|i| format!("p{} = {}\n", i + 1, i + 1)).collect();
+        let table: toml::Table = format!("[points]\n{pts}{extra}").parse().unwrap();
+        MatrixModel::from_matrices("long", m, ((n, n), k), None, table).unwrap()
+    }
+
+    #[test]
+    fn modes_above_the_cut_off_are_damped_and_the_others_left_alone() {
+        let mm = long_chain(40, "[reduction]\ncutoff_hz = 20.0\n");
+        let model = mm.reduce(&["p10".into(), "p40".into()], None).unwrap();
+        let rep = model.matrices.as_ref().unwrap().report.clone().unwrap();
+        let (m, k) = (model.mass_matrix(), model.stiffness_matrix());
+        let c = model.damping_matrix().unwrap();
+        let modes = crate::modal::solve(&m, &k).unwrap();
+        let mut above = 0;
+        for r in 0..modes.omega.len() {
+            let phi = modes.shapes.column(r);
+            let zeta = (phi.transpose() * &c * phi)[(0, 0)] / (2.0 * modes.omega[r]);
+            if modes.freq_hz[r] > 20.0 {
+                above += 1;
+                approx::assert_relative_eq!(zeta, ABOVE_CUTOFF_DAMPING, max_relative = 1e-9);
+            } else {
+                assert!(zeta.abs() < 1e-12, "mode {r} at {} Hz: {zeta}", modes.freq_hz[r]);
+            }
+        }
+        assert!(above > 0 && above == rep.damped_above_cutoff, "{above} {rep:?}");
+        assert_eq!(rep.above_cutoff_damping, ABOVE_CUTOFF_DAMPING);
+        // every DOF kept: the reduction is exact, nothing is added
+        let all: Vec<String> = (1..=40).map(|i| format!("p{i}")).collect();
+        let exact = mm.reduce(&all, None).unwrap();
+        let lin = exact.matrices.as_ref().unwrap();
+        assert_eq!(lin.report.as_ref().unwrap().damped_above_cutoff, 0);
+        assert!(lin.c.is_none());
+        // a ratio outside [0, 1] is an error naming the key
+        let bad = long_chain(40, "[reduction]\ncutoff_hz = 20.0\nabove_cutoff_damping = 1.5\n");
+        let e = bad.reduce(&["p10".into()], None).unwrap_err().to_string();
+        assert!(e.contains("above_cutoff_damping = 1.5"), "{e}");
+    }
+
     #[test]
     fn matrices_in_memory_are_checked_as_files_are() {
         let mm = chain("").unwrap();
