@@ -1156,7 +1156,9 @@ mod tests {
                 k.push((i + 1, i, -1e4));
             }
         }
-        let pts: String = (0..n).map(|i| format!("p{} = {}\n", i + 1, i + 1)).collect();
+        let pts: String = (0..n)
+            .map(|i| format!("p{} = {}\n", i + 1, i + 1))
+            .collect();
         let table: toml::Table = format!("[points]\n{pts}{extra}").parse().unwrap();
         MatrixModel::from_matrices("long", m, ((n, n), k), None, table).unwrap()
     }
@@ -1177,10 +1179,17 @@ mod tests {
                 above += 1;
                 approx::assert_relative_eq!(zeta, ABOVE_CUTOFF_DAMPING, max_relative = 1e-9);
             } else {
-                assert!(zeta.abs() < 1e-12, "mode {r} at {} Hz: {zeta}", modes.freq_hz[r]);
+                assert!(
+                    zeta.abs() < 1e-12,
+                    "mode {r} at {} Hz: {zeta}",
+                    modes.freq_hz[r]
+                );
             }
         }
-        assert!(above > 0 && above == rep.damped_above_cutoff, "{above} {rep:?}");
+        assert!(
+            above > 0 && above == rep.damped_above_cutoff,
+            "{above} {rep:?}"
+        );
         assert_eq!(rep.above_cutoff_damping, ABOVE_CUTOFF_DAMPING);
         // every DOF kept: the reduction is exact, nothing is added
         let all: Vec<String> = (1..=40).map(|i| format!("p{i}")).collect();
@@ -1189,7 +1198,10 @@ mod tests {
         assert_eq!(lin.report.as_ref().unwrap().damped_above_cutoff, 0);
         assert!(lin.c.is_none());
         // a ratio outside [0, 1] is an error naming the key
-        let bad = long_chain(40, "[reduction]\ncutoff_hz = 20.0\nabove_cutoff_damping = 1.5\n");
+        let bad = long_chain(
+            40,
+            "[reduction]\ncutoff_hz = 20.0\nabove_cutoff_damping = 1.5\n",
+        );
         let e = bad.reduce(&["p10".into()], None).unwrap_err().to_string();
         assert!(e.contains("above_cutoff_damping = 1.5"), "{e}");
     }
