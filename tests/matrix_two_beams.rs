@@ -1,4 +1,4 @@
-//! Issue 17's interface check: two clamped beams (408 DOFs, written by
+//! Issue 17's interface check: two clamped beams (204 DOFs, written by
 //! `scripts/two_beams_mtx.py`) joined at their tips by a spring, relative
 //! Coulomb friction (0.3 N) and a two-sided clearance (gap 0.6 mm,
 //! 2e4 N/m). Recorded by `tacit simulate` at four points, driven at

@@ -58,6 +58,11 @@ pub struct ReductionSpec {
     /// Most fixed-interface modes (default 200).
     #[serde(default)]
     pub max_modes: Option<usize>,
+    /// Damping ratio added to the reduced model's modes above the cut-off
+    /// (default [`ABOVE_CUTOFF_DAMPING`]; 0 leaves them as the damping
+    /// model makes them).
+    #[serde(default)]
+    pub above_cutoff_damping: Option<f64>,
 }
 
 /// A matrix in memory: its size (rows, columns) and its entries
@@ -68,6 +73,10 @@ pub type Entries = ((usize, usize), Vec<(usize, usize, f64)>);
 pub const BAND_FACTOR: f64 = 2.0;
 /// Default most fixed-interface modes.
 pub const MAX_MODES: usize = 200;
+/// Default damping ratio added to the modes of a reduced model above its
+/// cut-off: the frequencies there are the reduction's, not the full
+/// model's (docs/formats.md, "Reduction").
+pub const ABOVE_CUTOFF_DAMPING: f64 = 0.7;
 
 /// A model read from matrices, before reduction.
 #[derive(Debug, Clone)]
@@ -130,6 +139,12 @@ pub struct ReductionReport {
     pub max_error_in_band: f64,
     /// Largest relative frequency error up to `check_up_to_hz`.
     pub max_error: f64,
+    /// Modes of the reduced model above the cut-off given the added
+    /// damping ratio `above_cutoff_damping` (0 when the reduction is exact:
+    /// every DOF kept or every interior mode retained).
+    pub damped_above_cutoff: usize,
+    /// Damping ratio added to those modes.
+    pub above_cutoff_damping: f64,
     /// Time to build the reduction, s.
     pub seconds: f64,
 }
@@ -153,6 +168,12 @@ impl ReductionReport {
             .enumerate()
             .map(|(i, p)| format!("{} = `{p}`", i + 1))
             .collect();
+        if self.damped_above_cutoff > 0 {
+            s += &format!(
+                "The {} modes of the reduced model above the cut-off (frequencies of the reduction, not of the full model) carry an added damping ratio of {}.\n\n",
+                self.damped_above_cutoff, self.above_cutoff_damping
+            );
+        }
         s += &format!("Kept points (reduced DOF = label), each tried to ground as an effect location: {}.\n\n", pts.join(", "));
         if !self.interface_pairs.is_empty() {
             let pr: Vec<String> = self
@@ -188,7 +209,8 @@ pub struct LinearMatrices {
     pub m_offdiag: DMatrix<f64>,
     /// Stiffness matrix less the springs derived from it (`Model::springs`).
     pub k_rest: DMatrix<f64>,
-    /// Damping matrix from a file, when given.
+    /// Damping matrix from a file (reduced), plus the damping added to the
+    /// modes above the reduction's cut-off; `None` when neither.
     pub c: Option<DMatrix<f64>>,
     /// The reduction and its check.
     pub report: Option<ReductionReport>,
@@ -594,7 +616,16 @@ impl MatrixModel {
         let cb = craig_bampton(&mff, &kff, cff.as_ref(), &kept_free, &settings)
             .map_err(|e| model_err(src, e.to_string()))?;
         let kept: Vec<String> = kept_dofs.iter().map(|&d| self.label_at_plain(d)).collect();
-        let reduced_hz = crate::modal::solve(&cb.m, &cb.k)?.freq_hz;
+        let mut cb = cb;
+        let exact = cb.modes_hz.len() + kept_free.len() == free.len();
+        let zeta_hi = self.above_cutoff_damping()?;
+        let reduced = crate::modal::solve(&cb.m, &cb.k)?;
+        let damped = if exact {
+            0
+        } else {
+            damp_above_cutoff(&mut cb, &reduced, cutoff, zeta_hi)
+        };
+        let reduced_hz = reduced.freq_hz;
         let check_top = band_top_hz.map_or(cutoff, |b| 2.0 * b);
         let frequencies = check_frequencies(&mff, &kff, &reduced_hz, check_top)
             .map_err(|e| model_err(src, format!("reduction check: {e}")))?;
@@ -616,6 +647,8 @@ impl MatrixModel {
             max_error: err_below(f64::INFINITY),
             frequencies,
             check_up_to_hz: check_top,
+            damped_above_cutoff: damped,
+            above_cutoff_damping: zeta_hi,
             seconds: 0.0,
             kept: kept.clone(),
         };
@@ -631,6 +664,20 @@ impl MatrixModel {
             });
         }
         Ok(model)
+    }
+
+    fn above_cutoff_damping(&self) -> Result<f64> {
+        let z = self
+            .reduction
+            .above_cutoff_damping
+            .unwrap_or(ABOVE_CUTOFF_DAMPING);
+        if !(z.is_finite() && (0.0..=1.0).contains(&z)) {
+            return Err(model_err(
+                &self.source,
+                format!("[reduction]: above_cutoff_damping = {z} must be in [0, 1]"),
+            ));
+        }
+        Ok(z)
     }
 
     fn label_at_plain(&self, dof: usize) -> String {
@@ -720,6 +767,40 @@ impl MatrixModel {
         model.validate(&src)?;
         Ok(model)
     }
+}
+
+/// Add the damping ratio `zeta` to every mode of the reduced model above
+/// `cutoff_hz`, as the viscous matrix `Σ_r 2 ζ ω_r (M φ_r)(M φ_r)ᵀ` (mass-
+/// normalised φ_r) in the reduced damping; returns how many modes. Above
+/// the cut-off the reduced model's modes are those of its constraint
+/// modes, not the full model's (the first one can lie at twice the full
+/// model's frequency): left lightly damped they ring at those frequencies
+/// whenever a contact strikes or the force's linear interpolation between
+/// samples reaches them (its images at multiples of the sample rate), and
+/// an acceleration sampled without an anti-alias filter folds that ringing
+/// into the band, where it depends on the cut-off chosen. Damped, the
+/// sampled response converges with the cut-off; below the cut-off nothing
+/// changes (the matrix is M-orthogonal to the modes there).
+fn damp_above_cutoff(
+    cb: &mut crate::reduce::cb::CbModel,
+    modes: &crate::modal::Modes,
+    cutoff_hz: f64,
+    zeta: f64,
+) -> usize {
+    let above: Vec<usize> = (0..modes.freq_hz.len())
+        .filter(|&r| modes.freq_hz[r] > cutoff_hz)
+        .collect();
+    if above.is_empty() || zeta == 0.0 {
+        return 0;
+    }
+    let n = cb.m.nrows();
+    let mut c = cb.c.take().unwrap_or_else(|| DMatrix::zeros(n, n));
+    for &r in &above {
+        let mphi = &cb.m * modes.shapes.column(r);
+        c += (&mphi * mphi.transpose()) * (2.0 * zeta * modes.omega[r]);
+    }
+    cb.c = Some((&c + c.transpose()) * 0.5);
+    above.len()
 }
 
 /// Modes of the full model (every free DOF) up to a frequency.
@@ -1061,6 +1142,68 @@ mod tests {
             .parse()
             .unwrap();
         MatrixModel::from_matrices("chain", m, k, None, table)
+    }
+
+    /// A fixed-free chain of `n` unit masses and springs of 1e4, points
+    /// `p1`…`pn`, no damping model.
+    fn long_chain(n: usize, extra: &str) -> MatrixModel {
+        let m = ((n, n), (0..n).map(|i| (i, i, 1.0)).collect());
+        let mut k = vec![];
+        for i in 0..n {
+            k.push((i, i, if i + 1 < n { 2e4 } else { 1e4 }));
+            if i + 1 < n {
+                k.push((i, i + 1, -1e4));
+                k.push((i + 1, i, -1e4));
+            }
+        }
+        let pts: String = (0..n)
+            .map(|i| format!("p{} = {}\n", i + 1, i + 1))
+            .collect();
+        let table: toml::Table = format!("[points]\n{pts}{extra}").parse().unwrap();
+        MatrixModel::from_matrices("long", m, ((n, n), k), None, table).unwrap()
+    }
+
+    #[test]
+    fn modes_above_the_cut_off_are_damped_and_the_others_left_alone() {
+        let mm = long_chain(40, "[reduction]\ncutoff_hz = 20.0\n");
+        let model = mm.reduce(&["p10".into(), "p40".into()], None).unwrap();
+        let rep = model.matrices.as_ref().unwrap().report.clone().unwrap();
+        let (m, k) = (model.mass_matrix(), model.stiffness_matrix());
+        let c = model.damping_matrix().unwrap();
+        let modes = crate::modal::solve(&m, &k).unwrap();
+        let mut above = 0;
+        for r in 0..modes.omega.len() {
+            let phi = modes.shapes.column(r);
+            let zeta = (phi.transpose() * &c * phi)[(0, 0)] / (2.0 * modes.omega[r]);
+            if modes.freq_hz[r] > 20.0 {
+                above += 1;
+                approx::assert_relative_eq!(zeta, ABOVE_CUTOFF_DAMPING, max_relative = 1e-9);
+            } else {
+                assert!(
+                    zeta.abs() < 1e-12,
+                    "mode {r} at {} Hz: {zeta}",
+                    modes.freq_hz[r]
+                );
+            }
+        }
+        assert!(
+            above > 0 && above == rep.damped_above_cutoff,
+            "{above} {rep:?}"
+        );
+        assert_eq!(rep.above_cutoff_damping, ABOVE_CUTOFF_DAMPING);
+        // every DOF kept: the reduction is exact, nothing is added
+        let all: Vec<String> = (1..=40).map(|i| format!("p{i}")).collect();
+        let exact = mm.reduce(&all, None).unwrap();
+        let lin = exact.matrices.as_ref().unwrap();
+        assert_eq!(lin.report.as_ref().unwrap().damped_above_cutoff, 0);
+        assert!(lin.c.is_none());
+        // a ratio outside [0, 1] is an error naming the key
+        let bad = long_chain(
+            40,
+            "[reduction]\ncutoff_hz = 20.0\nabove_cutoff_damping = 1.5\n",
+        );
+        let e = bad.reduce(&["p10".into()], None).unwrap_err().to_string();
+        assert!(e.contains("above_cutoff_damping = 1.5"), "{e}");
     }
 
     #[test]
