@@ -51,9 +51,6 @@ pub struct JointFit {
     pub cost: (f64, f64),
     /// Accepted steps.
     pub iterations: usize,
-    /// Relative cost decrease of the last accepted step (0 when none was
-    /// accepted).
-    pub last_gain: f64,
     /// Segment simulations run (with or without sensitivities).
     pub simulations: usize,
     /// Why it stopped.
@@ -368,20 +365,10 @@ pub fn fit(
         x,
         segments,
         cost: (out.history[0], out.cost),
-        last_gain: last_gain(&out.history),
         iterations: out.iterations,
         simulations: q.sims,
         termination,
     })
-}
-
-/// The relative cost decrease of the last step of a cost `history`
-/// (accepted costs, the start first); 0 with no step.
-fn last_gain(history: &[f64]) -> f64 {
-    match history {
-        [.., a, b] if *a > 0.0 => 1.0 - b / a,
-        _ => 0.0,
-    }
 }
 
 /// How much of the cost the last `extra` parameters of `problem` are

@@ -38,8 +38,8 @@ pub(super) struct Polished {
 /// model (continuity starts and Gauss–Newton, [`starts::refine`]), then fit
 /// the parameters and the start states together ([`joint::fit`]); segments
 /// left far above the others are run in from the segment before
-/// ([`starts::run_in`]); again while that lowers the cost by `alternation_gain` (1 %)
-/// and the joint fit's last step by `round_gain` (0.1 %), or a run-in took, and while the cost is below twice `beat` (the cost of a
+/// ([`starts::run_in`]); again while that lowers the cost by `alternation_gain` (1 %) or a
+/// run-in took, and while the cost is below twice `beat` (the cost of a
 /// start already carried on).
 pub(super) fn polish(
     cmp: &Comparison,
@@ -118,12 +118,7 @@ pub(super) fn polish(
         );
         sims += n;
         run_ins += changed.len();
-        // a joint fit that settled (its last step gained little) leaves
-        // nothing for another refinement from its end
-        let settled = !(j.last_gain > s.round_gain);
-        if (!(gain > s.alternation_gain) || !(joint_gain > s.stall_gain) || settled)
-            && changed.is_empty()
-        {
+        if (!(gain > s.alternation_gain) || !(joint_gain > s.stall_gain)) && changed.is_empty() {
             break;
         }
         // a second start that stays well above the first is given up

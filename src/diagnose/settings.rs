@@ -448,12 +448,6 @@ pub struct StartSettings {
     pub stall_steps: usize,
     /// See `stall_steps` (default 1e-3; [0, 1)).
     pub stall_gain: f64,
-    /// A further alternation is run only when the joint fit's last
-    /// accepted step lowered the cost by more than this fraction, or a
-    /// segment was run in (default 1e-3; [0, 1)). Reason: a joint fit that
-    /// has settled left start states a refinement from its end does not
-    /// improve (0.05 % of the cost on the testbed, docs/calibration.md).
-    pub round_gain: f64,
     /// A second race start carried on is given up once its cost exceeds
     /// this multiple of the first's (default 2; ≥ 1). Reason: it will not
     /// catch up, and each alternation costs a joint fit.
@@ -471,7 +465,6 @@ impl Default for StartSettings {
             run_in_passes: 2,
             stall_steps: 3,
             stall_gain: 1e-3,
-            round_gain: 1e-3,
             give_up: 2.0,
         }
     }
@@ -618,12 +611,6 @@ impl DiagnoseSettings {
             fraction(st.stall_gain),
             "starts.stall_gain",
             st.stall_gain,
-            "must be in [0, 1)",
-        )?;
-        rule(
-            fraction(st.round_gain),
-            "starts.round_gain",
-            st.round_gain,
             "must be in [0, 1)",
         )?;
         let g = st.give_up;
@@ -996,7 +983,6 @@ mod tests {
             ("starts.settled", |s| s.starts.settled = -0.5),
             ("starts.stall_steps", |s| s.starts.stall_steps = 0),
             ("starts.stall_gain", |s| s.starts.stall_gain = 2.0),
-            ("starts.round_gain", |s| s.starts.round_gain = 1.0),
             ("starts.give_up", |s| s.starts.give_up = 0.5),
             ("fit.zero_starts.gap", |s| s.fit.zero_starts.gap = 0.0),
             ("fit.zero_starts.contact_stiffness", |s| {
