@@ -18,7 +18,9 @@
 //! groups it matches, e.g. `-- diagnose_calibrated`). With
 //! `TACIT_BENCH_ONCE=1` each diagnosis is run once, its stages printed with
 //! the process's CPU time and the wall time spent in each, and nothing is
-//! timed.
+//! timed. `TACIT_BENCH_SETTINGS=FILE` reads the diagnosis settings of the
+//! calibrated group from FILE (the `--settings` file of `tacit diagnose`)
+//! to weigh a setting's cost against its results.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
@@ -127,7 +129,7 @@ fn bench_calibrated(c: &mut Criterion) {
     let rec = testbed_record(&truth, 17);
     let val = testbed_record(&truth, 34);
     let low = vec![testbed_record(&linear, 5)];
-    let (settings, cal) = (DiagnoseSettings::default(), CalibratedSettings::default());
+    let (settings, cal) = (bench_settings(), CalibratedSettings::default());
     let run_with = |progress: &dyn Fn(&str)| {
         diagnose_calibrated(
             &declared,
@@ -159,6 +161,16 @@ fn bench_calibrated(c: &mut Criterion) {
     g.finish();
 }
 
+/// The diagnosis settings: from the file named by `TACIT_BENCH_SETTINGS`
+/// (the `--settings` file of `tacit diagnose`), else the defaults.
+fn bench_settings() -> DiagnoseSettings {
+    match std::env::var_os("TACIT_BENCH_SETTINGS") {
+        Some(p) => DiagnoseSettings::from_file(Path::new(&p))
+            .unwrap_or_else(|e| panic!("TACIT_BENCH_SETTINGS={}: {e}", p.to_string_lossy())),
+        None => DiagnoseSettings::default(),
+    }
+}
+
 /// The verdict, errors, simulations and stage timings of `d`.
 fn print_result(d: &Diagnosis) {
     let stages: Vec<String> = d
@@ -167,7 +179,7 @@ fn print_result(d: &Diagnosis) {
         .map(|(k, v)| format!("{k} {v:.2} s"))
         .collect();
     eprintln!(
-        "{}: relative error {:.4} -> {:.4}, validation {:.4} -> {:.4}; {} segment simulations + {} linear; {}",
+        "{}: relative error {:.6} -> {:.6}, validation {:.6} -> {:.6}; {} segment simulations + {} linear; {}",
         d.verdict,
         d.before.relative_error.unwrap_or(f64::NAN),
         d.after.relative_error.unwrap_or(f64::NAN),
