@@ -119,6 +119,30 @@ pub fn rms_of(x: &[f64]) -> f64 {
     (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
 }
 
+/// RMS of each signal in each frequency band (Hz; `[lo, hi)`), from its
+/// discrete Fourier transform at rate `fs` (Parseval: the squares of the
+/// bands sum to the square of the whole RMS).
+pub fn band_rms(signals: &[Vec<f64>], fs: f64, bands: &[(f64, f64)]) -> Vec<Vec<f64>> {
+    let mut planner = FftPlanner::<f64>::new();
+    signals
+        .iter()
+        .map(|x| {
+            let n = x.len();
+            let mut buf: Vec<Complex<f64>> = x.iter().map(|&v| Complex::new(v, 0.0)).collect();
+            planner.plan_fft_forward(n).process(&mut buf);
+            let mut ss = vec![0.0; bands.len()];
+            for (k, c) in buf.iter().enumerate() {
+                // bin k and its mirror n − k share the frequency
+                let f = k.min(n - k) as f64 * fs / n as f64;
+                if let Some(b) = bands.iter().position(|&(lo, hi)| f >= lo && f < hi) {
+                    ss[b] += c.norm_sqr();
+                }
+            }
+            ss.iter().map(|s| (s / (n * n) as f64).sqrt()).collect()
+        })
+        .collect()
+}
+
 /// Add Gaussian noise with standard deviation `fraction` × RMS of `x`.
 pub fn add_noise(x: &mut [f64], fraction: f64, g: &mut ChaCha8Rng) {
     if fraction <= 0.0 {
@@ -198,5 +222,28 @@ mod tests {
         assert_eq!(p[0], 0.0);
         approx::assert_relative_eq!(p[3], 50.0);
         assert!(impulse(5, 1.0, 10).is_err());
+    }
+
+    #[test]
+    fn band_rms_puts_each_sine_in_its_band_and_keeps_the_total() {
+        let fs = 400.0;
+        // 0.05 Hz bins: both lines on a bin
+        let n = 8000;
+        // 7 Hz (torsion band) amplitude 2, 12 Hz amplitude 1, offset 0.5
+        let x: Vec<f64> = (0..n)
+            .map(|k| {
+                let t = k as f64 / fs;
+                0.5 + 2.0 * (2.0 * std::f64::consts::PI * 7.0 * t).sin()
+                    + (2.0 * std::f64::consts::PI * 12.0 * t).cos()
+            })
+            .collect();
+        let b = band_rms(std::slice::from_ref(&x), fs, &crate::cases::f16::BANDS_HZ);
+        let b = &b[0];
+        approx::assert_relative_eq!(b[3], 2.0 / 2f64.sqrt(), max_relative = 1e-9);
+        approx::assert_relative_eq!(b[4], 1.0 / 2f64.sqrt(), max_relative = 1e-9);
+        approx::assert_relative_eq!(b[0], 0.5, max_relative = 1e-9);
+        assert!(b[1] < 1e-9 && b[2] < 1e-9 && b[5] < 1e-9, "{b:?}");
+        let total: f64 = b.iter().map(|v| v * v).sum::<f64>().sqrt();
+        approx::assert_relative_eq!(total, rms_of(&x), max_relative = 1e-12);
     }
 }

@@ -7,38 +7,15 @@
 
 mod common;
 
-use common::{tacit, text};
+use common::{json, simulate_points, tacit, text};
 use std::path::{Path, PathBuf};
 
 /// Simulate `model` at five points, driven at `n20:uy` in `band` (Hz), 1 %
 /// noise.
 fn simulate(model: &str, band: &str, seed: &str, samples: &str, substeps: &str, out: &Path) {
-    let o = tacit(&[
-        "simulate",
-        "--model",
-        model,
-        "--points",
-        "n20:uy,n40:uy,n60:uy,n80:uy,n100:uy",
-        "--input-point",
-        "n20:uy",
-        "--band",
-        band,
-        "--rms",
-        "5",
-        "--fs",
-        "1024",
-        "--noise",
-        "0.01",
-        "--substeps",
-        substeps,
-        "--samples",
-        samples,
-        "--seed",
-        seed,
-        "-o",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+    let points = "n20:uy,n40:uy,n60:uy,n80:uy,n100:uy";
+    let extra = ["--substeps", substeps, "--samples", samples, "--seed", seed];
+    simulate_points(model, points, "n20:uy", band, &extra, out);
 }
 
 /// The beam with the stop at the tip (gap 2e-4 m, 5e4 N/m), 4096 samples.
@@ -53,10 +30,6 @@ fn stop_record(dir: &Path) -> PathBuf {
         &r,
     );
     r
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
 fn correlation(a: &[f64], b: &[f64]) -> f64 {

@@ -11,58 +11,29 @@
 
 mod common;
 
-use common::{tacit, text};
+use common::{json, script_model, simulate_points, tacit, text};
 use std::path::Path;
-use std::process::Command;
 
 const POINTS: &str = "p10_10:uz,p20_12:uz,p30_15:uz,p25_5:uz,p8_20:uz";
 
-/// Run `scripts/membrane_mtx.py OUT --nx 40 --ny 25 ARGS`; false (with a
+/// Write the 40 × 25 membrane into `out` with `args`; false (with a
 /// message) when there is no `python3`.
 fn membrane(out: &Path, args: &[&str]) -> bool {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/membrane_mtx.py");
-    let o = match Command::new("python3")
-        .arg(script)
-        .arg(out)
-        .args(["--nx", "40", "--ny", "25"])
-        .args(args)
-        .output()
-    {
-        Ok(o) => o,
-        Err(e) => {
-            eprintln!("skipped: python3 is needed to write the membrane ({e})");
-            return false;
-        }
-    };
-    assert!(o.status.success(), "{}", text(&o));
-    true
+    let mut all = vec!["--nx", "40", "--ny", "25"];
+    all.extend_from_slice(args);
+    script_model("membrane_mtx.py", out, &all)
 }
 
 fn simulate(model: &Path, seed: &str, out: &Path) {
-    let o = tacit(&[
-        "simulate",
-        "--model",
+    let extra = ["--substeps", "20", "--seed", seed];
+    simulate_points(
         model.to_str().unwrap(),
-        "--points",
         POINTS,
-        "--input-point",
         "p10_10:uz",
-        "--band",
         "5,150",
-        "--rms",
-        "5",
-        "--fs",
-        "1024",
-        "--noise",
-        "0.01",
-        "--substeps",
-        "20",
-        "--seed",
-        seed,
-        "-o",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+        &extra,
+        out,
+    );
 }
 
 #[test]
@@ -91,10 +62,10 @@ fn stop_on_a_membrane_is_found_at_its_point() {
     ]);
     let t = text(&o);
     assert!(o.status.success(), "{t}");
-    let read = |f: &str| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(out.join(f)).unwrap()).unwrap()
-    };
-    let (rep, red) = (read("report.json"), read("reduction.json"));
+    let (rep, red) = (
+        json(&out.join("report.json")),
+        json(&out.join("reduction.json")),
+    );
     assert!(red["modal_coordinates"].as_u64().unwrap() > 10, "{red}");
     assert!(red["damped_above_cutoff"].as_u64().unwrap() > 0, "{red}");
     let effects = rep["effects"].as_array().unwrap();

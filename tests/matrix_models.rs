@@ -5,55 +5,20 @@
 //! record's beam is 3 % stiffer and twice as damped as declared; bad files
 //! give errors that name the file, the entry and the label.
 
+mod common;
+
+use common::{json, simulate_points, tacit, text};
 use std::path::Path;
-use std::process::Command;
-
-fn tacit(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_tacit"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap()
-}
-
-fn text(o: &std::process::Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
 
 fn report(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
+    json(&dir.join("report.json"))
 }
 
 /// Simulate the beam `model` at five points, driven at `n20:uy`.
 fn simulate_beam(model: &str, seed: &str, out: &Path) {
-    let o = tacit(&[
-        "simulate",
-        "--model",
-        model,
-        "--points",
-        "n20:uy,n40:uy,n60:uy,n80:uy,n100:uy",
-        "--input-point",
-        "n20:uy",
-        "--band",
-        "5,200",
-        "--rms",
-        "5",
-        "--fs",
-        "1024",
-        "--noise",
-        "0.01",
-        "--substeps",
-        "20",
-        "--seed",
-        seed,
-        "-o",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+    let points = "n20:uy,n40:uy,n60:uy,n80:uy,n100:uy";
+    let extra = ["--substeps", "20", "--seed", seed];
+    simulate_points(model, points, "n20:uy", "5,200", &extra, out);
 }
 
 #[test]

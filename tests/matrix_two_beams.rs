@@ -9,55 +9,20 @@
 
 mod common;
 
-use common::{tacit, text};
+use common::{json, script_model, simulate_points, tacit, text};
 use std::path::Path;
-use std::process::Command;
-
-/// Run `scripts/two_beams_mtx.py OUT ARGS`; false (with a message) when
-/// there is no `python3`.
-fn two_beams(out: &Path, args: &[&str]) -> bool {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/two_beams_mtx.py");
-    let o = match Command::new("python3")
-        .arg(script)
-        .arg(out)
-        .args(args)
-        .output()
-    {
-        Ok(o) => o,
-        Err(e) => {
-            eprintln!("skipped: python3 is needed to write the two beams ({e})");
-            return false;
-        }
-    };
-    assert!(o.status.success(), "{}", text(&o));
-    true
-}
 
 fn simulate(model: &Path, seed: &str, out: &Path) {
-    let o = tacit(&[
-        "simulate",
-        "--model",
+    let points = "a20:uy,a50:uy,b20:uy,b50:uy";
+    let extra = ["--substeps", "20", "--seed", seed];
+    simulate_points(
         model.to_str().unwrap(),
-        "--points",
-        "a20:uy,a50:uy,b20:uy,b50:uy",
-        "--input-point",
+        points,
         "a20:uy",
-        "--band",
         "5,200",
-        "--rms",
-        "5",
-        "--fs",
-        "1024",
-        "--noise",
-        "0.01",
-        "--substeps",
-        "20",
-        "--seed",
-        seed,
-        "-o",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+        &extra,
+        out,
+    );
 }
 
 #[test]
@@ -65,6 +30,7 @@ fn friction_and_clearance_are_found_at_the_interface() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let (truth, declared) = (d.join("truth"), d.join("declared"));
+    let two_beams = |out: &Path, args: &[&str]| script_model("two_beams_mtx.py", out, args);
     if !two_beams(&truth, &["--joint", "0.3,6e-4,2e4"]) || !two_beams(&declared, &[]) {
         return;
     }
@@ -86,8 +52,7 @@ fn friction_and_clearance_are_found_at_the_interface() {
     ]);
     let t = text(&o);
     assert!(o.status.success(), "{t}");
-    let rep: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let rep = json(&out.join("report.json"));
     let effects = rep["effects"].as_array().unwrap();
     let find = |kind: &str| {
         effects

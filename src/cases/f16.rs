@@ -191,7 +191,7 @@ pub fn simulate_errors(
     Ok(out)
 }
 
-/// The frequency bands (Hz) of [`band_rms`] on this case: below the
+/// The frequency bands (Hz) of [`crate::signal::band_rms`] on this case: below the
 /// excited band, the rigid-body modes, wing bending, wing torsion, the
 /// modes above, and above the excited band.
 pub const BANDS_HZ: [(f64, f64); 6] = [
@@ -202,31 +202,6 @@ pub const BANDS_HZ: [(f64, f64); 6] = [
     (8.5, 15.0),
     (15.0, f64::INFINITY),
 ];
-
-/// RMS of each signal in each frequency band (Hz; `[lo, hi)`), from its
-/// discrete Fourier transform at rate `fs` (Parseval: the squares of the
-/// bands sum to the square of the whole RMS).
-pub fn band_rms(signals: &[Vec<f64>], fs: f64, bands: &[(f64, f64)]) -> Vec<Vec<f64>> {
-    use rustfft::{num_complex::Complex, FftPlanner};
-    let mut planner = FftPlanner::<f64>::new();
-    signals
-        .iter()
-        .map(|x| {
-            let n = x.len();
-            let mut buf: Vec<Complex<f64>> = x.iter().map(|&v| Complex::new(v, 0.0)).collect();
-            planner.plan_fft_forward(n).process(&mut buf);
-            let mut ss = vec![0.0; bands.len()];
-            for (k, c) in buf.iter().enumerate() {
-                // bin k and its mirror n − k share the frequency
-                let f = k.min(n - k) as f64 * fs / n as f64;
-                if let Some(b) = bands.iter().position(|&(lo, hi)| f >= lo && f < hi) {
-                    ss[b] += c.norm_sqr();
-                }
-            }
-            ss.iter().map(|s| (s / (n * n) as f64).sqrt()).collect()
-        })
-        .collect()
-}
 
 /// Per-channel RMS errors, m/s², before, with the linear part calibrated,
 /// and after.
@@ -725,37 +700,9 @@ pub fn score(
                 model: name.to_string(),
                 record: rec.source.display().to_string(),
                 rms_per_channel: e.iter().map(|c| crate::signal::rms_of(c)).collect(),
-                rms_per_band: band_rms(&e, rec.fs, &BANDS_HZ),
+                rms_per_band: crate::signal::band_rms(&e, rec.fs, &BANDS_HZ),
             });
         }
     }
     Ok(out)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn band_rms_puts_each_sine_in_its_band_and_keeps_the_total() {
-        let fs = 400.0;
-        // 0.05 Hz bins: both lines on a bin
-        let n = 8000;
-        // 7 Hz (torsion band) amplitude 2, 12 Hz amplitude 1, offset 0.5
-        let x: Vec<f64> = (0..n)
-            .map(|k| {
-                let t = k as f64 / fs;
-                0.5 + 2.0 * (2.0 * std::f64::consts::PI * 7.0 * t).sin()
-                    + (2.0 * std::f64::consts::PI * 12.0 * t).cos()
-            })
-            .collect();
-        let b = band_rms(std::slice::from_ref(&x), fs, &BANDS_HZ);
-        let b = &b[0];
-        approx::assert_relative_eq!(b[3], 2.0 / 2f64.sqrt(), max_relative = 1e-9);
-        approx::assert_relative_eq!(b[4], 1.0 / 2f64.sqrt(), max_relative = 1e-9);
-        approx::assert_relative_eq!(b[0], 0.5, max_relative = 1e-9);
-        assert!(b[1] < 1e-9 && b[2] < 1e-9 && b[5] < 1e-9, "{b:?}");
-        let total: f64 = b.iter().map(|v| v * v).sum::<f64>().sqrt();
-        approx::assert_relative_eq!(total, crate::signal::rms_of(&x), max_relative = 1e-12);
-    }
 }

@@ -153,21 +153,12 @@ pub fn breakdown(
         })
         .collect();
     let ms = r.iter().map(|v| v * v).sum::<f64>() / n as f64;
-    let power = spectrum(&r, mean);
+    let centred: Vec<f64> = r.iter().map(|v| v - mean).collect();
+    let rms = crate::signal::band_rms(std::slice::from_ref(&centred), fs, bands);
     let bands = bands
         .iter()
-        .map(|&(lo, hi)| {
-            let p: f64 = power
-                .iter()
-                .enumerate()
-                .filter(|(k, _)| {
-                    let f = *k as f64 * fs / n as f64;
-                    f >= lo && f < hi && *k > 0
-                })
-                .map(|(_, p)| p)
-                .sum();
-            (lo, hi, p / ms)
-        })
+        .zip(&rms[0])
+        .map(|(&(lo, hi), v)| (lo, hi, v * v / ms))
         .collect();
     Breakdown {
         mean,
@@ -175,22 +166,6 @@ pub fn breakdown(
         bands,
         mean_share: mean * mean / ms,
     }
-}
-
-/// One-sided power of `r − mean` per frequency bin, scaled so that the
-/// bins sum to its mean square (Parseval).
-fn spectrum(r: &[f64], mean: f64) -> Vec<f64> {
-    use rustfft::{num_complex::Complex, FftPlanner};
-    let n = r.len();
-    let mut x: Vec<Complex<f64>> = r.iter().map(|v| Complex::new(v - mean, 0.0)).collect();
-    FftPlanner::new().plan_fft_forward(n).process(&mut x);
-    let scale = 1.0 / (n as f64 * n as f64);
-    (0..=n / 2)
-        .map(|k| {
-            let twice = k > 0 && 2 * k != n;
-            x[k].norm_sqr() * scale * if twice { 2.0 } else { 1.0 }
-        })
-        .collect()
 }
 
 impl SilverboxResult {

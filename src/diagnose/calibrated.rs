@@ -264,12 +264,11 @@ pub fn diagnose_calibrated(
     // calibration on a record with an effect is biased by it, and a start
     // from the declared values may land nearer; not run when the
     // calibrated diagnosis already explains the record up to the noise
-    let from_declared = match ctx.at_noise(&from_calibrated.d) {
-        true => None,
-        false => {
-            progress("refine the declared linear part with its effects");
-            Some(ctx.refined(trusted.clone(), declared)?)
-        }
+    let from_declared = if ctx.at_noise(&from_calibrated.d) {
+        None
+    } else {
+        progress("refine the declared linear part with its effects");
+        Some(ctx.refined(trusted.clone(), declared)?)
     };
     ctx.choose(trusted, from_calibrated, from_declared, calibration)
 }

@@ -86,7 +86,7 @@ fn other(kind: EffectKind) -> Option<(EffectKind, i32, i32)> {
 /// The coefficient of `|ν|^to` that dissipates the same mean power as
 /// `coef |ν|^from` on the velocities `nu`: `coef ⟨|ν|^(from+1)⟩ /
 /// ⟨|ν|^(to+1)⟩`; None when it is not finite and positive.
-pub(super) fn equal_power(coef: f64, from: i32, to: i32, nu: &[f64]) -> Option<f64> {
+fn equal_power(coef: f64, from: i32, to: i32, nu: &[f64]) -> Option<f64> {
     let moment = |p: i32| nu.iter().map(|v| v.abs().powi(p)).sum::<f64>();
     let c = coef * moment(from + 1) / moment(to + 1);
     Some(c).filter(|c| c.is_finite() && *c > 0.0)
