@@ -924,7 +924,52 @@ fn legend_box<'a, DB: DrawingBackend + 'a, X: Ranged, Y: Ranged>(
         .map_err(err)
 }
 
-fn draw_xy<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panel: &Panel) -> Draw {
+/// A line or dashed line series: its finite runs as paths, lone points as
+/// dots (runs shorter than a pixel would be invisible as lines).
+fn draw_line_series<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    s: &Series,
+    c: RGBColor,
+    line: ShapeStyle,
+    grid: &PixelGrid,
+) -> Draw {
+    let label = s.label.as_str();
+    let (runs, lone): (Vec<_>, Vec<_>) = finite_runs(&s.x, &s.y)
+        .into_iter()
+        .partition(|r| grid.length(r) >= 1.0);
+    // Isolated finite points (between NaNs) and runs shorter than
+    // a pixel would be invisible as lines: mark them with a dot.
+    chart
+        .draw_series(lone.into_iter().map(|r| Circle::new(r[0], 2, c.filled())))
+        .map_err(err)?;
+    let runs: Vec<_> = runs.into_iter().map(|r| decimate(r, grid)).collect();
+    let dashes: f64 = runs.iter().map(|r| grid.length(r)).sum::<f64>() / f64::from(DASH + DASH_GAP);
+    if s.style == SeriesStyle::DashedLine && dashes <= MAX_DASHES {
+        let anno = chart
+            .draw_series(
+                runs.into_iter()
+                    .map(|r| DashedPathElement::new(r, DASH, DASH_GAP, line)),
+            )
+            .map_err(err)?;
+        if !label.is_empty() {
+            anno.label(label).legend(move |(x, y)| {
+                DashedPathElement::new(vec![(x, y), (x + 20, y)], 5, 3, line)
+            });
+        }
+    } else {
+        let anno = chart
+            .draw_series(runs.into_iter().map(|r| PathElement::new(r, line)))
+            .map_err(err)?;
+        if !label.is_empty() {
+            anno.label(label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], line));
+        }
+    }
+    Ok(())
+}
+
+/// The x and y extents of a panel's finite points and band.
+fn xy_extent(panel: &Panel) -> (Extent, Extent) {
     let mut ex = Extent::new();
     let mut ey = Extent::new();
     for s in &panel.series {
@@ -944,6 +989,11 @@ fn draw_xy<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panel: &Panel) -> 
             }
         }
     }
+    (ex, ey)
+}
+
+fn draw_xy<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panel: &Panel) -> Draw {
+    let (ex, ey) = xy_extent(panel);
     let has_points = panel.series.iter().any(|s| s.style == SeriesStyle::Points);
     let xr = ex.range(if has_points { 0.03 } else { 0.0 });
     let yr = ey.range(0.05);
@@ -1011,39 +1061,7 @@ fn draw_xy<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panel: &Panel) -> 
                 }
             }
             SeriesStyle::Line | SeriesStyle::DashedLine => {
-                let (runs, lone): (Vec<_>, Vec<_>) = finite_runs(&s.x, &s.y)
-                    .into_iter()
-                    .partition(|r| grid.length(r) >= 1.0);
-                // Isolated finite points (between NaNs) and runs shorter than
-                // a pixel would be invisible as lines: mark them with a dot.
-                chart
-                    .draw_series(lone.into_iter().map(|r| Circle::new(r[0], 2, c.filled())))
-                    .map_err(err)?;
-                let runs: Vec<_> = runs.into_iter().map(|r| decimate(r, &grid)).collect();
-                let dashes: f64 =
-                    runs.iter().map(|r| grid.length(r)).sum::<f64>() / f64::from(DASH + DASH_GAP);
-                if s.style == SeriesStyle::DashedLine && dashes <= MAX_DASHES {
-                    let anno = chart
-                        .draw_series(
-                            runs.into_iter()
-                                .map(|r| DashedPathElement::new(r, DASH, DASH_GAP, line)),
-                        )
-                        .map_err(err)?;
-                    if !label.is_empty() {
-                        anno.label(label).legend(move |(x, y)| {
-                            DashedPathElement::new(vec![(x, y), (x + 20, y)], 5, 3, line)
-                        });
-                    }
-                } else {
-                    let anno = chart
-                        .draw_series(runs.into_iter().map(|r| PathElement::new(r, line)))
-                        .map_err(err)?;
-                    if !label.is_empty() {
-                        anno.label(label).legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], line)
-                        });
-                    }
-                }
+                draw_line_series(&mut chart, s, c, line, &grid)?;
             }
         }
     }

@@ -7,7 +7,7 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use tacit::diagnose::{self, report, DiagnoseSettings};
 use tacit::model::Model;
-use tacit::record::SampleRange;
+use tacit::record::{Record, SampleRange};
 
 /// Arguments of `tacit diagnose`.
 #[derive(Debug, clap::Args)]
@@ -154,15 +154,11 @@ fn check_skip(
     Ok(())
 }
 
-pub fn run(a: Args) -> anyhow::Result<()> {
-    let settings = settings(&a)?;
-    super::check::diagnose_options(
-        settings.segments.seconds,
-        settings.screen.max_effects,
-        settings.substeps.base,
-    )?;
-    settings.validate()?;
-    let staging = super::output::Staging::begin(&a.output, a.force)?;
+/// The record, the validation record and the linear records, each cut to
+/// its sample range and without its warm-up.
+type Records = (Record, Option<Record>, Vec<Record>);
+
+fn load_records(a: &Args) -> anyhow::Result<Records> {
     let load = |p: &std::path::Path, range: Option<(&str, SampleRange)>| {
         let mut r = load_record(p, &a.rec)?;
         if a.band_limited_force {
@@ -178,19 +174,67 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             None => r,
         })
     };
-    let mut rec = load(&a.record, a.samples.map(|r| ("--samples", r)))?;
+    let rec = load(&a.record, a.samples.map(|r| ("--samples", r)))?;
     let vrange = a.validation_samples.map(|r| ("--validation-samples", r));
-    let mut val = match (&a.validate, vrange) {
+    let val = match (&a.validate, vrange) {
         (Some(p), _) => Some(load(p, vrange)?),
         (None, Some(_)) => Some(load(&a.record, vrange)?),
         (None, None) => None,
     };
     check_skip(a.skip, &rec, val.as_ref())?;
-    let mut linear = a
+    let linear = a
         .linear_records
         .iter()
         .map(|p| load(p, None))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok((rec, val, linear))
+}
+
+/// A spinner with the stage's message on a terminal, hidden when piped.
+fn spinner() -> anyhow::Result<ProgressBar> {
+    Ok(if std::io::stderr().is_terminal() {
+        let b = ProgressBar::new_spinner();
+        b.set_draw_target(ProgressDrawTarget::stderr());
+        b.set_style(ProgressStyle::with_template("{spinner} {elapsed} {msg}")?);
+        b.enable_steady_tick(std::time::Duration::from_millis(120));
+        b
+    } else {
+        ProgressBar::hidden()
+    })
+}
+
+/// The verdict and the errors before and after, on the terminal.
+fn print_summary(d: &diagnose::Diagnosis, output: &std::path::Path) -> anyhow::Result<()> {
+    outln!("{}", d.verdict);
+    let pct = report::pct;
+    outln!(
+        "relative_error {} -> {}   simulation_error {} -> {}",
+        pct(d.before.relative_error),
+        pct(d.after.relative_error),
+        pct(d.before.simulation_error),
+        pct(d.after.simulation_error)
+    );
+    if let Some(v) = &d.validation {
+        outln!(
+            "validation: relative_error {} -> {}",
+            pct(v.before.relative_error),
+            pct(v.after.relative_error)
+        );
+    }
+    outln!("report: {}", output.join("report.md").display());
+    Ok(())
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let settings = settings(&a)?;
+    super::check::diagnose_options(
+        settings.segments.seconds,
+        settings.screen.max_effects,
+        settings.substeps.base,
+    )?;
+    settings.validate()?;
+    let staging = super::output::Staging::begin(&a.output, a.force)?;
+    let (mut rec, mut val, mut linear) = load_records(&a)?;
     // a model from matrices is reduced onto the records' points
     let mut recs: Vec<&mut tacit::record::Record> = vec![&mut rec];
     recs.extend(val.as_mut());
@@ -213,15 +257,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         "the diagnosis of this record",
     )?;
     let sensors = a.sensors.as_ref().map(|d| d.0.clone());
-    let bar = if std::io::stderr().is_terminal() {
-        let b = ProgressBar::new_spinner();
-        b.set_draw_target(ProgressDrawTarget::stderr());
-        b.set_style(ProgressStyle::with_template("{spinner} {elapsed} {msg}")?);
-        b.enable_steady_tick(std::time::Duration::from_millis(120));
-        b
-    } else {
-        ProgressBar::hidden()
-    };
+    let bar = spinner()?;
     let cal = diagnose::calibrated::CalibratedSettings {
         off: a.trust_linear,
         open_loop: a.refine_open_loop,
@@ -259,22 +295,5 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             .map_err(|e| staging.user_message(e.into()))?;
     }
     staging.commit()?;
-    outln!("{}", d.verdict);
-    let pct = report::pct;
-    outln!(
-        "relative_error {} -> {}   simulation_error {} -> {}",
-        pct(d.before.relative_error),
-        pct(d.after.relative_error),
-        pct(d.before.simulation_error),
-        pct(d.after.simulation_error)
-    );
-    if let Some(v) = &d.validation {
-        outln!(
-            "validation: relative_error {} -> {}",
-            pct(v.before.relative_error),
-            pct(v.after.relative_error)
-        );
-    }
-    outln!("report: {}", a.output.join("report.md").display());
-    Ok(())
+    print_summary(&d, &a.output)
 }

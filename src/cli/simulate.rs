@@ -191,7 +191,64 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     check_dofs(&sensors, n, "--sensors")?;
     check_dofs(&[a.input_dof], n, "--input-dof")?;
-    let (input, fs, samples, input_dof) = match a.input {
+    let (input, fs, samples, input_dof) = input_of(&a, n)?;
+    let kinds = a
+        .kind
+        .iter()
+        .map(|k| match k {
+            Kind::Accel => Quantity::Accel,
+            Kind::Vel => Quantity::Vel,
+            Kind::Disp => Quantity::Disp,
+        })
+        .collect();
+    let spec = RecordSpec {
+        fs,
+        samples,
+        input_dof,
+        input,
+        sensors,
+        kinds,
+        noise: a.noise,
+        seed: a.seed,
+        settings: SimSettings {
+            substeps: a.substeps,
+            hht_alpha: a.hht_alpha,
+            ..Default::default()
+        },
+        u0: vec![],
+        v0: vec![],
+    };
+    check::memory(
+        check::integration_bytes(n, model.contacts.len(), a.substeps, samples),
+        &format!("{samples} samples of {n} DOFs at {} sub-steps", a.substeps),
+    )?;
+    let t = std::time::Instant::now();
+    let (mut rec, sim) = simulate_record(&model, &spec)?;
+    if labelled.is_some() {
+        for c in rec.inputs.iter_mut().chain(rec.outputs.iter_mut()) {
+            c.point = Some(model.dof_name(c.dof));
+        }
+    }
+    let elapsed = t.elapsed();
+    rec.validate(None)?;
+    let written = write_outputs(&rec, &a.output, fmt)?;
+    let active = sim.fint.column_iter().filter(|c| c.amax() > 0.0).count();
+    eprintln!(
+        "simulated {} samples of {} ({} sub-steps, {} Newton iterations) in {:.1} ms; nonlinear force active in {:.1} % of samples",
+        sim.len(),
+        model.name,
+        sim.steps,
+        sim.newton_iterations,
+        elapsed.as_secs_f64() * 1e3,
+        100.0 * active as f64 / sim.len() as f64
+    );
+    outln!("wrote {}", written.join(", "));
+    Ok(())
+}
+
+/// The force, sampling rate, length and input DOF of `--input`.
+fn input_of(a: &Args, n: usize) -> anyhow::Result<(InputSpec, f64, usize, usize)> {
+    Ok(match a.input {
         InputKind::Random => (
             InputSpec::Random {
                 band: a.band,
@@ -238,75 +295,34 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             };
             (InputSpec::Given(ch.data.clone()), rec.fs, rec.len(), ch.dof)
         }
-    };
-    let kinds = a
-        .kind
-        .iter()
-        .map(|k| match k {
-            Kind::Accel => Quantity::Accel,
-            Kind::Vel => Quantity::Vel,
-            Kind::Disp => Quantity::Disp,
-        })
-        .collect();
-    let spec = RecordSpec {
-        fs,
-        samples,
-        input_dof,
-        input,
-        sensors,
-        kinds,
-        noise: a.noise,
-        seed: a.seed,
-        settings: SimSettings {
-            substeps: a.substeps,
-            hht_alpha: a.hht_alpha,
-            ..Default::default()
-        },
-        u0: vec![],
-        v0: vec![],
-    };
-    check::memory(
-        check::integration_bytes(n, model.contacts.len(), a.substeps, samples),
-        &format!("{samples} samples of {n} DOFs at {} sub-steps", a.substeps),
-    )?;
-    let t = std::time::Instant::now();
-    let (mut rec, sim) = simulate_record(&model, &spec)?;
-    if labelled.is_some() {
-        for c in rec.inputs.iter_mut().chain(rec.outputs.iter_mut()) {
-            c.point = Some(model.dof_name(c.dof));
-        }
-    }
-    let elapsed = t.elapsed();
-    rec.validate(None)?;
+    })
+}
+
+/// Writes the record (and for CSV its truth file beside it) atomically;
+/// the paths written.
+fn write_outputs(
+    rec: &record::Record,
+    output: &std::path::Path,
+    fmt: record::Format,
+) -> anyhow::Result<Vec<String>> {
     let write_rec = |p: &std::path::Path| -> anyhow::Result<()> {
         match fmt {
-            record::Format::Csv => record::csvio::write(&rec, p)?,
-            _ => record::hdf5io::write(&rec, p)?,
+            record::Format::Csv => record::csvio::write(rec, p)?,
+            _ => record::hdf5io::write(rec, p)?,
         }
         Ok(())
     };
     let write_truth =
-        |p: &std::path::Path| -> anyhow::Result<()> { Ok(record::csvio::write_truth(&rec, p)?) };
-    let mut written = vec![a.output.display().to_string()];
+        |p: &std::path::Path| -> anyhow::Result<()> { Ok(record::csvio::write_truth(rec, p)?) };
+    let mut written = vec![output.display().to_string()];
     if fmt == record::Format::Csv {
-        let tpath = super::with_suffix(&a.output, "-truth");
-        super::output::write_files(&[(&a.output, &write_rec), (&tpath, &write_truth)])?;
+        let tpath = super::with_suffix(output, "-truth");
+        super::output::write_files(&[(output, &write_rec), (&tpath, &write_truth)])?;
         written.push(tpath.display().to_string());
     } else {
-        super::output::write_files(&[(&a.output, &write_rec)])?;
+        super::output::write_files(&[(output, &write_rec)])?;
     }
-    let active = sim.fint.column_iter().filter(|c| c.amax() > 0.0).count();
-    eprintln!(
-        "simulated {} samples of {} ({} sub-steps, {} Newton iterations) in {:.1} ms; nonlinear force active in {:.1} % of samples",
-        sim.len(),
-        model.name,
-        sim.steps,
-        sim.newton_iterations,
-        elapsed.as_secs_f64() * 1e3,
-        100.0 * active as f64 / sim.len() as f64
-    );
-    outln!("wrote {}", written.join(", "));
-    Ok(())
+    Ok(written)
 }
 
 /// The model, and for a model from matrices the sensor and input DOFs of

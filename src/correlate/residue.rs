@@ -532,6 +532,36 @@ fn scaled_test(
     Ok(out)
 }
 
+/// The residue norm at `p` and the singular values (largest first) of its
+/// Jacobian in the relative changes; NaN and none when the residues fail.
+fn residual_and_singular_values(prob: &Problem<'_>, p: &[f64]) -> (f64, Vec<f64>) {
+    let np = p.len();
+    match prob.residues(p) {
+        Ok(r) => {
+            let jp = prob.cache.as_ref().map(|c| {
+                let mut j = c.1.rows(0, r.len()).into_owned();
+                for e in 0..np {
+                    let f = 1.0 / prob.q[e].exp();
+                    j.column_mut(e).scale_mut(f);
+                }
+                j
+            });
+            let mut sv: Vec<f64> = jp
+                .map(|j| {
+                    j.svd(false, false)
+                        .singular_values
+                        .iter()
+                        .copied()
+                        .collect()
+                })
+                .unwrap_or_default();
+            sv.sort_by(|a, b| b.total_cmp(a));
+            (r.norm(), sv)
+        }
+        Err(_) => (f64::NAN, vec![]),
+    }
+}
+
 /// Update spring stiffnesses of `model` so that the test modes satisfy the
 /// model's eigen-equation, by minimising the force (eq. 4) or hybrid
 /// (eq. 6) residues. Give the test modes to be matched (e.g. the first five
@@ -612,30 +642,7 @@ pub fn update_stiffness(
         },
     };
     let p = p_of(&prob.q);
-    let (residual_final, singular_values) = match prob.residues(&p) {
-        Ok(r) => {
-            let jp = prob.cache.as_ref().map(|c| {
-                let mut j = c.1.rows(0, r.len()).into_owned();
-                for e in 0..np {
-                    let f = 1.0 / prob.q[e].exp();
-                    j.column_mut(e).scale_mut(f);
-                }
-                j
-            });
-            let mut sv: Vec<f64> = jp
-                .map(|j| {
-                    j.svd(false, false)
-                        .singular_values
-                        .iter()
-                        .copied()
-                        .collect()
-                })
-                .unwrap_or_default();
-            sv.sort_by(|a, b| b.total_cmp(a));
-            (r.norm(), sv)
-        }
-        Err(_) => (f64::NAN, vec![]),
-    };
+    let (residual_final, singular_values) = residual_and_singular_values(&prob, &p);
     let mut updated = model.clone();
     for (&i, pe) in springs.iter().zip(&p) {
         updated.springs[i - 1].stiffness *= 1.0 + pe;
