@@ -7,7 +7,7 @@
 //! structure at a level where it behaves linearly (`--linear-record`).
 //! Prints a Markdown table (docs/calibration.md holds the last run).
 //!
-//! `cargo run --release --example imperfect_matrix [-- --seed N] [--only TEXT] [--variants no|yes]`
+//! `cargo run --release --example imperfect_matrix [-- --seed N] [--only TEXT] [--rows A-B] [--variants no|yes] [--progress] [--score-truth]`
 
 mod matrix_common;
 
@@ -398,6 +398,32 @@ fn explain(d: &tacit::diagnose::Diagnosis) {
     }
 }
 
+/// The true model's errors on the record and the validation record (the
+/// diagnosis with the truth declared and trusted), on stderr.
+fn score_truth(c: &Case, rec: &Record, val: &Record, settings: &DiagnoseSettings) {
+    let d = tacit::diagnose::diagnose(&c.truth, rec, Some(val), None, settings, &|_| {});
+    let d = match d {
+        Ok(d) => d,
+        Err(e) => return eprintln!("{}: the truth not scored: {e}", c.name),
+    };
+    let v = d.validation.as_ref().unwrap();
+    for (what, e) in [("record", &d.before), ("validation", &v.before)] {
+        let ch: Vec<String> = e
+            .per_channel
+            .iter()
+            .map(|x| format!("{} {}", x.channel, pct(x.relative_error)))
+            .collect();
+        eprintln!(
+            "{}: truth on the {what}: {} (open loop {}); {}; starts {:?}",
+            c.name,
+            pct(e.relative_error),
+            pct(e.simulation_error),
+            ch.join(", "),
+            e.starts
+        );
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let arg = |k: &str| {
@@ -408,12 +434,24 @@ fn main() {
     };
     let seed: u64 = arg("--seed").and_then(|s| s.parse().ok()).unwrap_or(9001);
     let only = arg("--only");
+    // `--rows A-B`: only the cases A to B (from 0, in the table's order)
+    let rows = arg("--rows").map(|r| {
+        let (a, b) = r.split_once('-').expect("--rows A-B");
+        (
+            a.parse::<usize>().expect("--rows A-B"),
+            b.parse::<usize>().expect("--rows A-B"),
+        )
+    });
     // `--variants no` or `--variants yes`: only the diagnoses without or
     // with the linear record
     let variants = arg("--variants");
     // `--progress`: the diagnosis's steps, its rounds and first ranking on
     // stderr
     let verbose = args.iter().any(|a| a == "--progress");
+    // `--score-truth`: only the true model's errors on the record and the
+    // validation record, per channel and with the start-state refinement's
+    // account, on stderr (what the scoring gives an exact model)
+    let truth_only = args.iter().any(|a| a == "--score-truth");
     let t0 = std::time::Instant::now();
     let progress = |m: &str| {
         if verbose {
@@ -423,14 +461,21 @@ fn main() {
     let settings = DiagnoseSettings::default();
     println!("| record | truth | sensors | noise (measured) | linear record | found | parameters | error before → after | validation before → after | corrections significant | checks | time |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for c in cases(seed) {
+    for (i, c) in cases(seed).into_iter().enumerate() {
         if only.as_ref().is_some_and(|o| !c.name.contains(o.as_str())) {
+            continue;
+        }
+        if rows.is_some_and(|(a, b)| i < a || i > b) {
             continue;
         }
         let samples = if c.running { 5120 } else { 4096 };
         let rec = record(&c.truth, &c, seed * 10 + 1, samples);
         let val = record(&c.truth, &c, seed * 10 + 2, samples);
         let low = record(&c.linear, &c, seed * 10 + 3, samples);
+        if truth_only {
+            score_truth(&c, &rec, &val, &settings);
+            continue;
+        }
         for with_low in [false, true] {
             if variants
                 .as_deref()
