@@ -31,12 +31,19 @@
 //! when the cost falls (λ ÷ 3), else λ × 4 and the step is recomputed; the fit stops when an accepted step with light
 //! damping (λ ≤ 0.01 after it) lowers the cost by less than the relative
 //! `f_tol` (at least 1e-4), when λ exceeds 1e6 (stalled: the cost
-//! is rough at the sub-step scale), or at the iteration limit.
+//! is rough at the sub-step scale), or at the iteration limit. A trial
+//! point's simulations keep their tapes ([`crate::integrate::Tape`]): when
+//! the point is accepted, its residuals and Jacobians come from the
+//! derivative steps alone, without simulating the segments again (the
+//! same numbers, bit for bit).
 
 use super::comparison::segment_residual;
+use crate::integrate::{Integrator, Seeds, Tape};
+use crate::record::Quantity;
 use crate::update::optimize::FitSettings;
-use crate::update::{forward, sensitivity, Problem, Segment};
+use crate::update::{sensitivity, Problem, Segment};
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 /// How a joint fit ended.
 #[derive(Debug, Clone)]
@@ -137,16 +144,114 @@ fn state_scale(problem: &Problem) -> Option<DVector<f64>> {
         .map(|sm| sm.state_scale())
 }
 
-/// Weighted residual of every segment of `problem` at `x`
-/// ([`forward::simulate`]); `None` when a simulation fails.
-fn residuals(problem: &Problem, x: &[f64]) -> Option<Vec<DVector<f64>>> {
-    let resp = forward::simulate(problem, x).0.ok()?;
-    problem
+/// The observed channels (p × len) of a full-order simulation's
+/// `(u, v, a)` (DOF × sample), as [`crate::update::forward::simulate`] extracts them.
+fn channels(
+    problem: &Problem,
+    (u, v, a): (&DMatrix<f64>, &DMatrix<f64>, &DMatrix<f64>),
+) -> DMatrix<f64> {
+    let mut y = DMatrix::zeros(problem.observations.len(), u.ncols());
+    for (c, o) in problem.observations.iter().enumerate() {
+        let src = match o.quantity {
+            Quantity::Disp => u,
+            Quantity::Vel => v,
+            _ => a,
+        };
+        y.row_mut(c).copy_from(&src.row(o.dof - 1));
+    }
+    y
+}
+
+/// The weighted residual of every segment of `problem` at `x` and the
+/// tape of its simulation (with the states, for the parameter seeds):
+/// [`residuals`] with what [`linearize_taped`] needs to differentiate at
+/// the same point without simulating again. The integrator is the one
+/// [`crate::update::forward::simulate`] builds for a full-order problem, so the
+/// simulations are the same; `None` when one fails.
+fn residuals_taped(problem: &Problem, x: &[f64]) -> Option<Vec<(DVector<f64>, Tape)>> {
+    let model = problem.model_at(x);
+    let integ = Integrator::new(&model, problem.fs, problem.sim).ok()?;
+    let runs: Vec<Option<(DVector<f64>, Tape)>> = problem
         .segments
-        .iter()
-        .zip(&resp)
-        .map(|(s, y)| segment_residual(&problem.observations, s, y.as_view()))
-        .collect()
+        .par_iter()
+        .map(|s| {
+            let force = problem.force.columns(s.start, s.len);
+            let (sim, tape) = integ.run_taped(force, &s.u0, &s.v0, true);
+            if !sim.completed() {
+                return None;
+            }
+            let y = channels(problem, (&sim.u, &sim.v, &sim.a));
+            let r = segment_residual(&problem.observations, s, y.as_view())?;
+            Some((r, tape))
+        })
+        .collect();
+    runs.into_iter().collect()
+}
+
+/// [`linearize`] from the segments' residuals and tapes at `x`
+/// ([`residuals_taped`]): the same residuals and Jacobians, bit for bit,
+/// from the derivative steps alone
+/// ([`Integrator::sensitivities_from_tape`]); `None` when the tapes cannot
+/// be replayed for these seeds (a parameter of M, C or K where a tape took
+/// samples whole) or a tangent is singular.
+fn linearize_taped(
+    problem: &Problem,
+    x: &[f64],
+    scale: &DVector<f64>,
+    taped: &[(DVector<f64>, Tape)],
+) -> Option<Vec<Lin>> {
+    let model = problem.model_at(x);
+    let integ = Integrator::new(&model, problem.fs, problem.sim).ok()?;
+    let n = model.ndof();
+    let seeds = Seeds {
+        state: DMatrix::identity(2 * n, 2 * n),
+        params: sensitivity::param_seeds(&model, &problem.parameters).ok()?,
+    };
+    let runs: Vec<Option<Lin>> = problem
+        .segments
+        .par_iter()
+        .zip(taped)
+        .map(|(s, (r, tape))| {
+            let force = problem.force.columns(s.start, s.len);
+            let d = integ
+                .sensitivities_from_tape(force, &s.u0, &s.v0, tape, &seeds)
+                .ok()?;
+            if d.singular_tangent.is_some() {
+                return None;
+            }
+            let dy: Vec<DMatrix<f64>> = (0..seeds.len())
+                .map(|j| channels(problem, (&d.du[j], &d.dv[j], &d.da[j])))
+                .collect();
+            jacobians(problem, s, r.clone(), &dy, scale)
+        })
+        .collect();
+    runs.into_iter().collect()
+}
+
+/// A segment's [`Lin`] from its residual `r` and the derivatives `dy` of
+/// its channels (the `2n` state directions, then the parameters); `None`
+/// when a derivative is not finite.
+fn jacobians(
+    problem: &Problem,
+    s: &Segment,
+    r: DVector<f64>,
+    dy: &[DMatrix<f64>],
+    scale: &DVector<f64>,
+) -> Option<Lin> {
+    let (nx, np) = (scale.len(), problem.parameters.len());
+    let p = problem.observations.len();
+    let m = s.len * p;
+    // ∂r/∂θ = −w ∂ŷ/∂θ
+    let column = |j: usize, f: f64| {
+        DVector::from_fn(m, |row, _| {
+            let (k, c) = (row / p, row % p);
+            -problem.observations[c].weight * dy[j][(c, k)] * f
+        })
+    };
+    let js = DMatrix::from_columns(&(0..nx).map(|j| column(j, scale[j])).collect::<Vec<_>>());
+    let jp = DMatrix::from_columns(&(0..np).map(|j| column(nx + j, 1.0)).collect::<Vec<_>>());
+    let finite = js.iter().chain(jp.iter()).all(|v| v.is_finite());
+    finite.then_some(Lin { r, js, jp })
 }
 
 /// Residuals and Jacobians of every segment of `problem` at `x`, from one
@@ -154,30 +259,14 @@ fn residuals(problem: &Problem, x: &[f64]) -> Option<Vec<DVector<f64>>> {
 /// ([`sensitivity::simulate_seeded`]); `None` when a simulation or its
 /// derivatives fail.
 fn linearize(problem: &Problem, x: &[f64], scale: &DVector<f64>) -> Option<Vec<Lin>> {
-    let nx = scale.len();
-    let np = problem.parameters.len();
     let runs = sensitivity::simulate_seeded(problem, x, true).0.ok()?;
-    let p = problem.observations.len();
     problem
         .segments
         .iter()
         .zip(runs)
         .map(|(s, d)| {
             let r = segment_residual(&problem.observations, s, d.y.as_view())?;
-            let m = s.len * p;
-            // ∂r/∂θ = −w ∂ŷ/∂θ
-            let column = |j: usize, f: f64| {
-                DVector::from_fn(m, |row, _| {
-                    let (k, c) = (row / p, row % p);
-                    -problem.observations[c].weight * d.dy[j][(c, k)] * f
-                })
-            };
-            let js =
-                DMatrix::from_columns(&(0..nx).map(|j| column(j, scale[j])).collect::<Vec<_>>());
-            let jp =
-                DMatrix::from_columns(&(0..np).map(|j| column(nx + j, 1.0)).collect::<Vec<_>>());
-            let finite = js.iter().chain(jp.iter()).all(|v| v.is_finite());
-            finite.then_some(Lin { r, js, jp })
+            jacobians(problem, s, r, &d.dy, scale)
         })
         .collect()
 }
@@ -257,7 +346,12 @@ struct Joint<'a> {
     lo: Vec<f64>,
     hi: Vec<f64>,
     sims: usize,
+    /// The last point evaluated with its segments' residuals and tapes.
+    last: Option<Taped>,
 }
+
+/// A joint-fit point with its segments' residuals and simulation tapes.
+type Taped = ((Vec<f64>, Vec<Segment>), Vec<(DVector<f64>, Tape)>);
 
 impl crate::lsq::Problem for Joint<'_> {
     type Point = (Vec<f64>, Vec<Segment>);
@@ -268,7 +362,14 @@ impl crate::lsq::Problem for Joint<'_> {
     fn evaluate(&mut self, (x, segs): &Self::Point) -> Option<Vec<f64>> {
         self.sims += segs.len();
         let old = std::mem::replace(&mut self.cur.segments, segs.clone());
-        let costs = residuals(&self.cur, x).map(|r| r.iter().map(|v| v.norm_squared()).collect());
+        // the tapes of the last point evaluated: its linearization, when
+        // the driver accepts it, needs no simulation ([`linearize_taped`])
+        self.last = None;
+        let taped = residuals_taped(&self.cur, x);
+        let costs = taped
+            .as_ref()
+            .map(|t| t.iter().map(|(r, _)| r.norm_squared()).collect());
+        self.last = taped.map(|t| ((x.clone(), segs.clone()), t));
         self.cur.segments = old;
         costs
     }
@@ -280,7 +381,11 @@ impl crate::lsq::Problem for Joint<'_> {
     fn linearize(&mut self, (x, segs): &Self::Point, _: &Vec<f64>) -> Result<Vec<Lin>, String> {
         self.sims += segs.len();
         self.cur.segments.clone_from(segs);
-        linearize(&self.cur, x, self.scale).ok_or_else(|| "simulation failed".into())
+        let last = self.last.take().filter(|(p, _)| p.0 == *x && p.1 == *segs);
+        let taped = last.and_then(|(_, t)| linearize_taped(&self.cur, x, self.scale, &t));
+        taped
+            .or_else(|| linearize(&self.cur, x, self.scale))
+            .ok_or_else(|| "simulation failed".into())
     }
 
     fn step(&mut self, lins: &Vec<Lin>, lambda: f64) -> Result<Self::Step, String> {
@@ -332,6 +437,7 @@ pub fn fit(
         lo,
         hi,
         sims: 0,
+        last: None,
     };
     let damping = lsq::Damping {
         initial: settings.lm_lambda.max(1e-6),

@@ -14,8 +14,10 @@
 //! solves the problem (the only one taken). For a nonlinear model it is the
 //! forward sensitivity of the nonlinear simulation
 //! ([`Integrator::run_sensitivities`], the exact derivative of the discrete
-//! solution: one simulation of every segment per iteration, with 2n seeds),
-//! and the iterations go on; a step that does not lower `J_s` is halved, up
+//! solution, with 2n seeds), and the iterations go on; a segment's
+//! evaluation keeps its simulation's tape ([`Tape`]), so the sensitivities
+//! at an accepted point are the derivative steps alone, without simulating
+//! the segment again; a step that does not lower `J_s` is halved, up
 //! to four times, else the segment keeps its state. Each segment is a
 //! problem of the least-squares driver ([`crate::lsq`], Gauss–Newton with
 //! its halving line search), the segments in parallel. `J⁺` is the
@@ -38,7 +40,7 @@
 //! noise), and the fitted model's from 26 % to 1.3 %.
 
 use super::comparison::{segment_residual, Comparison};
-use crate::integrate::{Integrator, Seeds, SimSettings};
+use crate::integrate::{Integrator, Seeds, SimSettings, Tape};
 use crate::linear::SampledModel;
 use crate::model::Model;
 use crate::record::Quantity;
@@ -130,6 +132,21 @@ fn residual(cmp: &Comparison, seg: &Segment, y: &DMatrix<f64>) -> Option<(DVecto
     Some((r, s))
 }
 
+/// The observed channels of a segment's simulation (p × len), as
+/// [`Comparison::predict`] extracts them.
+fn observed(cmp: &Comparison, run: &crate::integrate::Simulation) -> DMatrix<f64> {
+    let mut y = DMatrix::zeros(cmp.observations.len(), run.len());
+    for (c, o) in cmp.observations.iter().enumerate() {
+        let src = match o.quantity {
+            Quantity::Disp => &run.u,
+            Quantity::Vel => &run.v,
+            _ => &run.a,
+        };
+        y.row_mut(c).copy_from(&src.row(o.dof - 1));
+    }
+    y
+}
+
 /// Copy the columns of segment `s` from `src` into `dst`.
 fn copy_segment(dst: &mut DMatrix<f64>, src: &DMatrix<f64>, s: &Segment) {
     dst.columns_mut(s.start, s.len)
@@ -160,13 +177,16 @@ fn predict_each(
 
 /// The Gauss–Newton step of segment `s` (weighted residual `r`) from the
 /// forward sensitivities of the nonlinear simulation
-/// ([`Integrator::run_sensitivities`]): one simulation with the `2n`
-/// initial-state seeds; None when the simulation or its derivatives fail.
+/// ([`Integrator::run_sensitivities`]) with the `2n` initial-state seeds:
+/// from the tape of the segment's evaluation when there is one (the
+/// derivative steps alone, [`Integrator::sensitivities_from_tape`]: the
+/// same numbers without simulating the segment again), else from one
+/// simulation; None when the simulation or its derivatives fail.
 fn sens_step(
     integ: &Integrator,
     cmp: &Comparison,
     s: &Segment,
-    r: &DVector<f64>,
+    (r, tape): (&DVector<f64>, Option<&Tape>),
     scale: &DVector<f64>,
 ) -> Option<DVector<f64>> {
     let n = integ.ndof();
@@ -174,8 +194,19 @@ fn sens_step(
     let p = cmp.observations.len();
     let seeds = Seeds::initial_state(n);
     let force = cmp.force.columns(s.start, s.len);
-    let (run, d) = integ.run_sensitivities(force, &s.u0, &s.v0, &seeds).ok()?;
-    if !run.completed() || d.singular_tangent.is_some() {
+    let d = match tape {
+        Some(t) if t.samples() == s.len => integ
+            .sensitivities_from_tape(force, &s.u0, &s.v0, t, &seeds)
+            .ok()?,
+        _ => {
+            let (run, d) = integ.run_sensitivities(force, &s.u0, &s.v0, &seeds).ok()?;
+            if !run.completed() {
+                return None;
+            }
+            d
+        }
+    };
+    if d.singular_tangent.is_some() {
         return None;
     }
     let mut j = DMatrix::zeros(s.len * p, nx);
@@ -468,14 +499,19 @@ struct StartProblem<'a> {
     model: &'a Model,
     sim: SimSettings,
     exact: Option<&'a DMatrix<f64>>,
+    /// The model's integrator (the one [`Comparison::predict`] builds).
     integ: Option<&'a Integrator>,
+    /// Linearized by the sensitivities (a nonlinear model).
+    sensitivities: bool,
     scale: &'a DVector<f64>,
     sims: usize,
 }
 
-/// A segment's evaluation: weighted residual, its squared norm and the
-/// prediction of the segment's samples (p × len).
-type SegEval = (DVector<f64>, f64, DMatrix<f64>);
+/// A segment's evaluation: weighted residual, its squared norm, the
+/// prediction of the segment's samples (p × len) and, for a nonlinear
+/// model, the simulation's tape (for the sensitivities at the point,
+/// [`sens_step`]).
+type SegEval = (DVector<f64>, f64, DMatrix<f64>, Option<Tape>);
 
 impl crate::lsq::Problem for StartProblem<'_> {
     type Point = Segment;
@@ -484,6 +520,25 @@ impl crate::lsq::Problem for StartProblem<'_> {
     type Step = DVector<f64>;
 
     fn evaluate(&mut self, s: &Segment) -> Option<SegEval> {
+        if let Some(integ) = self.integ {
+            // the simulation [`Comparison::predict`] runs, with its tape
+            // when the sensitivities will need it
+            self.sims += 1;
+            let force = self.cmp.force.columns(s.start, s.len);
+            let (run, tape) = if self.sensitivities {
+                let (run, tape) = integ.run_taped(force, &s.u0, &s.v0, false);
+                (run, Some(tape))
+            } else {
+                (integ.run(force, &s.u0, &s.v0), None)
+            };
+            if !run.completed() {
+                return None;
+            }
+            let y = observed(self.cmp, &run);
+            let r = segment_residual(&self.cmp.observations, s, y.as_view())?;
+            let c = r.norm_squared();
+            return Some((r, c, y, tape));
+        }
         let y = predict_each(
             self.cmp,
             self.model,
@@ -492,7 +547,7 @@ impl crate::lsq::Problem for StartProblem<'_> {
             &mut self.sims,
         );
         let (r, c) = residual(self.cmp, s, &y)?;
-        Some((r, c, y.columns(s.start, s.len).into_owned()))
+        Some((r, c, y.columns(s.start, s.len).into_owned(), None))
     }
 
     fn cost(&self, e: &SegEval) -> f64 {
@@ -502,12 +557,12 @@ impl crate::lsq::Problem for StartProblem<'_> {
     fn linearize(&mut self, s: &Segment, e: &SegEval) -> Result<DVector<f64>, String> {
         match (self.exact, self.integ) {
             (Some(pinv), _) => Ok(pinv * &e.0),
-            (None, Some(integ)) => {
+            (None, Some(integ)) if self.sensitivities => {
                 self.sims += 1;
-                sens_step(integ, self.cmp, s, &e.0, self.scale)
+                sens_step(integ, self.cmp, s, (&e.0, e.3.as_ref()), self.scale)
                     .ok_or_else(|| "the sensitivities failed".into())
             }
-            (None, None) => Err("no integrator".into()),
+            (None, _) => Err("no integrator".into()),
         }
     }
 
@@ -526,8 +581,9 @@ impl crate::lsq::Problem for StartProblem<'_> {
     }
 }
 
-/// A segment's refined start and its evaluation, when it improved.
-type Improved = Option<(Segment, SegEval)>;
+/// A segment's refined start, its residual, cost and prediction, when it
+/// improved.
+type Improved = Option<(Segment, (DVector<f64>, f64, DMatrix<f64>))>;
 
 /// How one segment's refinement went: iterations in which it took part,
 /// whether the last of them failed to lower its cost, whether it is still
@@ -594,14 +650,19 @@ impl Refining<'_> {
                     sim: this.sim,
                     exact: this.pinv.get(&seg.len).filter(|_| this.linear),
                     integ: this.integ.as_ref(),
+                    sensitivities: !this.linear,
                     scale: &this.scale,
                     sims: 0,
                 };
                 let y0 = this.y.columns(seg.start, seg.len).into_owned();
-                let out = lsq::minimize_from(&mut q, seg.clone(), (r, c, y0), method, &stop);
+                let out = lsq::minimize_from(&mut q, seg.clone(), (r, c, y0, None), method, &stop);
                 let run = segment_run(&out.termination, out.iterations);
                 let improved = out.history.len() > 1;
-                let kept = improved.then(|| (out.point, out.eval.expect("evaluated")));
+                // the tape is dropped here: one per segment at a time
+                let kept = improved.then(|| {
+                    let (r, c, y, _) = out.eval.expect("evaluated");
+                    (out.point, (r, c, y))
+                });
                 (run, kept, q.sims)
             })
             .collect();
@@ -701,9 +762,7 @@ fn refine_local(
         sim,
         pinv,
         linear: exact,
-        integ: (!exact)
-            .then(|| Integrator::new(model, cmp.fs, sim).ok())
-            .flatten(),
+        integ: Integrator::new(model, cmp.fs, sim).ok(),
         scale: sm.state_scale(),
         segs,
         y,

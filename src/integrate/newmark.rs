@@ -27,7 +27,7 @@ mod dense;
 mod sensitivity;
 mod stability;
 use dense::{chol_solve, cholesky_in_place, dim, lu_solve, mat_vec_axpy, max_abs};
-pub use sensitivity::{ElementSeed, ParamSeed, Seeds, Sensitivities};
+pub use sensitivity::{ElementSeed, ParamSeed, Seeds, Sensitivities, Tape};
 use serde::Serialize;
 pub use stability::{Divergence, MAX_SUBSTEPS};
 
@@ -346,17 +346,29 @@ impl Integrator {
     /// from `u0`, `v0`. The first column of the output is the initial state;
     /// the output has as many samples as `force` has columns.
     pub fn run(&self, force: DMatrixView<'_, f64>, u0: &[f64], v0: &[f64]) -> Simulation {
+        self.run_sized(force, u0, v0, None)
+    }
+
+    /// [`Integrator::run`] with the kernels' size chosen, recording into
+    /// `tape` when given ([`Integrator::run_taped`]).
+    pub(super) fn run_sized(
+        &self,
+        force: DMatrixView<'_, f64>,
+        u0: &[f64],
+        v0: &[f64],
+        tape: Option<&mut Tape>,
+    ) -> Simulation {
         // sizes up to 8 get kernels unrolled at compile time (same bits)
         match self.n {
-            1 => self.run_n::<1>(force, u0, v0),
-            2 => self.run_n::<2>(force, u0, v0),
-            3 => self.run_n::<3>(force, u0, v0),
-            4 => self.run_n::<4>(force, u0, v0),
-            5 => self.run_n::<5>(force, u0, v0),
-            6 => self.run_n::<6>(force, u0, v0),
-            7 => self.run_n::<7>(force, u0, v0),
-            8 => self.run_n::<8>(force, u0, v0),
-            _ => self.run_n::<0>(force, u0, v0),
+            1 => self.run_n::<1>(force, u0, v0, tape),
+            2 => self.run_n::<2>(force, u0, v0, tape),
+            3 => self.run_n::<3>(force, u0, v0, tape),
+            4 => self.run_n::<4>(force, u0, v0, tape),
+            5 => self.run_n::<5>(force, u0, v0, tape),
+            6 => self.run_n::<6>(force, u0, v0, tape),
+            7 => self.run_n::<7>(force, u0, v0, tape),
+            8 => self.run_n::<8>(force, u0, v0, tape),
+            _ => self.run_n::<0>(force, u0, v0, tape),
         }
     }
 
@@ -366,6 +378,7 @@ impl Integrator {
         force: DMatrixView<'_, f64>,
         u0: &[f64],
         v0: &[f64],
+        mut tape: Option<&mut Tape>,
     ) -> Simulation {
         let n = self.n;
         let ns = force.ncols();
@@ -399,6 +412,9 @@ impl Integrator {
                 ws.f_next[i] = force[(i, k)];
             }
             let whole = self.whole_sample(map, &mut ws, k);
+            if let Some(t) = tape.as_deref_mut() {
+                t.sample(whole.is_some());
+            }
             if whole.is_some() {
                 steps += self.settings.substeps;
                 iters += self.settings.substeps;
@@ -430,6 +446,9 @@ impl Integrator {
                     };
                     break 'samples;
                 }
+                if let Some(t) = tape.as_deref_mut() {
+                    t.substep(&ws);
+                }
                 if self.alpha != 0.0 {
                     self.g_of::<N>(&mut ws);
                 }
@@ -437,6 +456,9 @@ impl Integrator {
             elements::internal_force_at(&self.elements, &ws.u, &ws.v, &ws.slips, &mut ws.fnl);
             out.store(&ws, k);
             done = k + 1;
+        }
+        if let Some(t) = tape {
+            t.finish(done);
         }
         out.truncate(done);
         out.finish(status, steps, iters)

@@ -60,6 +60,9 @@ use nalgebra::{DMatrix, DMatrixView, Dyn, LU};
 use serde::Serialize;
 use std::ops::Range;
 
+mod tape;
+pub use tape::Tape;
+
 static POWERS: OperatorCache<Vec<f64>> = OperatorCache::new();
 
 /// One element parameter in a [`ParamSeed`].

@@ -259,7 +259,7 @@ fn unrolled_and_generic_kernels_agree_bit_for_bit() {
         };
         let integ = Integrator::new(&model, 512.0, settings).unwrap();
         let fast = integ.run(f.as_view(), &[0.0; 8], &[0.0; 8]);
-        let generic = integ.run_n::<0>(f.as_view(), &[0.0; 8], &[0.0; 8]);
+        let generic = integ.run_n::<0>(f.as_view(), &[0.0; 8], &[0.0; 8], None);
         assert!(fast.completed() && fast.newton_iterations > fast.steps);
         assert_eq!(fast.status, generic.status);
         assert_eq!(fast.newton_iterations, generic.newton_iterations);

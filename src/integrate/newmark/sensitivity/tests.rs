@@ -711,3 +711,105 @@ fn seeds_stepped_together_equal_each_seed_alone_bit_for_bit() {
         assert_eq!(together.da[j], one.da[0], "seed {j}: da");
     }
 }
+
+/// The derivatives replayed from a run's tape against those of the run
+/// with sensitivities, bit for bit: `seeds` on `model` under `f` from
+/// (`u0`, `v0`); also the simulation against [`Integrator::run`]. Returns
+/// how many samples the run took whole.
+fn replay_matches(integ: &Integrator, f: &DMatrix<f64>, v0: &[f64], seeds: &Seeds) -> usize {
+    let u0 = [0.0; 8];
+    let (sim, live) = integ
+        .run_sensitivities(f.as_view(), &u0, v0, seeds)
+        .unwrap();
+    let states = !seeds.params.is_empty();
+    let (taped, tape) = integ.run_taped(f.as_view(), &u0, v0, states);
+    let plain = integ.run(f.as_view(), &u0, v0);
+    assert!(sim.completed() && tape.samples() == f.ncols());
+    assert_eq!(taped.u, plain.u);
+    assert_eq!(taped.a, plain.a);
+    assert_eq!(taped.newton_iterations, plain.newton_iterations);
+    let replay = integ
+        .sensitivities_from_tape(f.as_view(), &u0, v0, &tape, seeds)
+        .unwrap();
+    for j in 0..seeds.len() {
+        assert!(live.da[j].amax() > 0.0, "seed {j} moves nothing");
+        assert_eq!(live.du[j], replay.du[j], "seed {j}: du");
+        assert_eq!(live.dv[j], replay.dv[j], "seed {j}: dv");
+        assert_eq!(live.da[j], replay.da[j], "seed {j}: da");
+    }
+    assert_eq!(live.factorizations, replay.factorizations);
+    assert_eq!(live.newton_side_steps, replay.newton_side_steps);
+    tape.whole_samples()
+}
+
+#[test]
+fn derivatives_from_a_tape_equal_those_of_the_run_bit_for_bit() {
+    // friction at every mass and the bumper (every sample sub-stepped),
+    // α = 0 and HHT: state seeds alone (a tape without the states) and
+    // with contact and friction parameters (with them)
+    let mut model = lanl(true);
+    model.frictions = (1..=8)
+        .map(|d| Friction {
+            dof: d,
+            level: 0.2,
+            velocity: 1e-3,
+        })
+        .collect();
+    let f = shaker(200, 20.0);
+    for alpha in [0.0, -0.1] {
+        let integ = Integrator::new(&model, 512.0, settings(alpha)).unwrap();
+        let state = Seeds::initial_state(8);
+        replay_matches(&integ, &f, &swinging(), &state);
+        let with_params = Seeds {
+            state: some_state_directions(),
+            params: vec![
+                seed(&model, P::Gap(0)),
+                seed(&model, P::Kc(0)),
+                seed(&model, P::Level(4)),
+                seed(&model, P::Spring(3)),
+            ],
+        };
+        replay_matches(&integ, &f, &swinging(), &with_params);
+    }
+    // the bumper alone: open stretches taken whole by the sample map,
+    // their derivatives by the powers of the sub-step map
+    let model = lanl(true);
+    let integ = Integrator::new(&model, 512.0, SimSettings::default()).unwrap();
+    let f = shaker(300, 40.0);
+    let whole = replay_matches(&integ, &f, &[0.0; 8], &Seeds::initial_state(8));
+    assert!(whole > 100, "{whole} samples taken whole");
+    let contact = Seeds {
+        state: some_state_directions(),
+        params: vec![seed(&model, P::Gap(0)), seed(&model, P::Kc(0))],
+    };
+    replay_matches(&integ, &f, &[0.0; 8], &contact);
+}
+
+#[test]
+fn a_tape_refuses_what_it_cannot_replay() {
+    let model = lanl(true);
+    let integ = Integrator::new(&model, 512.0, SimSettings::default()).unwrap();
+    let f = shaker(300, 40.0);
+    let (u0, v0) = ([0.0; 8], [0.0; 8]);
+    let err = |tape: &Tape, seeds: &Seeds, f: &DMatrix<f64>| {
+        integ
+            .sensitivities_from_tape(f.as_view(), &u0, &v0, tape, seeds)
+            .unwrap_err()
+            .to_string()
+    };
+    let (_, bare) = integ.run_taped(f.as_view(), &u0, &v0, false);
+    let gap = Seeds::params(8, vec![seed(&model, P::Gap(0))]);
+    assert!(err(&bare, &gap, &f).contains("made with the states"));
+    // a spring's parameter has a term in every sub-step: the samples the
+    // tape took whole cannot be replayed for it
+    let (_, full) = integ.run_taped(f.as_view(), &u0, &v0, true);
+    let spring = Seeds::params(8, vec![seed(&model, P::Spring(2))]);
+    assert!(err(&full, &spring, &f).contains("took some whole"));
+    // a tape of another integrator or a shorter force
+    let other = Integrator::new(&lanl(false), 512.0, SimSettings::default()).unwrap();
+    let (_, foreign) = other.run_taped(f.as_view(), &u0, &v0, false);
+    let state = Seeds::initial_state(8);
+    assert!(err(&foreign, &state, &f).contains("not made by this integrator"));
+    let short = f.columns(0, 100).into_owned();
+    assert!(err(&bare, &state, &short).contains("not made by this integrator"));
+}
