@@ -33,11 +33,13 @@
 //! `--residual-damping Z|identified` sets the damping ratio of the
 //! residual mode above the band in that model (default 0.3),
 //! `--jenkins-elements N` puts N Jenkins elements in parallel (an Iwan
-//! model; default 1); `--jenkins-direction points|coordinate` puts the
-//! element between the wing and payload points (default) or on the
-//! interface coordinate, an unmeasured point whose participation in every
-//! mode is fitted with the slip force, started from the pair's fit;
-//! `--max-simulations N` limits the simulations of that fit (default 60).
+//! model; default 1); `--jenkins-direction coordinate|points` puts the
+//! element on the interface coordinate (default: an unmeasured point
+//! whose participation in every in-band mode is fitted with the slip
+//! force, started from the fit of the element between the wing and
+//! payload points) or between the wing and payload points;
+//! `--max-simulations N` limits the simulations of that fit (default 150
+//! for the coordinate, 60 between the points).
 
 use std::path::{Path, PathBuf};
 use tacit::cases::f16;
@@ -75,7 +77,7 @@ fn args() -> anyhow::Result<Args> {
         jenkins: false,
         residual_damping: Some(0.3),
         jenkins_elements: 1,
-        jenkins_direction: f16::jenkins::Direction::Points,
+        jenkins_direction: f16::jenkins::Direction::Coordinate,
         max_simulations: None,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
@@ -245,7 +247,10 @@ fn jenkins_study(a: &Args, settings: &f16::Settings) -> anyhow::Result<serde_jso
     let defaults = f16::jenkins::FitSpec::default();
     let spec = f16::jenkins::FitSpec {
         direction: a.jenkins_direction,
-        max_simulations: a.max_simulations.unwrap_or(defaults.max_simulations),
+        max_simulations: a.max_simulations.unwrap_or(match a.jenkins_direction {
+            f16::jenkins::Direction::Points => defaults.max_simulations,
+            f16::jenkins::Direction::Coordinate => 150,
+        }),
         upper_residual_damping: a.residual_damping,
         elements: a.jenkins_elements,
         substeps: settings.substeps,

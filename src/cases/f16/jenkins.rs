@@ -740,8 +740,11 @@ shape = [0.1, -0.4, 0.4]
             shape: vec![0.2, 0.1, -0.3],
             residual: true,
         });
+        // a pair the linear model couples by a spring
+        let d = &held_model(&s).unwrap().springs[0].dofs;
         let spec = FitSpec {
             direction: Direction::Coordinate,
+            pair: [d[0], d[1]],
             upper_residual_damping: None,
             ..Default::default()
         };
