@@ -7,6 +7,13 @@
 //! model's); once the interface force exceeds the slip force `F_s` the
 //! coupling softens by `k_J` and the slider dissipates (`docs/f16.md`).
 //!
+//! Or the element acts on the interface as a coordinate of its own
+//! ([`Direction::Coordinate`], [`coordinate_model`]): an unmeasured point
+//! of the modal model whose displacement in each in-band mode (the
+//! interface's participation in that mode) is fitted, so that the slip
+//! softens and damps each mode by as much as the test shows rather than in
+//! proportion to the relative displacement of two measured points.
+//!
 //! The fit is by open-loop output error over the steady-state periods of
 //! one or more records (Levenberg–Marquardt on the logarithms of the
 //! parameters). The Jenkins element's slip state has no derivative
