@@ -33,7 +33,13 @@
 //! `--residual-damping Z|identified` sets the damping ratio of the
 //! residual mode above the band in that model (default 0.3),
 //! `--jenkins-elements N` puts N Jenkins elements in parallel (an Iwan
-//! model; default 1).
+//! model; default 1); `--jenkins-direction coordinate|points` puts the
+//! element on the interface coordinate (default: an unmeasured point
+//! whose participation in every in-band mode is fitted with the slip
+//! force, started from the fit of the element between the wing and
+//! payload points) or between the wing and payload points;
+//! `--max-simulations N` limits the simulations of that fit (default 150
+//! for the coordinate, 60 between the points).
 
 use std::path::{Path, PathBuf};
 use tacit::cases::f16;
@@ -52,6 +58,8 @@ struct Args {
     jenkins: bool,
     residual_damping: Option<f64>,
     jenkins_elements: usize,
+    jenkins_direction: f16::jenkins::Direction,
+    max_simulations: Option<usize>,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -69,6 +77,8 @@ fn args() -> anyhow::Result<Args> {
         jenkins: false,
         residual_damping: Some(0.3),
         jenkins_elements: 1,
+        jenkins_direction: f16::jenkins::Direction::Coordinate,
+        max_simulations: None,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let mut it = argv.iter();
@@ -91,6 +101,18 @@ fn args() -> anyhow::Result<Args> {
                     anyhow::anyhow!("--residual-damping {v}: {e} (a ratio or identified)")
                 })?),
             };
+            continue;
+        }
+        if flag == "--jenkins-direction" {
+            a.jenkins_direction = match value.as_str() {
+                "points" => f16::jenkins::Direction::Points,
+                "coordinate" => f16::jenkins::Direction::Coordinate,
+                _ => anyhow::bail!("--jenkins-direction {value}: expected points or coordinate"),
+            };
+            continue;
+        }
+        if flag == "--max-simulations" {
+            a.max_simulations = Some(value.parse()?);
             continue;
         }
         if flag == "--jenkins-elements" {
@@ -222,12 +244,18 @@ fn jenkins_study(a: &Args, settings: &f16::Settings) -> anyhow::Result<serde_jso
         .filter(|p| p.exists())
         .collect();
     let refs: Vec<&Path> = levels.iter().map(|p| p.as_path()).collect();
+    let defaults = f16::jenkins::FitSpec::default();
     let spec = f16::jenkins::FitSpec {
+        direction: a.jenkins_direction,
+        max_simulations: a.max_simulations.unwrap_or(match a.jenkins_direction {
+            f16::jenkins::Direction::Points => defaults.max_simulations,
+            f16::jenkins::Direction::Coordinate => 150,
+        }),
         upper_residual_damping: a.residual_damping,
         elements: a.jenkins_elements,
         substeps: settings.substeps,
         warm_up: settings.warm_up,
-        ..Default::default()
+        ..defaults
     };
     let (st, model) = f16::jenkins::study(&a.linear, &a.estimate, &refs, &spec, settings)?;
     let f = &st.fitted;
@@ -247,6 +275,19 @@ fn jenkins_study(a: &Args, settings: &f16::Settings) -> anyhow::Result<serde_jso
         f.simulations,
         f.seconds
     );
+    for (hz, d) in &f.participations {
+        println!("  interface participation of the {hz:.2}-Hz mode: {d:+.4}");
+    }
+    println!(
+        "  stuck modes {:.3?} Hz\n  slipped modes {:.3?} Hz",
+        f.stuck_hz, f.slipped_hz
+    );
+    if let Some(p) = &st.pair {
+        println!(
+            "  started from the pair's element: k_J {:.4e} N/m, slip force {:.4e} N",
+            p.stiffness, p.slip_force
+        );
+    }
     for x in &st.scores {
         let file = Path::new(&x.record)
             .file_name()

@@ -7,6 +7,13 @@
 //! model's); once the interface force exceeds the slip force `F_s` the
 //! coupling softens by `k_J` and the slider dissipates (`docs/f16.md`).
 //!
+//! Or the element acts on the interface as a coordinate of its own
+//! ([`Direction::Coordinate`], [`coordinate_model`]): an unmeasured point
+//! of the modal model whose displacement in each in-band mode (the
+//! interface's participation in that mode) is fitted, so that the slip
+//! softens and damps each mode by as much as the test shows rather than in
+//! proportion to the relative displacement of two measured points.
+//!
 //! The fit is by open-loop output error over the steady-state periods of
 //! one or more records (Levenberg–Marquardt on the logarithms of the
 //! parameters). The Jenkins element's slip state has no derivative
@@ -22,6 +29,7 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use rayon::prelude::*;
 use serde::Serialize;
+use std::f64::consts::PI;
 use std::sync::Arc;
 
 /// A linear-part parameter fitted with the interface.
@@ -35,10 +43,29 @@ pub enum ModeParam {
     Damping(f64),
 }
 
+/// Where the Jenkins element acts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Direction {
+    /// Between the two points of [`FitSpec::pair`], taking `k_J` out of
+    /// their coupling spring ([`model_with`]); fitted: `k_J` and `F_s`.
+    Points,
+    /// From the interface coordinate to ground ([`coordinate_model`]): an
+    /// unmeasured point whose modal displacements (the interface's
+    /// participation in each non-residual mode) are fitted with `F_s`,
+    /// starting from the relative displacement of [`FitSpec::pair`] in
+    /// those modes.
+    Coordinate,
+}
+
 /// What [`fit`] fits.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FitSpec {
-    /// The two points the Jenkins element joins (DOFs from 1).
+    /// Where the Jenkins element acts.
+    pub direction: Direction,
+    /// The two points the Jenkins element joins (DOFs from 1); with
+    /// [`Direction::Coordinate`], the pair whose relative displacement
+    /// the interface coordinate starts from and whose coupling sets `k_J`.
     pub pair: [usize; 2],
     /// Start of the share of the coupling spring taken by the Jenkins
     /// element, `k_J / k_coupling` (in (0, 1]).
@@ -109,6 +136,37 @@ pub fn model_with(
     k_j_share: f64,
     slip_force: f64,
 ) -> Result<Model> {
+    let section = linear_section(base, spec, factors)?;
+    let mut m = held_model(&section)?;
+    let pair = spec.pair;
+    let s = coupling_index(&m, pair)?;
+    let k_c = m.springs[s].stiffness;
+    let k_j = k_j_share * k_c;
+    m.springs[s].stiffness = k_c - k_j;
+    push_jenkins(&mut m, spec, pair.to_vec(), k_j, slip_force);
+    Ok(m)
+}
+
+/// `n` Jenkins elements of stiffness `k_j / n` and slip forces
+/// `F_s i / n` on `dofs` (one: a single Jenkins element).
+fn push_jenkins(m: &mut Model, spec: &FitSpec, dofs: Vec<usize>, k_j: f64, slip_force: f64) {
+    let n = spec.elements.max(1);
+    for i in 1..=n {
+        m.jenkins.push(Jenkins {
+            dofs: dofs.clone(),
+            stiffness: k_j / n as f64,
+            slip_force: slip_force * i as f64 / n as f64,
+        });
+    }
+}
+
+/// `base` with the residual mode above the band and the factors of
+/// `spec.modes` applied.
+fn linear_section(
+    base: &modal::ModalSection,
+    spec: &FitSpec,
+    factors: &[f64],
+) -> Result<modal::ModalSection> {
     let mut section = base.clone();
     let top = section
         .modes
@@ -138,9 +196,14 @@ pub fn model_with(
             section.modes[r].damping *= f;
         }
     }
-    let text = modal::to_toml_string("f16-jenkins", "F-16 GVT, Jenkins interface", &section);
+    Ok(section)
+}
+
+/// The dense model of `section` with its modal damping matrix held as a
+/// matrix (so that splitting a stiffness does not change it).
+fn held_model(section: &modal::ModalSection) -> Result<Model> {
+    let text = modal::to_toml_string("f16-jenkins", "F-16 GVT, Jenkins interface", section);
     let mut m = modal::from_toml_str(&text, "f16-jenkins")?;
-    // the damping of the stuck model held while the coupling is split
     let c = m.damping_matrix()?;
     let mut lin = m
         .matrices
@@ -150,9 +213,12 @@ pub fn model_with(
     lin.c = Some(c);
     m.matrices = Some(Arc::new(lin));
     m.damping = crate::model::Damping::None;
-    let pair = spec.pair;
-    let s = m
-        .springs
+    Ok(m)
+}
+
+/// Index in `m.springs` of the coupling spring between the two points.
+fn coupling_index(m: &Model, pair: [usize; 2]) -> Result<usize> {
+    m.springs
         .iter()
         .position(|s| s.dofs.len() == 2 && s.dofs.contains(&pair[0]) && s.dofs.contains(&pair[1]))
         .ok_or_else(|| {
@@ -161,18 +227,85 @@ pub fn model_with(
                 m.dof_name(pair[0]),
                 m.dof_name(pair[1])
             ))
-        })?;
-    let k_c = m.springs[s].stiffness;
-    let k_j = k_j_share * k_c;
-    m.springs[s].stiffness = k_c - k_j;
-    let n = spec.elements.max(1);
-    for i in 1..=n {
-        m.jenkins.push(Jenkins {
-            dofs: pair.to_vec(),
-            stiffness: k_j / n as f64,
-            slip_force: slip_force * i as f64 / n as f64,
-        });
+        })
+}
+
+/// Label of the unmeasured point that is the interface's slip coordinate
+/// ([`Direction::Coordinate`]).
+pub const INTERFACE: &str = "interface";
+
+/// The Level-1 coupling spring between the points of `spec.pair` (N/m)
+/// times `spec.share`: the stuck stiffness `k_J` of the Jenkins element on
+/// the interface coordinate.
+pub fn coordinate_stiffness(base: &modal::ModalSection, spec: &FitSpec) -> Result<f64> {
+    let m = held_model(base)?;
+    Ok(spec.share * m.springs[coupling_index(&m, spec.pair)?].stiffness)
+}
+
+/// The interface's participation `δ_r` in each non-residual mode of `base`
+/// (in the section's order) when the interface coordinate is the relative
+/// displacement of `spec.pair` restricted to those modes:
+/// `δ_r = √k_J (φ_a,r − φ_b,r) / ω_r`.
+pub fn pair_participations(base: &modal::ModalSection, spec: &FitSpec) -> Result<Vec<f64>> {
+    let k_j = coordinate_stiffness(base, spec)?;
+    let [a, b] = spec.pair.map(|d| d - 1);
+    Ok(base
+        .modes
+        .iter()
+        .filter(|m| !m.residual)
+        .map(|m| k_j.sqrt() * (m.shape[a] - m.shape[b]) / (2.0 * PI * m.frequency_hz))
+        .collect())
+}
+
+/// The model with the interface as a coordinate of its own: `base` (with
+/// `factors`, [`linear_section`]) gains the unmeasured point
+/// [`INTERFACE`] whose displacement in mode `r` is
+/// `g_r = δ_r ω_r / √k_J` for the non-residual modes (`deltas`, in the
+/// section's order) and 0 for the residual modes; a Jenkins element
+/// `(k_J, F_s)` acts from it to ground, and `k_J` is taken out of the
+/// linear stiffness of that coordinate, so that stuck the model is the
+/// linear model and fully slipped the stiffness of the modes loses
+/// `k_J g gᵀ` (mode `r` alone: `ω_r² (1 − δ_r²)`). `k_J` is
+/// [`coordinate_stiffness`]; it only sets the coordinate's scale.
+pub fn coordinate_model(
+    base: &modal::ModalSection,
+    spec: &FitSpec,
+    factors: &[f64],
+    deltas: &[f64],
+    slip_force: f64,
+) -> Result<Model> {
+    let k_j = coordinate_stiffness(base, spec)?;
+    let mut section = linear_section(base, spec, factors)?;
+    let free = section.modes.iter().filter(|m| !m.residual).count();
+    if deltas.len() != free {
+        return Err(TacitError::Setting(format!(
+            "F-16 interface coordinate: {} participations for {free} modes",
+            deltas.len()
+        )));
     }
+    section.points.push(INTERFACE.into());
+    let mut d = deltas.iter();
+    for m in section.modes.iter_mut() {
+        let g = match m.residual {
+            true => 0.0,
+            false => d.next().copied().unwrap_or(0.0) * 2.0 * PI * m.frequency_hz / k_j.sqrt(),
+        };
+        m.shape.push(g);
+    }
+    if !section.dofs.is_empty() {
+        let next = section.dofs.iter().max().copied().unwrap_or(0) + 1;
+        section.dofs.push(next);
+    }
+    let mut m = held_model(&section)?;
+    let s = m.points.len();
+    let mut lin = m
+        .matrices
+        .as_deref()
+        .cloned()
+        .ok_or_else(|| TacitError::Numerical("the modal model has no matrices".into()))?;
+    lin.k_rest[(s - 1, s - 1)] -= k_j;
+    m.matrices = Some(Arc::new(lin));
+    push_jenkins(&mut m, spec, vec![s], k_j, slip_force);
     Ok(m)
 }
 
@@ -188,10 +321,20 @@ fn nearest_mode(section: &modal::ModalSection, hz: f64) -> Result<usize> {
 }
 
 /// The fitted interface.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Default, Serialize)]
 pub struct Fitted {
-    /// Points joined.
+    /// Points joined (the interface coordinate and `ground` with
+    /// [`Direction::Coordinate`]).
     pub points: [String; 2],
+    /// With [`Direction::Coordinate`]: per non-residual mode, its
+    /// frequency (Hz) and the interface's participation `δ_r` (fully
+    /// slipped, that mode alone would keep `1 − δ_r²` of its ω²).
+    pub participations: Vec<(f64, f64)>,
+    /// Natural frequencies of the model stuck (the linear model), Hz.
+    pub stuck_hz: Vec<f64>,
+    /// Natural frequencies with every slider slipping (the Jenkins
+    /// springs removed), Hz.
+    pub slipped_hz: Vec<f64>,
     /// The coupling spring of the Level-1 model, N/m.
     pub coupling: f64,
     /// Stuck stiffness of the Jenkins element(s), N/m (their sum).
@@ -230,12 +373,23 @@ struct Problem<'a> {
 }
 
 impl Problem<'_> {
-    /// `x = [ln factors..., ln share, ln F_s]`.
+    /// `x = [ln factors..., ln share, ln F_s]` ([`Direction::Points`]) or
+    /// `[ln factors..., δ..., ln F_s]` ([`Direction::Coordinate`]; `δ`
+    /// scaled into `|δ| ≤ 0.95`, so that the slipped model stays stable).
     fn model(&self, x: &[f64]) -> Result<Model> {
         let nm = self.spec.modes.len();
         let f: Vec<f64> = x[..nm].iter().map(|v| v.exp()).collect();
-        let share = x[nm].exp().min(1.0);
-        model_with(self.base, self.spec, &f, share, x[nm + 1].exp())
+        let fs = x[x.len() - 1].exp();
+        match self.spec.direction {
+            Direction::Points => model_with(self.base, self.spec, &f, x[nm].exp().min(1.0), fs),
+            Direction::Coordinate => {
+                let d = &x[nm..x.len() - 1];
+                let norm = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let scale = if norm > 0.95 { 0.95 / norm } else { 1.0 };
+                let d: Vec<f64> = d.iter().map(|v| v * scale).collect();
+                coordinate_model(self.base, self.spec, &f, &d, fs)
+            }
+        }
     }
 
     fn residual(&self, x: &[f64]) -> Result<DVector<f64>> {
@@ -324,7 +478,11 @@ pub fn fit(
         .collect();
     let nm = spec.modes.len();
     let mut x0 = vec![0.0; nm];
-    x0.extend([spec.share.ln(), spec.slip_force.ln()]);
+    match spec.direction {
+        Direction::Points => x0.push(spec.share.ln()),
+        Direction::Coordinate => x0.extend(pair_participations(base, spec)?),
+    }
+    x0.push(spec.slip_force.ln());
     let mut p = Problem {
         base,
         spec,
@@ -353,23 +511,58 @@ pub fn fit(
         }
         _ => format!("{:?}", report.termination),
     };
+    let mut fitted = describe(&model, base, spec, &x)?;
+    fitted.records = records
+        .iter()
+        .map(|r| r.source.display().to_string())
+        .collect();
+    fitted.cost = (cost0, cost1);
+    fitted.termination = termination;
+    fitted.simulations = p.simulations.into_inner();
+    fitted.seconds = t.elapsed().as_secs_f64();
+    Ok((fitted, model))
+}
+
+/// The fitted interface's parameters and modes (`x` as [`Problem::model`]
+/// takes it); the fit's record, cost and counts are left empty.
+fn describe(
+    model: &Model,
+    base: &modal::ModalSection,
+    spec: &FitSpec,
+    x: &[f64],
+) -> Result<Fitted> {
     let j = model
         .jenkins
         .last()
         .ok_or_else(|| TacitError::Numerical("no Jenkins element in the fitted model".into()))?;
     let k_j: f64 = model.jenkins.iter().map(|j| j.stiffness).sum();
-    let coupling = model
-        .springs
-        .iter()
-        .find(|s| {
-            s.dofs.len() == 2 && s.dofs.contains(&spec.pair[0]) && s.dofs.contains(&spec.pair[1])
-        })
-        .map_or(0.0, |s| s.stiffness)
-        + k_j;
-    let fitted = Fitted {
-        points: spec
-            .pair
-            .map(|d| POINTS.get(d - 1).map_or(d.to_string(), |s| s.to_string())),
+    let name = |d: usize| POINTS.get(d - 1).map_or(d.to_string(), |s| s.to_string());
+    let (points, coupling, participations) = match spec.direction {
+        Direction::Points => {
+            let s = &model.springs[coupling_index(model, spec.pair)?];
+            (spec.pair.map(name), s.stiffness + k_j, vec![])
+        }
+        Direction::Coordinate => {
+            let nm = spec.modes.len();
+            let hz = base.modes.iter().filter(|m| !m.residual);
+            let p = hz
+                .zip(&x[nm..x.len() - 1])
+                .map(|(m, &d)| (m.frequency_hz, d));
+            let pts = [INTERFACE.to_string(), "ground".to_string()];
+            (pts, k_j / spec.share, p.collect())
+        }
+    };
+    let mut stuck = model.stiffness_matrix();
+    for e in &model.jenkins {
+        let ends = (e.dofs[0] - 1, e.dofs.get(1).map(|d| d - 1));
+        crate::model::add_spring(&mut stuck, ends, e.stiffness);
+    }
+    let mass = model.mass_matrix();
+    Ok(Fitted {
+        points,
+        participations,
+        stuck_hz: crate::modal::solve(&mass, &stuck)?.freq_hz,
+        slipped_hz: crate::modal::solve(&mass, &model.stiffness_matrix())?.freq_hz,
         coupling,
         stiffness: k_j,
         slip_force: j.slip_force,
@@ -378,19 +571,11 @@ pub fn fit(
         modes: spec
             .modes
             .iter()
-            .zip(&x)
+            .zip(x)
             .map(|(m, v)| (*m, v.exp()))
             .collect(),
-        records: records
-            .iter()
-            .map(|r| r.source.display().to_string())
-            .collect(),
-        cost: (cost0, cost1),
-        termination,
-        simulations: p.simulations.into_inner(),
-        seconds: t.elapsed().as_secs_f64(),
-    };
-    Ok((fitted, model))
+        ..Default::default()
+    })
 }
 
 /// The Jenkins interface fitted and scored ([`study`]).
@@ -400,16 +585,23 @@ pub struct Study {
     pub spec: FitSpec,
     /// The fitted interface.
     pub fitted: Fitted,
+    /// With [`Direction::Coordinate`]: the Jenkins element between the
+    /// points of the pair, fitted first (its `k_J` and `F_s` start the
+    /// interface coordinate's fit).
+    pub pair: Option<Fitted>,
     /// The Level-1 model, the modal model re-identified on the estimation
-    /// record (linear, for reference) and the Jenkins model on every
-    /// record: RMS per channel and per band ([`super::BANDS_HZ`]).
+    /// record (linear, for reference), the pair's Jenkins model (with
+    /// [`Direction::Coordinate`]) and the fitted model on every record:
+    /// RMS per channel and per band ([`super::BANDS_HZ`]).
     pub scores: Vec<super::Scored>,
 }
 
 /// Fit the Jenkins interface ([`fit`]) on the linear (Level-1) record and
 /// the estimation record together, with the Level-1 modal model, and score
 /// it with the Level-1 model and the estimation record's re-identified
-/// modal model on `records`. Returns the study and the Jenkins model.
+/// modal model on `records`. With [`Direction::Coordinate`] the element
+/// between the points of the pair is fitted first and starts the
+/// interface coordinate's fit. Returns the study and the Jenkins model.
 pub fn study(
     linear: &std::path::Path,
     estimate: &std::path::Path,
@@ -426,7 +618,24 @@ pub fn study(
         Ok(r)
     };
     let (r1, est) = (load(linear)?, load(estimate)?);
-    let (fitted, model) = fit(&fit1.section, &[&r1, &est], spec)?;
+    let pair_spec = FitSpec {
+        direction: Direction::Points,
+        max_simulations: spec.max_simulations.min(60),
+        ..spec.clone()
+    };
+    let (pair_fit, pair_model) = fit(&fit1.section, &[&r1, &est], &pair_spec)?;
+    let (fitted, model, pair) = match spec.direction {
+        Direction::Points => (pair_fit, pair_model.clone(), None),
+        Direction::Coordinate => {
+            let from_pair = FitSpec {
+                share: pair_fit.stiffness / pair_fit.coupling,
+                slip_force: pair_fit.slip_force,
+                ..spec.clone()
+            };
+            let (f, m) = fit(&fit1.section, &[&r1, &est], &from_pair)?;
+            (f, m, Some(pair_fit))
+        }
+    };
     let (_, text7) = super::linear_model(&est, s)?;
     let l7 = modal::from_toml_str(&text7, "f16-calibrated")?;
     let recs = records
@@ -434,15 +643,19 @@ pub fn study(
         .map(|p| load(p))
         .collect::<Result<Vec<_>>>()?;
     let refs: Vec<&Record> = recs.iter().collect();
-    let models = [
+    let mut models = vec![
         ("level-1 model", &l1),
         ("re-identified at the estimation level", &l7),
-        ("jenkins interface", &model),
     ];
+    if pair.is_some() {
+        models.push(("jenkins between the pair", &pair_model));
+    }
+    models.push(("jenkins interface", &model));
     let scores = super::score(&models, &refs, s.warm_up, s.substeps)?;
     let st = Study {
         spec: spec.clone(),
         fitted,
+        pair,
         scores,
     };
     Ok((st, model))
@@ -451,6 +664,7 @@ pub fn study(
 impl Default for FitSpec {
     fn default() -> Self {
         FitSpec {
+            direction: Direction::Points,
             pair: [2, 3],
             share: 0.5,
             slip_force: 50.0,
@@ -496,6 +710,7 @@ shape = [0.1, -0.4, 0.4]
     fn stuck_jenkins_model_has_the_linear_models_matrices() {
         let s = section();
         let spec = FitSpec {
+            direction: Direction::Points,
             pair: [2, 3],
             share: 0.5,
             slip_force: 1.0,
@@ -521,5 +736,57 @@ shape = [0.1, -0.4, 0.4]
         let c1 = lin.damping_matrix().unwrap();
         assert!((c - &c1).abs().max() < 1e-9 * c1.abs().max());
         assert!(j.stiffness > 0.0);
+    }
+
+    #[test]
+    fn interface_coordinate_softens_only_the_modes_it_strains() {
+        let mut s = section();
+        s.modes.push(modal::ModalMode {
+            frequency_hz: 30.0,
+            damping: 0.05,
+            shape: vec![0.2, 0.1, -0.3],
+            residual: true,
+        });
+        // a pair the linear model couples by a spring
+        let d = &held_model(&s).unwrap().springs[0].dofs;
+        let spec = FitSpec {
+            direction: Direction::Coordinate,
+            pair: [d[0], d[1]],
+            upper_residual_damping: None,
+            ..Default::default()
+        };
+        // the 7-Hz mode alone: fully slipped it keeps 1 − δ² of its ω²
+        let m = coordinate_model(&s, &spec, &[], &[0.0, 0.0, 0.6], 1.0).unwrap();
+        assert_eq!(m.points, ["exc", "wing", "payload", INTERFACE]);
+        assert_eq!(m.jenkins[0].dofs, [4]);
+        let f = describe(&m, &s, &spec, &[0.0, 0.0, 0.6, 0.0]).unwrap();
+        let want = [3.0, 5.0, 7.0, 30.0];
+        for (got, w) in f.stuck_hz.iter().zip(want) {
+            assert!((got - w).abs() < 1e-7 * w, "stuck {:?}", f.stuck_hz);
+        }
+        let slipped = [3.0, 5.0, 7.0 * 0.8, 30.0];
+        let mut got = f.slipped_hz.clone();
+        got.sort_by(f64::total_cmp);
+        for (g, w) in got.iter().zip(slipped) {
+            assert!((g - w).abs() < 1e-7 * w, "slipped {:?}", f.slipped_hz);
+        }
+        // the stuck model's damping is modal with the section's ratios
+        let mut k = m.stiffness_matrix();
+        crate::model::add_spring(&mut k, (3, None), m.jenkins[0].stiffness);
+        let modes = crate::modal::solve(&m.mass_matrix(), &k).unwrap();
+        let c = m.damping_matrix().unwrap();
+        let mc = modes.shapes.transpose() * c * &modes.shapes;
+        for (r, z) in [0.02, 0.01, 0.01, 0.05].iter().enumerate() {
+            let w = modes.omega[r];
+            assert!(
+                (mc[(r, r)] - 2.0 * z * w).abs() < 1e-7 * w,
+                "mode {r}: {}",
+                mc[(r, r)]
+            );
+        }
+        // participations of the pair's relative displacement: all modes
+        let d = pair_participations(&s, &spec).unwrap();
+        assert_eq!(d.len(), 3);
+        assert!(d.iter().all(|v| v.abs() > 0.0));
     }
 }
