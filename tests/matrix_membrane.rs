@@ -9,7 +9,7 @@
 //! 10 % and a validation error at the noise. The force located at the
 //! stop's point fits the data closer than half the noise at the default
 //! weight of the force prior (weighted residual 0.32), so the weight is
-//! raised (to 0.1, residual 0.51). About 35 s in release on two shared
+//! raised (to 0.1, residual 0.51). About 17 s in release on two shared
 //! cores.
 
 mod common;

@@ -217,7 +217,8 @@ pub struct LiftedGroup {
     pub reweight_floor: f64,
     /// Least weighted residual RMS (1 = the noise level) of the
     /// reconstruction along located directions: below it `lambda` is
-    /// raised by factors of √10 (default 0.5; [0, 1), 0 keeps `lambda`).
+    /// raised by factors of √10, kept when no weight up to 1e4 times
+    /// reaches it (default 0.5; [0, 1), 0 keeps `lambda`).
     /// Reason: a closer fit absorbs more than three quarters of the noise
     /// with the force; at 32 361 DOFs of the membrane of docs/formats.md
     /// `lambda` = 1e-2 left 0.18 and lost the stop.

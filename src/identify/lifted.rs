@@ -46,7 +46,9 @@
 //! 1966): λ is raised by factors of √10 until the quadratic
 //! reconstruction leaves at least [`LiftedSettings::min_residual`] (0.5)
 //! of the assumed noise — a fit closer than that absorbs more than three
-//! quarters of the noise variance with the force. At 32 361 DOFs this
+//! quarters of the noise variance with the force; when no weight up to
+//! `10^4 λ_0` reaches it (a single channel with the force at its own DOF,
+//! as the Silverbox, is fitted exactly whatever λ) λ stays. At 32 361 DOFs this
 //! takes λ to 10 (residual 0.54, force 0.343 N RMS, correlation with the
 //! true force 0.92 against 0.23); the lumped LANL bumper record (residual
 //! 0.74 with sensors 1, 5, 6, 0.94 with all eight) keeps λ = 1e-2.
@@ -866,7 +868,9 @@ pub const FLOOR_STEPS: usize = 8;
 /// `λ_0 10^{k/2}` (`λ_0` = [`LiftedSettings::lambda`],
 /// `k = 0..=`[`FLOOR_STEPS`]) whose quadratic reconstruction (no
 /// reweighting) leaves a weighted residual RMS of at least
-/// [`LiftedSettings::min_residual`]; the largest when none does. Returns
+/// [`LiftedSettings::min_residual`]. When none does (the residual does
+/// not respond to the weight: a force at the only measured DOF fits it
+/// whatever λ), the principle has no answer and λ stays `λ_0`. Returns
 /// the weight and the residuals tried.
 pub fn floor_lambda(
     sm: &SampledModel,
@@ -895,7 +899,10 @@ pub fn floor_lambda(
             break;
         }
     }
-    let lambda = tried.last().map_or(s.lambda, |t| t.0);
+    let lambda = match tried.last() {
+        Some(&(l, w)) if w >= s.min_residual => l,
+        _ => s.lambda,
+    };
     Ok((lambda, tried))
 }
 
@@ -922,10 +929,20 @@ pub fn reconstruct_floored(
             .iter()
             .map(|(l, w)| format!("{l:.2e}: {w:.3}"))
             .collect();
+        let what = if lambda > s.lambda {
+            format!(
+                "force-prior weight raised from {:.2e} to {lambda:.2e} so that the quadratic reconstruction leaves",
+                s.lambda
+            )
+        } else {
+            format!(
+                "force-prior weight kept at {:.2e}: no weight tried makes the quadratic reconstruction leave",
+                s.lambda
+            )
+        };
         r.status = format!(
-            "{}; force-prior weight raised from {:.2e} to {lambda:.2e} so that the quadratic reconstruction leaves at least {} of the assumed noise (weighted residual by λ: {})",
+            "{}; {what} at least {} of the assumed noise (weighted residual by λ: {})",
             r.status,
-            s.lambda,
             s.min_residual,
             steps.join(", ")
         );
@@ -1398,8 +1415,9 @@ mod tests {
     /// The floor on the residual: a force along DOF 0 (measured) at the
     /// default weight follows the noise (residual 0.24 of it); the
     /// weight is raised by √10 steps to the first that leaves at least
-    /// half, the residual growing with it; with the floor at 0, or with no
-    /// direction, the weight stays.
+    /// half, the residual growing with it. From 1e-6 no weight of the grid
+    /// reaches it (0.24 at 1e-2): the weight stays, as it does with the
+    /// floor at 0 or with no direction.
     #[test]
     fn weight_is_raised_until_the_residual_reaches_the_floor() {
         let sm = chain(3);
@@ -1418,6 +1436,18 @@ mod tests {
         let r = reconstruct_floored(&sm, &e0, &known, &y, &channels, &s).unwrap();
         assert_eq!(r.lambda, lambda);
         assert!(r.status.contains("raised"), "{}", r.status);
+        // no weight reaches the floor from 1e-6 (up to 1e-2): λ as given
+        let weak = LiftedSettings {
+            lambda: 1e-6,
+            ..s.clone()
+        };
+        let (kept, tried) = floor_lambda(&sm, &e0, &known, &y, &channels, &weak).unwrap();
+        assert_eq!(tried.len(), FLOOR_STEPS + 1);
+        assert!(tried.iter().all(|t| t.1 < 0.5), "{tried:?}");
+        assert_eq!(kept, 1e-6);
+        let r = reconstruct_floored(&sm, &e0, &known, &y, &channels, &weak).unwrap();
+        assert_eq!(r.lambda, 1e-6);
+        assert!(r.status.contains("kept at 1.00e-6"), "{}", r.status);
         // the floor off, or no direction: λ as given, nothing tried
         let off = LiftedSettings {
             min_residual: 0.0,
