@@ -98,9 +98,16 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "discrepancy")]
     weights: WeightRule,
     /// Horizon and lifted methods: λ > 0, weight of Σ‖f_k‖² in 1/N²
-    /// relative to the data weight (horizon: start of the weight search).
+    /// relative to the data weight (horizon: start of the weight search;
+    /// lifted: the least weight, raised by factors of √10 while the
+    /// located force fits the data closer than half the noise).
     #[arg(long, default_value_t = 1e-2)]
     lambda: f64,
+    /// Lifted method: least weighted residual RMS (1 = the --noise level)
+    /// of the located force's reconstruction, in [0, 1); below it --lambda
+    /// is raised. 0 keeps --lambda.
+    #[arg(long, default_value_t = 0.5, value_name = "FRACTION")]
+    min_residual: f64,
     /// Horizon method: μ >= 0, weight of Σ‖f_{k+1} − f_k‖².
     #[arg(long, default_value_t = 0.0)]
     mu: f64,
@@ -213,6 +220,12 @@ fn validate(a: &Args) -> anyhow::Result<()> {
         check::positive("--alpha", x, 1e12, "Tikhonov weight")?;
     }
     check::positive("--lambda", a.lambda, 1e12, "weight of the force")?;
+    if !(0.0..1.0).contains(&a.min_residual) {
+        anyhow::bail!(
+            "--min-residual {}: must be in [0, 1) (least weighted residual, a fraction of the noise)",
+            a.min_residual
+        );
+    }
     check::in_range("--mu", a.mu, 0.0, 1e12, "weight of the force's differences")?;
     check::positive("--noise", a.noise, 1.0, "fraction of each channel's RMS")?;
     check::count(
@@ -484,6 +497,7 @@ fn run_lifted(
             resolution: a.resolution,
             lambda: a.lambda,
             noise_fraction: a.noise,
+            min_residual: a.min_residual,
             ..defaults.lifted.clone()
         },
         locate: tacit::diagnose::settings::LocateSettings {

@@ -262,9 +262,10 @@ fn prepare_from(
     })
 }
 
-/// The lifted smoother's reconstruction along the located directions
-/// (an unknown force at every DOF when none were located or the search
-/// was off).
+/// The lifted smoother's reconstruction along the located directions,
+/// its force prior's weight floored by the residual
+/// ([`lifted::reconstruct_floored`]); an unknown force at every DOF, at
+/// the settings' weight, when none were located or the search was off.
 fn reconstruct_lifted(
     sampled: &SampledModel,
     force: &DMatrix<f64>,
@@ -274,12 +275,17 @@ fn reconstruct_lifted(
     loc: Option<&locate::Located>,
 ) -> Result<Reconstruction> {
     let n = sampled.n;
-    let e = match loc {
-        Some(l) if !l.directions.is_empty() => l.matrix(n),
-        _ => DMatrix::identity(n, n),
-    };
     let lifted = settings.lifted_settings();
-    let r = lifted::reconstruct_along(sampled, &e, force, measured, channels, &lifted)?;
+    let r = match loc {
+        Some(l) if !l.directions.is_empty() => {
+            let e = l.matrix(n);
+            lifted::reconstruct_floored(sampled, &e, force, measured, channels, &lifted)?
+        }
+        _ => {
+            let e = DMatrix::identity(n, n);
+            lifted::reconstruct_along(sampled, &e, force, measured, channels, &lifted)?
+        }
+    };
     let status = format!(
         "lifted smoother, {} sub-intervals per sample; {}: {}",
         lifted.resolution,
@@ -290,7 +296,7 @@ fn reconstruct_lifted(
         states: r.states,
         force: -r.force,
         force_std: None,
-        lambda: lifted.lambda,
+        lambda: r.lambda,
         status,
         elapsed_s: 0.0,
     })

@@ -142,11 +142,16 @@ pub fn identify_located(
     let selection = t_loc.elapsed().as_secs_f64();
     let t_run = Instant::now();
     let n = prob.ndof();
-    let dirs = match &located {
-        Some(l) if !l.directions.is_empty() => l.matrix(n),
-        _ => DMatrix::identity(n, n),
+    let (y, ch) = (&prob.y, &prob.channels);
+    let r = match &located {
+        Some(l) if !l.directions.is_empty() => {
+            lifted::reconstruct_floored(&sys.sm, &l.matrix(n), &known, y, ch, &s.lifted)?
+        }
+        _ => {
+            let every = DMatrix::identity(n, n);
+            lifted::reconstruct_along(&sys.sm, &every, &known, y, ch, &s.lifted)?
+        }
     };
-    let r = lifted::reconstruct_along(&sys.sm, &dirs, &known, &prob.y, &prob.channels, &s.lifted)?;
     let solve = t_run.elapsed().as_secs_f64();
     let res = s.lifted.resolution;
     let f = DMatrix::from_fn(n, prob.len(), |i, k| -r.fine_force[(i, k * res)]);
@@ -157,7 +162,7 @@ pub fn identify_located(
         c.replay = replay.row(i).iter().copied().collect();
         c.error_replay = crate::metrics::relative_error(&c.replay, &c.measured);
     }
-    est.settings = settings_json(s, located.as_ref(), &r.status);
+    est.settings = settings_json(s, located.as_ref(), &r.status, r.lambda);
     est.diagnostics.windows = 1;
     let mut ident = super::identifiability::analyse(&sys, 3, None, 1e-6);
     ident.note = format!("{}. {}", visible_note(located.as_ref(), n), ident.note);
@@ -222,16 +227,20 @@ fn visible_note(located: Option<&Located>, n: usize) -> String {
     }
 }
 
-/// The settings and the location as JSON for `summary.json`.
+/// The settings, the force prior's weight used and the location as JSON
+/// for `summary.json`.
 fn settings_json(
     s: &LocatedSettings,
     located: Option<&Located>,
     status: &str,
+    lambda_used: f64,
 ) -> serde_json::Value {
     let l = &s.lifted;
     serde_json::json!({
         "resolution": l.resolution,
         "lambda": l.lambda,
+        "lambda_used": lambda_used,
+        "min_residual": l.min_residual,
         "noise_fraction": l.noise_fraction,
         "x0_std": [l.x0_std.0, l.x0_std.1],
         "reweight_passes": l.reweight_passes,
