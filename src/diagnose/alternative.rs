@@ -63,16 +63,7 @@ mod tests {
     use crate::trace::Candidate;
 
     fn ranked(c: Candidate, parameters: Vec<(&str, f64)>) -> RankedEffect {
-        RankedEffect {
-            label: c.label(),
-            candidate: c,
-            parameters: parameters.into_iter().map(|(n, v)| (n.into(), v)).collect(),
-            std_errors: vec![],
-            residual_explained: 0.3,
-            force_explained: None,
-            bic_change: -100.0,
-            hidden: vec![],
-        }
+        RankedEffect::for_test(c, &parameters)
     }
 
     /// The cubic alternative of a large stiffness change: `k3` from the

@@ -182,17 +182,7 @@ mod tests {
     use crate::trace::{Candidate, RankedEffect};
 
     fn ranked(kind: EffectKind, dofs: Vec<usize>, name: &str, v: f64) -> RankedEffect {
-        let c = Candidate::new(kind, dofs);
-        RankedEffect {
-            label: c.label(),
-            candidate: c,
-            parameters: vec![(name.into(), v)],
-            std_errors: vec![],
-            residual_explained: 0.3,
-            force_explained: None,
-            bic_change: -100.0,
-            hidden: vec![],
-        }
+        RankedEffect::for_test(Candidate::new(kind, dofs), &[(name, v)])
     }
 
     /// Two cubic dampers and a quadratic one on the testbed: the first

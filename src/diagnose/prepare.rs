@@ -276,16 +276,10 @@ fn reconstruct_lifted(
 ) -> Result<Reconstruction> {
     let n = sampled.n;
     let lifted = settings.lifted_settings();
-    let r = match loc {
-        Some(l) if !l.directions.is_empty() => {
-            let e = l.matrix(n);
-            lifted::reconstruct_floored(sampled, &e, force, measured, channels, &lifted)?
-        }
-        _ => {
-            let e = DMatrix::identity(n, n);
-            lifted::reconstruct_along(sampled, &e, force, measured, channels, &lifted)?
-        }
-    };
+    let e = loc
+        .filter(|l| !l.directions.is_empty())
+        .map(|l| l.matrix(n));
+    let r = lifted::reconstruct_located(sampled, e.as_ref(), force, measured, channels, &lifted)?;
     let status = format!(
         "lifted smoother, {} sub-intervals per sample; {}: {}",
         lifted.resolution,

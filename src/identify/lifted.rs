@@ -951,6 +951,23 @@ pub fn reconstruct_floored(
     Ok(r)
 }
 
+/// The reconstruction after a location: along the located `directions`
+/// at the floored weight ([`reconstruct_floored`]), or with an unknown
+/// force at every DOF at the settings' weight when none were located.
+pub fn reconstruct_located(
+    sm: &SampledModel,
+    directions: Option<&DMatrix<f64>>,
+    known_force: &DMatrix<f64>,
+    measured: &DMatrix<f64>,
+    channels: &[(Quantity, usize)],
+    s: &LiftedSettings,
+) -> Result<LiftedResult> {
+    match directions {
+        Some(e) => reconstruct_floored(sm, e, known_force, measured, channels, s),
+        None => reconstruct(sm, known_force, measured, channels, s),
+    }
+}
+
 fn riccati_note(bw: &Backward, len: usize) -> String {
     if bw.j0 > 0 {
         format!("Riccati converged after {} of {len} samples", len - bw.j0)

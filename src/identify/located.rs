@@ -143,15 +143,11 @@ pub fn identify_located(
     let t_run = Instant::now();
     let n = prob.ndof();
     let (y, ch) = (&prob.y, &prob.channels);
-    let r = match &located {
-        Some(l) if !l.directions.is_empty() => {
-            lifted::reconstruct_floored(&sys.sm, &l.matrix(n), &known, y, ch, &s.lifted)?
-        }
-        _ => {
-            let every = DMatrix::identity(n, n);
-            lifted::reconstruct_along(&sys.sm, &every, &known, y, ch, &s.lifted)?
-        }
-    };
+    let dirs = located
+        .as_ref()
+        .filter(|l| !l.directions.is_empty())
+        .map(|l| l.matrix(n));
+    let r = lifted::reconstruct_located(&sys.sm, dirs.as_ref(), &known, y, ch, &s.lifted)?;
     let solve = t_run.elapsed().as_secs_f64();
     let res = s.lifted.resolution;
     let f = DMatrix::from_fn(n, prob.len(), |i, k| -r.fine_force[(i, k * res)]);

@@ -90,6 +90,24 @@ pub struct RankedEffect {
     pub hidden: Vec<f64>,
 }
 
+#[cfg(test)]
+impl RankedEffect {
+    /// An effect as the trace ranks one (30 % of the residual, BIC change
+    /// −100, no standard errors) with the given parameters, for tests.
+    pub(crate) fn for_test(candidate: Candidate, parameters: &[(&str, f64)]) -> Self {
+        RankedEffect {
+            label: candidate.label(),
+            candidate,
+            parameters: parameters.iter().map(|&(n, v)| (n.into(), v)).collect(),
+            std_errors: vec![],
+            residual_explained: 0.3,
+            force_explained: None,
+            bic_change: -100.0,
+            hidden: vec![],
+        }
+    }
+}
+
 /// Result of the trace step.
 #[derive(Debug, Clone, Serialize)]
 pub struct TraceResult {

@@ -268,6 +268,20 @@ fn shaker(ns: usize, amplitude: f64) -> DMatrix<f64> {
     f
 }
 
+/// The bumper model with 0.2 N of friction at every mass (an element
+/// active at nearly every sub-step).
+fn lanl_with_friction() -> Model {
+    let mut model = lanl(true);
+    model.frictions = (1..=8)
+        .map(|d| Friction {
+            dof: d,
+            level: 0.2,
+            velocity: 1e-3,
+        })
+        .collect();
+    model
+}
+
 /// A case of the lanl8dof chain `model` at 512 Hz from `u = 0` and `v0`
 /// under `force`, HHT `alpha`.
 fn lanl_case(model: &Model, alpha: f64, force: DMatrix<f64>, v0: Vec<f64>) -> Case {
@@ -669,14 +683,7 @@ fn seeds_stepped_together_equal_each_seed_alone_bit_for_bit() {
     // friction at every mass (an element active at nearly every sub-step:
     // all seeds stepped at once) and the bumper, α = 0; each seed's
     // derivatives must not depend on the other seeds stepped with it
-    let mut model = lanl(true);
-    model.frictions = (1..=8)
-        .map(|d| Friction {
-            dof: d,
-            level: 0.2,
-            velocity: 1e-3,
-        })
-        .collect();
+    let model = lanl_with_friction();
     let integ = Integrator::new(&model, 512.0, settings(0.0)).unwrap();
     let f = shaker(200, 20.0);
     let (u0, v0) = ([0.0; 8], swinging());
@@ -747,14 +754,7 @@ fn derivatives_from_a_tape_equal_those_of_the_run_bit_for_bit() {
     // friction at every mass and the bumper (every sample sub-stepped),
     // α = 0 and HHT: state seeds alone (a tape without the states) and
     // with contact and friction parameters (with them)
-    let mut model = lanl(true);
-    model.frictions = (1..=8)
-        .map(|d| Friction {
-            dof: d,
-            level: 0.2,
-            velocity: 1e-3,
-        })
-        .collect();
+    let model = lanl_with_friction();
     let f = shaker(200, 20.0);
     for alpha in [0.0, -0.1] {
         let integ = Integrator::new(&model, 512.0, settings(alpha)).unwrap();
