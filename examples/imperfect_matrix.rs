@@ -398,6 +398,11 @@ fn explain(d: &tacit::diagnose::Diagnosis) {
     }
 }
 
+/// `e / noise` as "1.23 ×".
+fn ratio(e: Option<f64>, noise: f64) -> String {
+    e.map_or("-".into(), |e| format!("{:.2} ×", e / noise))
+}
+
 /// The true model's errors on the record and the validation record (the
 /// diagnosis with the truth declared and trusted), on stderr.
 fn score_truth(c: &Case, rec: &Record, val: &Record, settings: &DiagnoseSettings) {
@@ -407,6 +412,14 @@ fn score_truth(c: &Case, rec: &Record, val: &Record, settings: &DiagnoseSettings
         Err(e) => return eprintln!("{}: the truth not scored: {e}", c.name),
     };
     let v = d.validation.as_ref().unwrap();
+    let noise = d.noise.as_ref().map_or(f64::NAN, |n| n.level);
+    eprintln!(
+        "{}: truth scored at {} / {} of the measured noise {} (record / validation)",
+        c.name,
+        ratio(d.before.relative_error, noise),
+        ratio(v.before.relative_error, noise),
+        pct(Some(noise))
+    );
     for (what, e) in [("record", &d.before), ("validation", &v.before)] {
         let ch: Vec<String> = e
             .per_channel

@@ -39,6 +39,9 @@
 //! sensors this brought the exact model's error from 14 % to 1.3 % (the
 //! noise), and the fitted model's from 26 % to 1.3 %.
 
+mod arrival;
+mod rescue;
+
 use super::comparison::{segment_residual, Comparison};
 use crate::integrate::{Integrator, Seeds, SimSettings, Tape};
 use crate::linear::SampledModel;
@@ -59,6 +62,14 @@ pub struct StartFit {
     pub continued: usize,
     /// Segments whose start came from a growing horizon ([`grow`]).
     pub grown: usize,
+    /// Segments whose start came from a long run-in or an arrival
+    /// ([`rescue`]).
+    pub rescued: usize,
+    /// Segments left above [`super::settings::StartSettings::outlier`] ×
+    /// the median cost after every start tried (in a wrong basin, or not
+    /// predicted by the model), each with its cost; their costs stay in
+    /// the error.
+    pub stuck: Vec<StuckSegment>,
     /// Segment simulations run.
     pub simulations: usize,
     /// Weighted squared error summed over segments, before and after.
@@ -67,6 +78,19 @@ pub struct StartFit {
     pub stalled: usize,
     /// What went wrong, if anything.
     pub note: String,
+}
+
+/// A segment left far above the others ([`StartFit::stuck`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct StuckSegment {
+    /// Index of the segment.
+    pub segment: usize,
+    /// Its first sample.
+    pub start: usize,
+    /// Its weighted squared error.
+    pub cost: f64,
+    /// The median over the segments.
+    pub median: f64,
 }
 
 /// Pseudo-inverses of the start-state Jacobian of the linear part, one per
@@ -325,10 +349,7 @@ pub fn refine(
         segs.iter().map(|s| residual(cmp, s, &y)).collect();
     let mut tried = vec![false; segs.len()];
     for _ in 0..cmp.starts.run_in_passes {
-        let costs: Vec<f64> = res
-            .iter()
-            .map(|r| r.as_ref().map_or(f64::INFINITY, |r| r.1))
-            .collect();
+        let costs = segment_costs(&res);
         let picks: Vec<Pick> = outliers(&costs, &tried, cmp.starts.outlier)
             .into_iter()
             .filter(|&i| i > 0 && segs[i - 1].start + segs[i - 1].len == segs[i].start)
@@ -351,12 +372,22 @@ pub fn refine(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
-    // segments still far above the others: a growing horizon from the
-    // reconstructed start
-    let costs: Vec<f64> = res
-        .iter()
-        .map(|r| r.as_ref().map_or(f64::INFINITY, |r| r.1))
-        .collect();
+    // segments still far above the others: a long run-in from earlier
+    // segments or the arrival at the next one's start ([`rescue`]), then a
+    // growing horizon
+    let costs = segment_costs(&res);
+    let picks = outliers(&costs, &vec![false; segs.len()], cmp.starts.outlier);
+    if !picks.is_empty() {
+        let (changed, yt, n) =
+            rescue::rescue(cmp, model, sim, &mut segs, (&picks, &costs), iterations);
+        fit.simulations += n;
+        fit.rescued += changed.len();
+        for &i in &changed {
+            copy_segment(&mut y, &yt, &segs[i]);
+            res[i] = residual(cmp, &segs[i], &y);
+        }
+    }
+    let costs = segment_costs(&res);
     let picks: Vec<(usize, f64)> = outliers(&costs, &vec![false; segs.len()], cmp.starts.outlier)
         .into_iter()
         .map(|i| (i, costs[i]))
@@ -370,8 +401,32 @@ pub fn refine(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
+    fit.stuck = stuck(&segs, &segment_costs(&res), cmp.starts.outlier);
     fit.cost.1 = res.iter().flatten().map(|r| r.1).sum();
     (segs, y, fit)
+}
+
+/// Each segment's cost (infinite where its prediction failed).
+fn segment_costs(res: &[Option<(DVector<f64>, f64)>]) -> Vec<f64> {
+    res.iter()
+        .map(|r| r.as_ref().map_or(f64::INFINITY, |r| r.1))
+        .collect()
+}
+
+/// The segments whose cost exceeds `factor` × the median.
+fn stuck(segs: &[Segment], costs: &[f64], factor: f64) -> Vec<StuckSegment> {
+    let mut sorted = costs.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN);
+    outliers(costs, &vec![false; costs.len()], factor)
+        .into_iter()
+        .map(|i| StuckSegment {
+            segment: i,
+            start: segs[i].start,
+            cost: costs[i],
+            median,
+        })
+        .collect()
 }
 
 /// Horizon schedules of [`grow`]: the fractions of a segment over which
@@ -735,6 +790,8 @@ fn refine_local(
             cost: (cost0, cost0),
             continued: 0,
             grown: 0,
+            rescued: 0,
+            stuck: vec![],
             stalled: segs.len(),
             note: "the linear part of the model could not be sampled; start states kept".into(),
         };
@@ -801,6 +858,8 @@ fn refine_local(
         iterations: done,
         continued,
         grown: 0,
+        rescued: 0,
+        stuck: vec![],
         simulations: run.sims,
         cost: (cost0, cost1),
         stalled,
