@@ -258,7 +258,14 @@ fn sens_step(
 /// Continuity starts: every segment that directly follows another is tried
 /// from the state where the previous one ends (its simulation carried one
 /// sample further); the trial is kept when it lowers the segment's error.
-/// Returns the segments changed.
+/// The segments are taken in order, each from its predecessor as it is
+/// then: when the predecessor has just taken its own trial, the trial is
+/// simulated again from there, so a run of segments in a wrong basin is
+/// replaced by the model's simulation from the last good one (a state the
+/// segments do not see, such as a free-free structure's rigid-body
+/// displacement under a stop or a spring to ground, is carried along);
+/// the other trials are simulated beforehand in parallel. Returns the
+/// segments changed.
 fn continuity(
     cmp: &Comparison,
     model: &Model,
@@ -289,16 +296,30 @@ fn continuity(
         .collect();
     let trial_segs: Vec<Segment> = ok.iter().map(|(_, t)| t.clone()).collect();
     let yt = predict_each(cmp, model, &trial_segs, sim, count);
-    let mut changed = vec![];
+    let mut changed: Vec<usize> = vec![];
     for (i, t) in &ok {
-        let old = res[*i].as_ref().map_or(f64::INFINITY, |r| r.1);
-        if let Some(r) = residual(cmp, t, &yt) {
-            if r.1 < old {
-                copy_segment(y, &yt, t);
-                segs[*i] = t.clone();
-                res[*i] = Some(r);
-                changed.push(*i);
-            }
+        let i = *i;
+        let old = res[i].as_ref().map_or(f64::INFINITY, |r| r.1);
+        let kept = if changed.last() == Some(&(i - 1)) {
+            // the predecessor has just moved: its end again, simulated alone
+            *count += 2;
+            carried(&integ, cmp, &segs[i - 1], &segs[i], n)
+                .and_then(|t| {
+                    let yi = cmp.predict(model, std::slice::from_ref(&t), sim).ok()?;
+                    let r = residual(cmp, &t, &yi)?;
+                    Some((t, r, Some(yi)))
+                })
+                .filter(|a| a.1 .1 < old)
+        } else {
+            residual(cmp, t, &yt)
+                .filter(|r| r.1 < old)
+                .map(|r| (t.clone(), r, None))
+        };
+        if let Some((t, r, yi)) = kept {
+            copy_segment(y, yi.as_ref().unwrap_or(&yt), &t);
+            segs[i] = t;
+            res[i] = Some(r);
+            changed.push(i);
         }
     }
     changed

@@ -147,8 +147,5 @@ pub(super) fn arrive(
     let method = crate::lsq::Method::LineSearch { min_t: 1.0 / 64.0 };
     let out = crate::lsq::minimize(&mut q, seg.clone(), method, &stop);
     *sims += q.sims;
-    if std::env::var("DBG_LONG").is_ok() {
-        eprintln!("DBG arrive {}: history {:?} termination {:?}", seg.start, out.history, out.termination);
-    }
     out.eval.is_some().then_some(out.point)
 }
