@@ -29,15 +29,19 @@
 //! scored the same way.
 //!
 //! For a nonlinear model a segment may start in the wrong basin (the wrong
-//! side of an impact; the cost is rough in a contact, docs/updating.md). From the second iteration a segment
-//! may take the state where the segment before ends (continuity); a
-//! segment left above 8× the median cost is run in from the refined
-//! segment before; and one still there is refined over a growing horizon
-//! (the first quarter of the segment, then half, then all; and from an
-//! eighth), from the reconstructed start and from the end of the segment
-//! before, the best kept ([`grow`]). On a 0.203 mm bumper seen by three
-//! sensors this brought the exact model's error from 14 % to 1.3 % (the
-//! noise), and the fitted model's from 26 % to 1.3 %.
+//! side of an impact; the cost is rough in a contact, docs/updating.md).
+//! From the second iteration a segment may take the state where the
+//! segment before ends (continuity), the segments taken in order so that a
+//! run of them in a wrong basin takes the model's simulation from the last
+//! good one; a segment left above 8× the median cost is run in from the
+//! refined segment before; one still there is given a long run-in from 2,
+//! 4, 8 or 16 segments back, or the state from which the model arrives at
+//! the next segment's refined start ([`rescue`]); and one still there is
+//! refined over a growing horizon (the first quarter of the segment, then
+//! half, then all; and from an eighth), from the reconstructed start and
+//! from the end of the segment before, the best kept ([`grow`]). Segments
+//! left above 8× the median are reported ([`StartFit::stuck`]) with their
+//! costs, which stay in the error.
 
 mod arrival;
 mod rescue;
