@@ -66,7 +66,7 @@ pub(super) fn polish(
     };
     while cmp.starts.iterations > 0 && rounds < s.alternations {
         rounds += 1;
-        let (segs, _, sf) = starts::refine(
+        let (segs, _, sf) = starts::refine_for_fit(
             cmp,
             &model,
             problem.sim,

@@ -364,6 +364,30 @@ pub fn refine(
     segments: &[Segment],
     iterations: usize,
 ) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
+    refine_with(cmp, model, sim, segments, (iterations, true))
+}
+
+/// [`refine`] without the long run-ins and arrivals ([`rescue`]): the
+/// starts of the segments a joint fit steps (a trial model's segment far
+/// above the others is left to the fit, which moves the model).
+pub fn refine_for_fit(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    segments: &[Segment],
+    iterations: usize,
+) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
+    refine_with(cmp, model, sim, segments, (iterations, false))
+}
+
+/// [`refine`], with the rescue of stuck segments or without.
+fn refine_with(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    segments: &[Segment],
+    (iterations, with_rescue): (usize, bool),
+) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
     let (mut segs, mut y, mut fit) = refine_local(cmp, model, sim, segments, iterations, true);
     if !model.is_nonlinear() || iterations == 0 {
         return (segs, y, fit);
@@ -402,7 +426,7 @@ pub fn refine(
     // growing horizon
     let costs = segment_costs(&res);
     let picks = outliers(&costs, &vec![false; segs.len()], cmp.starts.outlier);
-    if !picks.is_empty() {
+    if with_rescue && !picks.is_empty() {
         let (changed, yt, n) =
             rescue::rescue(cmp, model, sim, &mut segs, (&picks, &costs), iterations);
         fit.simulations += n;
