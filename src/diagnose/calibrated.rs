@@ -226,14 +226,19 @@ pub fn diagnose_calibrated(
         Some(c) => c,
         None => calibrate_on(vec![rec])?,
     };
-    let d = super::diagnose(
-        &calibration.model,
-        rec,
-        validation,
-        sensors,
-        settings,
-        progress,
-    )?;
+    // a calibration that absorbs a localized effect keeps the declared
+    // values: the diagnosis on them is the trusted one
+    let d = match (&calibration.status, trusted.as_ref()) {
+        (calibrate::CalibrationStatus::Absorbs { .. }, Some(t)) => t.clone(),
+        _ => super::diagnose(
+            &calibration.model,
+            rec,
+            validation,
+            sensors,
+            settings,
+            progress,
+        )?,
+    };
     let ctx = Context {
         declared,
         low_level: !linear_records.is_empty(),
