@@ -816,3 +816,124 @@ fn with_elements(declared: &Model, linear: Model) -> Model {
     m.matrices = linear.matrices;
     m
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linear::SampledModel;
+
+    /// The parameter farthest out of its range is named, with the value it
+    /// is held at: a spring at its declared value, a modal ratio at the
+    /// median of the others not held; global numbers never.
+    #[test]
+    fn the_worst_implausible_parameter_is_held_at_its_centre() {
+        let free = [
+            LinearParam::Spring(0),
+            LinearParam::Spring(1),
+            LinearParam::ModalRatio(0),
+            LinearParam::ModalRatio(1),
+            LinearParam::ModalRatio(2),
+            LinearParam::ModalRatio(3),
+            LinearParam::RayleighAlpha,
+        ];
+        let s = CalibrationSettings::default();
+        // spring 2 at +65 % (beyond a factor 1.5 by 0.095 in log), ratio 4
+        // at e^-1 against a median e^1.1 of the others (beyond a factor 4
+        // by 0.71), alpha far off but global
+        let q = DVector::from_vec(vec![0.1, 0.5, 1.0, 1.1, 1.2, -1.0, 9.0]);
+        let h = implausible(&free, &q, &[], &s).unwrap();
+        assert_eq!(h.index, 5);
+        assert!((h.q - 1.1).abs() < 1e-12 && (h.ran_to + 1.0).abs() < 1e-12);
+        // with the ratio held, the spring is next, held at its declared value
+        let h2 = implausible(&free, &q, &[h], &s).unwrap();
+        assert_eq!((h2.index, h2.q), (1, 0.0));
+        // with both held nothing else is out of range
+        assert!(implausible(&free, &q, &[h, h2], &s).is_none());
+        // a wider spring range lets the spring pass
+        let wide = CalibrationSettings {
+            spring_factor: 2.0,
+            ..s
+        };
+        assert!(implausible(&free, &q, &[h], &wide).is_none());
+    }
+
+    fn chain(k12: f64) -> Model {
+        Model::from_toml_str(
+            &format!(
+                r#"
+name = "chain"
+masses = [1.0, 1.0, 1.0]
+[[spring]]
+dofs = [1]
+stiffness = 1000.0
+[[spring]]
+dofs = [1, 2]
+stiffness = {k12}
+[[spring]]
+dofs = [2, 3]
+stiffness = 1500.0
+[damping]
+kind = "rayleigh"
+alpha = 0.5
+beta = 2e-4
+"#
+            ),
+            "chain",
+        )
+        .unwrap()
+    }
+
+    /// Accelerations of `truth` at every DOF under a force at DOF 1.
+    fn record_of(truth: &Model, fs: f64, n: usize) -> Data {
+        let sm = SampledModel::from_model(truth, fs, 10).unwrap();
+        let force = DMatrix::from_fn(3, n, |i, k| {
+            let t = k as f64;
+            if i == 0 {
+                (t * 0.37).sin() * 3.0 + (t * 0.091).cos() * 2.0 + (t * 1.3).sin()
+            } else {
+                0.0
+            }
+        });
+        let xs = sm.simulate(&DVector::zeros(6), &force);
+        let channels: Vec<_> = (0..3).map(|d| (Quantity::Accel, d)).collect();
+        let (cy, dy) = sm.outputs(&channels).unwrap();
+        Data {
+            source: "chain".into(),
+            fs,
+            measured: &cy * &xs + &dy * &force,
+            force,
+            channels,
+            names: vec!["a1".into(), "a2".into(), "a3".into()],
+            warmup: 0,
+        }
+    }
+
+    /// A spring three times its declared stiffness (a record the declared
+    /// spring cannot explain) runs out of the plausible range: it is held
+    /// at its declared value, what it ran to is reported (the truth, on a
+    /// noise-free record), and it is not called significant.
+    #[test]
+    fn a_spring_run_out_of_range_is_held_and_reported() {
+        let data = record_of(&chain(6000.0), 100.0, 2000);
+        let s = CalibrationSettings {
+            substeps: 10,
+            ..Default::default()
+        };
+        let cal = calibrate(&chain(2000.0), std::slice::from_ref(&data), &s).unwrap();
+        let k12 = &cal.corrections[1];
+        assert!(k12.held, "{:?}", cal.corrections);
+        let ran = k12.ran_to.unwrap();
+        assert!((ran / 6000.0 - 1.0).abs() < 0.01, "ran to {ran}");
+        assert_eq!(k12.calibrated, 2000.0);
+        assert!(!k12.significant && k12.std_error.is_infinite());
+        // the same record with the plausible range opened: calibrated
+        let open = CalibrationSettings {
+            spring_factor: f64::INFINITY,
+            ..s
+        };
+        let cal = calibrate(&chain(2000.0), &[data], &open).unwrap();
+        let k = cal.corrections[1].calibrated;
+        assert!((k / 6000.0 - 1.0).abs() < 1e-3 && !cal.corrections[1].held, "{k}");
+        assert_eq!(cal.status, CalibrationStatus::Converged);
+    }
+}

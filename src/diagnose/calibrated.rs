@@ -477,6 +477,9 @@ impl Context<'_> {
             std = est.unwrap_or(std);
         }
         update_effects(&mut d, &std, &self.cal.calibration);
+        if let Some(n) = drop_negligible(&mut d, vcmp, self.progress) {
+            note = format!("{note}; {n}");
+        }
         let start_errors = std::mem::replace(&mut d.before, declared_errors);
         let mut start_validation_errors = None;
         if let (Some(v), Some(b)) = (d.validation.as_mut(), declared_validation) {
@@ -917,6 +920,64 @@ fn update_effects(d: &mut Diagnosis, std: &[Estimated], s: &CalibrationSettings)
         .filter(|(_, k)| *k)
         .map(|(pair, _)| pair);
     (d.effects, d.added) = pairs.unzip();
+}
+
+/// A rise of the record's multiple-shooting error, as a fraction of it,
+/// below which an effect switched off explains nothing the rest of the
+/// model does not ([`drop_negligible`]).
+const NEGLIGIBLE: f64 = 0.01;
+
+/// Drop the nonlinear effects the final model does not need: each is
+/// switched off in turn ([`effects::without`]: its stiffness, coefficient
+/// or level to zero) and, when the record's multiple-shooting error rises
+/// by less than [`NEGLIGIBLE`] of itself, it is no longer named (the model
+/// keeps it switched off; the validation record is scored again). A
+/// refinement can take an effect proposed beside the right one to nothing
+/// (a clearance of 71 N/m beside a cubic spring) without the stop rules
+/// seeing it. The note says what was dropped; None when nothing was.
+fn drop_negligible(
+    d: &mut Diagnosis,
+    vcmp: Option<&super::Comparison>,
+    progress: &dyn Fn(&str),
+) -> Option<String> {
+    let sim = sim_of(d);
+    let mut dropped = vec![];
+    for i in (0..d.added.len()).rev() {
+        let e = &d.added[i];
+        if matches!(e.candidate.kind, EffectKind::Stiffness | EffectKind::Damping) {
+            continue;
+        }
+        let Some(with) = d.after.relative_error else {
+            return None;
+        };
+        progress("score the model with an effect switched off");
+        let off = effects::without(&d.model, e);
+        let (after, pred) = d.prepared.comparison.errors(&off, sim);
+        if !after
+            .relative_error
+            .is_some_and(|x| x <= with * (1.0 + NEGLIGIBLE))
+        {
+            continue;
+        }
+        dropped.push(format!(
+            "{} dropped (switched off: {} against {})",
+            e.label,
+            pct(after.relative_error),
+            pct(Some(with))
+        ));
+        d.model = off;
+        d.after = after;
+        d.predictions.1 = pred;
+        d.added.remove(i);
+        d.effects.remove(i);
+    }
+    if dropped.is_empty() {
+        return None;
+    }
+    if let (Some(c), Some(v)) = (vcmp, d.validation.as_mut()) {
+        v.after = c.errors(&d.model, sim).0;
+    }
+    Some(dropped.join("; "))
 }
 
 /// The linear corrections of the final model against the declared one
