@@ -442,7 +442,12 @@ pub fn calibrate(
         for (k, &i) in open.iter().enumerate() {
             q[i] = run.q[k];
         }
-        match implausible(&free, &q, &held, settings) {
+        // a model calibrated by scales has no local number to hold
+        let out = match base.calibrated_by_scales() {
+            true => None,
+            false => implausible(&free, &q, &held, settings),
+        };
+        match out {
             // a spring out of range: the springs beside a localized effect
             // take its linearization in turn when one is held, so every
             // spring is held at its declared stiffness and the damping

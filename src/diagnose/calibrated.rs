@@ -170,9 +170,17 @@ pub fn diagnose_calibrated(
     if cal.off {
         return super::diagnose(declared, rec, validation, sensors, settings, progress);
     }
+    // a model whose linear values are marked free gives starting values
+    // only: no plausible range around them
+    let (spring_factor, damping_factor) = match declared.free {
+        Some(_) => (f64::INFINITY, f64::INFINITY),
+        None => (cal.calibration.spring_factor, cal.calibration.damping_factor),
+    };
     let cal = &CalibratedSettings {
         calibration: CalibrationSettings {
             freedom: declared.free.unwrap_or(cal.calibration.freedom),
+            spring_factor,
+            damping_factor,
             ..cal.calibration.clone()
         },
         ..cal.clone()
