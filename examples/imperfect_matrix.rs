@@ -443,7 +443,12 @@ fn calibration_only(c: &Case, rec: &Record, low: &Record) {
             .map(|x| {
                 let truth = match x.parameter {
                     tacit::calibrate::LinearParam::Spring(i) => {
-                        format!(" ({:+.1})", 100.0 * (c.linear.springs[i].stiffness / declared.springs[i].stiffness - 1.0))
+                        format!(
+                            " ({:+.1})",
+                            100.0
+                                * (c.linear.springs[i].stiffness / declared.springs[i].stiffness
+                                    - 1.0)
+                        )
                     }
                     _ => String::new(),
                 };

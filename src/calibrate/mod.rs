@@ -257,6 +257,11 @@ pub struct Calibration {
     /// Wall time, s (not serialized: a report's timings hold it).
     #[serde(skip)]
     pub seconds: f64,
+    /// When parameters were held: the model the first minimisation gave,
+    /// every parameter free (an alternative start for the diagnosis,
+    /// which compares the two by the record's error).
+    #[serde(skip)]
+    pub unheld: Option<Model>,
 }
 
 impl Calibration {
@@ -419,6 +424,7 @@ pub fn calibrate(
     let mut evaluations = 0;
     let mut r0 = None;
     let mut absorbed = false;
+    let mut first_q = None;
     let run = loop {
         let open: Vec<usize> = (0..free.len())
             .filter(|i| !held.iter().any(|h| h.index == *i))
@@ -427,7 +433,12 @@ pub fn calibrate(
         let held_ix: Vec<usize> = held.iter().map(|h| h.index).collect();
         let held_params: Vec<LinearParam> = held_ix.iter().map(|&i| free[i]).collect();
         let eval = Eval {
-            base: params::apply(&base, &held_params, &pick(&p0, &held_ix), &pick(q.as_slice(), &held_ix)),
+            base: params::apply(
+                &base,
+                &held_params,
+                &pick(&p0, &held_ix),
+                &pick(q.as_slice(), &held_ix),
+            ),
             params: open.iter().map(|&i| free[i]).collect(),
             p0: pick(&p0, &open),
             data,
@@ -442,6 +453,7 @@ pub fn calibrate(
         for (k, &i) in open.iter().enumerate() {
             q[i] = run.q[k];
         }
+        first_q.get_or_insert_with(|| q.clone());
         // a model calibrated by scales has no local number to hold
         let out = match base.calibrated_by_scales() {
             true => None,
@@ -484,7 +496,10 @@ pub fn calibrate(
         };
     }
     let model = restore_damping(declared, &params::apply(&base, &free, &p0, q.as_slice()));
-    let mut std_q = run.std_q.as_ref().map(|_| DVector::from_element(free.len(), f64::INFINITY));
+    let mut std_q = run
+        .std_q
+        .as_ref()
+        .map(|_| DVector::from_element(free.len(), f64::INFINITY));
     if let (Some(all), Some(s)) = (std_q.as_mut(), run.std_q.as_ref()) {
         for (k, &i) in open.iter().enumerate() {
             all[i] = s[k];
@@ -511,6 +526,13 @@ pub fn calibrate(
             .sum(),
         records: data.iter().map(|d| d.source.clone()).collect(),
         seconds: t.elapsed().as_secs_f64(),
+        unheld: (!held.is_empty()).then(|| {
+            let q1 = first_q.expect("one run at least");
+            with_elements(
+                declared,
+                restore_damping(declared, &params::apply(&base, &free, &p0, q1.as_slice())),
+            )
+        }),
     })
 }
 
@@ -551,7 +573,9 @@ pub fn implausible(
                 let others: Vec<f64> = free
                     .iter()
                     .enumerate()
-                    .filter(|(j, o)| *j != i && !is_held(*j) && matches!(o, LinearParam::ModalRatio(_)))
+                    .filter(|(j, o)| {
+                        *j != i && !is_held(*j) && matches!(o, LinearParam::ModalRatio(_))
+                    })
                     .map(|(j, _)| q[j])
                     .collect();
                 match median(others) {
@@ -619,9 +643,7 @@ fn solve(eval: Eval<'_>, q0: DVector<f64>, settings: &CalibrationSettings) -> Re
         .ok_or_else(|| TacitError::Numerical(prob.failure.clone().unwrap_or_default()))?;
     let (prob, status) = minimize(prob, settings);
     let r = prob.r.clone().unwrap_or_else(|| r0.clone());
-    let std_q = prob
-        .jacobian()
-        .map(|j| std_errors(&j, &r, prob_dof(&prob)));
+    let std_q = prob.jacobian().map(|j| std_errors(&j, &r, prob_dof(&prob)));
     Ok(Run {
         r0,
         q: prob.q.clone(),
@@ -938,7 +960,10 @@ beta = 2e-4
         };
         let cal = calibrate(&chain(2000.0), &[data], &open).unwrap();
         let k = cal.corrections[1].calibrated;
-        assert!((k / 6000.0 - 1.0).abs() < 1e-3 && !cal.corrections[1].held, "{k}");
+        assert!(
+            (k / 6000.0 - 1.0).abs() < 1e-3 && !cal.corrections[1].held,
+            "{k}"
+        );
         assert_eq!(cal.status, CalibrationStatus::Converged);
     }
 }

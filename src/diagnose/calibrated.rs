@@ -174,7 +174,10 @@ pub fn diagnose_calibrated(
     // only: no plausible range around them
     let (spring_factor, damping_factor) = match declared.free {
         Some(_) => (f64::INFINITY, f64::INFINITY),
-        None => (cal.calibration.spring_factor, cal.calibration.damping_factor),
+        None => (
+            cal.calibration.spring_factor,
+            cal.calibration.damping_factor,
+        ),
     };
     let cal = &CalibratedSettings {
         calibration: CalibrationSettings {
@@ -259,7 +262,12 @@ pub fn diagnose_calibrated(
     };
     progress("refine the linear part with the effects");
     let first = ctx.refined(d, &calibration.model)?;
-    let from_calibrated = ctx.more_rounds(first)?;
+    let mut from_calibrated = ctx.more_rounds(first)?;
+    if let Some(unheld) = calibration.unheld.as_ref() {
+        if !ctx.at_noise(&from_calibrated.d) {
+            from_calibrated = ctx.unheld_alternative(from_calibrated, unheld)?;
+        }
+    }
     let Some(trusted) = trusted else {
         // linear values marked free, or the declared ones off on the
         // low-level records: the calibrated diagnosis is the only one
@@ -374,6 +382,42 @@ impl Context<'_> {
             best = next;
         }
         Ok(best)
+    }
+
+    /// The calibration held parameters out of their plausible range
+    /// ([`calibrate::Held`]): the diagnosis from the calibration with every
+    /// parameter free (`unheld`), refined and in rounds, is the
+    /// alternative; the lower multiple-shooting error on the record is
+    /// kept (the held start can leave a one-sided contact a spurious
+    /// companion that the biased spring did not). Not run when the held
+    /// path explains the record up to the noise.
+    fn unheld_alternative(&self, held: RefinedPath, unheld: &Model) -> Result<RefinedPath> {
+        (self.progress)("diagnose from the calibration without held parameters");
+        let d = super::diagnose(
+            unheld,
+            self.rec,
+            self.validation,
+            self.sensors,
+            self.settings,
+            self.progress,
+        )?;
+        let first = self.refined(d, unheld)?;
+        let mut other = self.more_rounds(first)?;
+        let (e_held, e_other) = (held.d.after.relative_error, other.d.after.relative_error);
+        let compared = format!(
+            "multiple-shooting error on the record from the calibration with parameters held {}, with none held {}",
+            pct(e_held),
+            pct(e_other)
+        );
+        Ok(if lower(e_other, e_held) {
+            other.note = format!("{}; {compared}: none held kept", other.note);
+            other
+        } else {
+            RefinedPath {
+                note: format!("{}; {compared}: held kept", held.note),
+                ..held
+            }
+        })
     }
 
     /// Whether `d` explains the record up to the noise: its
@@ -952,12 +996,13 @@ fn drop_negligible(
     let mut dropped = vec![];
     for i in (0..d.added.len()).rev() {
         let e = &d.added[i];
-        if matches!(e.candidate.kind, EffectKind::Stiffness | EffectKind::Damping) {
+        if matches!(
+            e.candidate.kind,
+            EffectKind::Stiffness | EffectKind::Damping
+        ) {
             continue;
         }
-        let Some(with) = d.after.relative_error else {
-            return None;
-        };
+        let with = d.after.relative_error?;
         progress("score the model with an effect switched off");
         let off = effects::without(&d.model, e);
         let (after, pred) = d.prepared.comparison.errors(&off, sim);
