@@ -7,7 +7,7 @@
 //! structure at a level where it behaves linearly (`--linear-record`).
 //! Prints a Markdown table (docs/calibration.md holds the last run).
 //!
-//! `cargo run --release --example imperfect_matrix [-- --seed N] [--only TEXT] [--rows A-B] [--variants no|yes] [--progress] [--score-truth]`
+//! `cargo run --release --example imperfect_matrix [-- --seed N] [--only TEXT] [--rows A-B] [--variants no|yes] [--progress] [--score-truth] [--calibration-only]`
 
 mod matrix_common;
 
