@@ -7,7 +7,7 @@
 //! structure at a level where it behaves linearly (`--linear-record`).
 //! Prints a Markdown table (docs/calibration.md holds the last run).
 //!
-//! `cargo run --release --example imperfect_matrix [-- --seed N] [--only TEXT] [--rows A-B] [--variants no|yes] [--progress] [--score-truth]`
+//! `cargo run --release --example imperfect_matrix [-- --seed N] [--only TEXT] [--rows A-B] [--variants no|yes] [--progress] [--score-truth] [--calibration-only]`
 
 mod matrix_common;
 
@@ -437,6 +437,50 @@ fn score_truth(c: &Case, rec: &Record, val: &Record, settings: &DiagnoseSettings
     }
 }
 
+/// The linear calibration alone on the record and on the linear record,
+/// each correction with the truth's change beside it, on stdout (what the
+/// calibration gives before any diagnosis; a second or so per record).
+fn calibration_only(c: &Case, rec: &Record, low: &Record) {
+    let declared = lanl();
+    for (what, r) in [("record", rec), ("linear record", low)] {
+        let data = tacit::calibrate::data_of(r, 8, None, 0).unwrap();
+        let cal = tacit::calibrate::calibrate(
+            &declared,
+            &[data],
+            &tacit::calibrate::CalibrationSettings::default(),
+        )
+        .unwrap();
+        let cells: Vec<String> = cal
+            .corrections
+            .iter()
+            .map(|x| {
+                let truth = match x.parameter {
+                    tacit::calibrate::LinearParam::Spring(i) => {
+                        format!(
+                            " ({:+.1})",
+                            100.0
+                                * (c.linear.springs[i].stiffness / declared.springs[i].stiffness
+                                    - 1.0)
+                        )
+                    }
+                    _ => String::new(),
+                };
+                let held = x.ran_to.map_or(String::new(), |v| {
+                    format!(" held (ran to {:+.1} %)", 100.0 * (v / x.declared - 1.0))
+                });
+                format!("{} {:+.1}{truth}{held}", x.name, 100.0 * x.change)
+            })
+            .collect();
+        println!(
+            "{} | {what} | {:.2} % → {:.2} % | {}",
+            c.name,
+            100.0 * cal.error_before,
+            100.0 * cal.error_after,
+            cells.join(", ")
+        );
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let arg = |k: &str| {
@@ -465,6 +509,9 @@ fn main() {
     // validation record, per channel and with the start-state refinement's
     // account, on stderr (what the scoring gives an exact model)
     let truth_only = args.iter().any(|a| a == "--score-truth");
+    // `--calibration-only`: only the linear calibration on the record and
+    // on the linear record, against the truth's springs
+    let calibration_only_run = args.iter().any(|a| a == "--calibration-only");
     let t0 = std::time::Instant::now();
     let progress = |m: &str| {
         if verbose {
@@ -487,6 +534,10 @@ fn main() {
         let low = record(&c.linear, &c, seed * 10 + 3, samples);
         if truth_only {
             score_truth(&c, &rec, &val, &settings);
+            continue;
+        }
+        if calibration_only_run {
+            calibration_only(&c, &rec, &low);
             continue;
         }
         for with_low in [false, true] {

@@ -75,6 +75,25 @@ pub struct CalibrationSettings {
     /// reconstructed, which would absorb their change.
     #[serde(default)]
     pub frozen_springs: Vec<usize>,
+    /// Plausible range of a spring's correction, as a factor either way
+    /// of the declared stiffness (default 1.5; > 1, infinite: no limit).
+    /// A spring the calibration moves beyond it has absorbed a localized
+    /// effect's equivalent linearization (a cubic or a contact beside it)
+    /// and is held at its declared value; the diagnosis must explain the
+    /// difference (a stiffness change is one of its candidates) and the
+    /// joint refinement frees it again.
+    pub spring_factor: f64,
+    /// Plausible range of a modal damping ratio, as a factor either way of
+    /// the median of the other modes' calibrated ratios (default 4; > 1,
+    /// infinite: no limit). A ratio beyond it (a mode's damping run to
+    /// zero, or one mode damped many times more than the others) has
+    /// absorbed a localized effect acting on that mode; it is held at that
+    /// median.
+    pub damping_factor: f64,
+    /// Most parameters held out of their plausible range (default 2);
+    /// one more running out makes the calibration
+    /// [`CalibrationStatus::Absorbs`].
+    pub max_held: usize,
 }
 
 impl Default for CalibrationSettings {
@@ -90,6 +109,9 @@ impl Default for CalibrationSettings {
             min_change: 0.005,
             max_relative_std: 0.25,
             frozen_springs: vec![],
+            spring_factor: 1.5,
+            damping_factor: 4.0,
+            max_held: 2,
         }
     }
 }
@@ -126,6 +148,12 @@ impl CalibrationSettings {
         if !(self.max_relative_std > 0.0) {
             return bad("max_relative_std", "> 0");
         }
+        if !(self.spring_factor > 1.0) {
+            return bad("spring_factor", "> 1 (inf: no limit)");
+        }
+        if !(self.damping_factor > 1.0) {
+            return bad("damping_factor", "> 1 (inf: no limit)");
+        }
 
         Ok(())
     }
@@ -141,6 +169,15 @@ pub enum CalibrationStatus {
     EvaluationLimit,
     /// Nothing to calibrate (no free parameter).
     NothingFree,
+    /// Parameters ran out of their plausible range one after another
+    /// (more than [`CalibrationSettings::max_held`] held): the calibration
+    /// absorbs a localized effect it cannot separate from the linear part
+    /// and the declared values are kept; the diagnosis corrects the linear
+    /// part jointly with the effects it finds.
+    Absorbs {
+        /// The parameters held, in the order they ran out.
+        parameters: Vec<String>,
+    },
     /// The minimisation failed; the declared values are kept.
     Failed {
         /// What failed.
@@ -169,6 +206,17 @@ pub struct Correction {
     pub significant: bool,
     /// Relative standard error below `max_relative_std`.
     pub identifiable: bool,
+    /// The calibration ran it out of its plausible range
+    /// ([`CalibrationSettings::spring_factor`],
+    /// [`CalibrationSettings::damping_factor`]) and held it (at the
+    /// declared stiffness, or the other modes' median ratio) while the
+    /// others were calibrated: a localized effect the linear part cannot
+    /// hold acts there. Not estimated (infinite standard error).
+    #[serde(default)]
+    pub held: bool,
+    /// The value it ran to before it was held (None when not held).
+    #[serde(default)]
+    pub ran_to: Option<f64>,
 }
 
 /// Residual of one channel after calibration.
@@ -209,6 +257,11 @@ pub struct Calibration {
     /// Wall time, s (not serialized: a report's timings hold it).
     #[serde(skip)]
     pub seconds: f64,
+    /// When parameters were held: the model the first minimisation gave,
+    /// every parameter free (an alternative start for the diagnosis,
+    /// which compares the two by the record's error).
+    #[serde(skip)]
+    pub unheld: Option<Model>,
 }
 
 impl Calibration {
@@ -342,7 +395,9 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 }
 
 /// Calibrate `declared`'s linear part on `data` (one or more records of
-/// the same structure).
+/// the same structure). A parameter the minimisation runs out of its
+/// plausible range ([`implausible`]) is held and the others are
+/// calibrated again, one at a time, the worst first.
 pub fn calibrate(
     declared: &Model,
     data: &[Data],
@@ -363,55 +418,242 @@ pub fn calibrate(
         .iter()
         .map(|d| segment_len(d, settings))
         .collect::<Result<Vec<_>>>()?;
-    let eval = Eval {
-        base: base.clone(),
-        params: free.clone(),
-        p0: p0.clone(),
-        data,
-        weights: data.iter().map(|d| d.weights()).collect(),
-        lens,
-        settings,
-        evaluations: 0.into(),
+    let weights: Vec<Vec<f64>> = data.iter().map(|d| d.weights()).collect();
+    let mut q = DVector::zeros(free.len());
+    let mut held: Vec<Held> = vec![];
+    let mut evaluations = 0;
+    let mut r0 = None;
+    let mut absorbed = false;
+    let mut first_q = None;
+    let run = loop {
+        let open: Vec<usize> = (0..free.len())
+            .filter(|i| !held.iter().any(|h| h.index == *i))
+            .collect();
+        let pick = |v: &[f64], ix: &[usize]| ix.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let held_ix: Vec<usize> = held.iter().map(|h| h.index).collect();
+        let held_params: Vec<LinearParam> = held_ix.iter().map(|&i| free[i]).collect();
+        let eval = Eval {
+            base: params::apply(
+                &base,
+                &held_params,
+                &pick(&p0, &held_ix),
+                &pick(q.as_slice(), &held_ix),
+            ),
+            params: open.iter().map(|&i| free[i]).collect(),
+            p0: pick(&p0, &open),
+            data,
+            weights: weights.clone(),
+            lens: lens.clone(),
+            settings,
+            evaluations: 0.into(),
+        };
+        let run = solve(eval, DVector::from_vec(pick(q.as_slice(), &open)), settings)?;
+        evaluations += run.evaluations;
+        r0.get_or_insert_with(|| run.r0.clone());
+        for (k, &i) in open.iter().enumerate() {
+            q[i] = run.q[k];
+        }
+        first_q.get_or_insert_with(|| q.clone());
+        // a model calibrated by scales has no local number to hold
+        let out = match base.calibrated_by_scales() {
+            true => None,
+            false => implausible(&free, &q, &held, settings),
+        };
+        match out {
+            // a spring out of range: the springs beside a localized effect
+            // take its linearization in turn when one is held, so every
+            // spring is held at its declared stiffness and the damping
+            // calibrated again from the declared values
+            // the effect's linearization moves on to the next parameter
+            // when one is held: the calibration cannot separate it, and
+            // the declared values are kept
+            Some(h) if held.len() >= settings.max_held || open.len() < 2 => {
+                held.push(h);
+                absorbed = true;
+                break (run, open);
+            }
+            // a spring out of range: the others start again from their
+            // declared values (their values were fitted beside it); a
+            // ratio: the others go on from where they are
+            Some(h) => {
+                if matches!(free[h.index], LinearParam::Spring(_)) {
+                    q.fill(0.0);
+                    held.iter().for_each(|g| q[g.index] = g.q);
+                }
+                q[h.index] = h.q;
+                held.push(h);
+            }
+            None => break (run, open),
+        }
     };
+    let ((mut run, open), r0) = (run, r0.expect("one run at least"));
+    if absorbed {
+        q.fill(0.0);
+        run.r = r0.clone();
+        run.std_q = None;
+        run.status = CalibrationStatus::Absorbs {
+            parameters: held.iter().map(|h| free[h.index].label(&base)).collect(),
+        };
+    }
+    let model = restore_damping(declared, &params::apply(&base, &free, &p0, q.as_slice()));
+    let mut std_q = run
+        .std_q
+        .as_ref()
+        .map(|_| DVector::from_element(free.len(), f64::INFINITY));
+    if let (Some(all), Some(s)) = (std_q.as_mut(), run.std_q.as_ref()) {
+        for (k, &i) in open.iter().enumerate() {
+            all[i] = s[k];
+        }
+    }
+    let mut corrections = corrections(&base, &free, &p0, &q, std_q.as_ref(), settings);
+    for h in &held {
+        corrections[h.index].held = true;
+        corrections[h.index].ran_to = Some(p0[h.index] * h.ran_to.exp());
+    }
+    let residuals = channel_residuals(&model, data, settings, &lens)?;
+    Ok(Calibration {
+        error_before: relative(&r0, data, &lens, &weights),
+        error_after: relative(&run.r, data, &lens, &weights),
+        model: with_elements(declared, model),
+        corrections,
+        residuals,
+        status: run.status,
+        evaluations,
+        segments: data
+            .iter()
+            .zip(&lens)
+            .map(|(d, &l)| d.segment_starts(l).len())
+            .sum(),
+        records: data.iter().map(|d| d.source.clone()).collect(),
+        seconds: t.elapsed().as_secs_f64(),
+        unheld: (!held.is_empty()).then(|| {
+            let q1 = first_q.expect("one run at least");
+            with_elements(
+                declared,
+                restore_damping(declared, &params::apply(&base, &free, &p0, q1.as_slice())),
+            )
+        }),
+    })
+}
+
+/// A parameter held out of the calibration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Held {
+    /// Index among the free parameters.
+    pub index: usize,
+    /// The log value it is held at.
+    pub q: f64,
+    /// The log value the calibration ran it to.
+    pub ran_to: f64,
+}
+
+/// The parameter farthest out of its plausible range at `q` (log values
+/// of `free`), with the value to hold it at; None when every one not yet
+/// `held` is plausible. A spring is plausible within
+/// [`CalibrationSettings::spring_factor`] of its declared stiffness (held
+/// there); a modal ratio within [`CalibrationSettings::damping_factor`] of
+/// the median of the other modes' ratios not held (held at that median).
+/// Global numbers (scales, Rayleigh coefficients, one ratio for every
+/// mode) are never held: they cannot absorb a localized effect alone.
+pub fn implausible(
+    free: &[LinearParam],
+    q: &DVector<f64>,
+    held: &[Held],
+    settings: &CalibrationSettings,
+) -> Option<Held> {
+    let is_held = |i: usize| held.iter().any(|h| h.index == i);
+    let mut worst: Option<(f64, Held)> = None;
+    for (i, p) in free.iter().enumerate() {
+        if is_held(i) {
+            continue;
+        }
+        let (centre, limit) = match p {
+            LinearParam::Spring(_) => (0.0, settings.spring_factor.ln()),
+            LinearParam::ModalRatio(_) => {
+                let others: Vec<f64> = free
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, o)| {
+                        *j != i && !is_held(*j) && matches!(o, LinearParam::ModalRatio(_))
+                    })
+                    .map(|(j, _)| q[j])
+                    .collect();
+                match median(others) {
+                    Some(m) => (m, settings.damping_factor.ln()),
+                    None => continue,
+                }
+            }
+            _ => continue,
+        };
+        let excess = (q[i] - centre).abs() - limit;
+        if excess > 0.0 && worst.is_none_or(|(w, _)| excess > w) {
+            worst = Some((
+                excess,
+                Held {
+                    index: i,
+                    q: centre,
+                    ran_to: q[i],
+                },
+            ));
+        }
+    }
+    worst.map(|(_, h)| h)
+}
+
+/// Median of `v` (None when empty).
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    Some(if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    })
+}
+
+/// One minimisation of the calibration from `q0`.
+struct Run {
+    /// Residual at `q0`.
+    r0: DVector<f64>,
+    /// Parameters at the end.
+    q: DVector<f64>,
+    /// Residual there.
+    r: DVector<f64>,
+    /// Their standard errors (None without a Jacobian).
+    std_q: Option<DVector<f64>>,
+    status: CalibrationStatus,
+    evaluations: usize,
+}
+
+fn solve(eval: Eval<'_>, q0: DVector<f64>, settings: &CalibrationSettings) -> Result<Run> {
     let mut prob = Problem {
         eval,
-        q: DVector::zeros(free.len()),
+        q: q0.clone(),
         r: None,
         jac: RefCell::new(None),
         failure: None,
     };
-    prob.set_params(&DVector::zeros(free.len()));
+    prob.set_params(&q0);
     let r0 = prob
         .r
         .clone()
         .ok_or_else(|| TacitError::Numerical(prob.failure.clone().unwrap_or_default()))?;
     let (prob, status) = minimize(prob, settings);
-    let q = prob.q.clone();
     let r = prob.r.clone().unwrap_or_else(|| r0.clone());
-    let jac = prob.jacobian();
-    let evaluations = prob
-        .eval
-        .evaluations
-        .load(std::sync::atomic::Ordering::Relaxed);
-    let model = restore_damping(declared, &params::apply(&base, &free, &p0, q.as_slice()));
-    let std_q = jac.map(|j| std_errors(&j, &r, prob_dof(&prob)));
-    let corrections = corrections(&base, &free, &p0, &q, std_q.as_ref(), settings);
-    let residuals = channel_residuals(&model, data, settings, &prob.eval.lens)?;
-    Ok(Calibration {
-        error_before: relative(&r0, &prob.eval),
-        error_after: relative(&r, &prob.eval),
-        model: with_elements(declared, model),
-        corrections,
-        residuals,
+    let std_q = prob.jacobian().map(|j| std_errors(&j, &r, prob_dof(&prob)));
+    Ok(Run {
+        r0,
+        q: prob.q.clone(),
+        r,
+        std_q,
         status,
-        evaluations,
-        segments: data
-            .iter()
-            .zip(&prob.eval.lens)
-            .map(|(d, &l)| d.segment_starts(l).len())
-            .sum(),
-        records: data.iter().map(|d| d.source.clone()).collect(),
-        seconds: t.elapsed().as_secs_f64(),
+        evaluations: prob
+            .eval
+            .evaluations
+            .load(std::sync::atomic::Ordering::Relaxed),
     })
 }
 
@@ -516,16 +758,18 @@ fn corrections(
                 std_error: value * sq,
                 significant: q[i].abs() > s.significance * sq && change.abs() > s.min_change,
                 identifiable: sq < s.max_relative_std,
+                held: false,
+                ran_to: None,
             }
         })
         .collect()
 }
 
 /// Relative error `‖r‖ / ‖W y‖` over the scored segments of every record
-/// (the weights and segment lengths of `eval`).
-fn relative(r: &DVector<f64>, eval: &Eval<'_>) -> f64 {
+/// (segment lengths `lens`, channel weights `weights`).
+fn relative(r: &DVector<f64>, data: &[Data], lens: &[usize], weights: &[Vec<f64>]) -> f64 {
     let mut ss = 0.0;
-    for ((d, &len), w) in eval.data.iter().zip(&eval.lens).zip(&eval.weights) {
+    for ((d, &len), w) in data.iter().zip(lens).zip(weights) {
         for s in d.segment_starts(len) {
             for k in s..s + len {
                 for (c, wc) in w.iter().enumerate() {
@@ -598,4 +842,128 @@ fn with_elements(declared: &Model, linear: Model) -> Model {
     m.damping = linear.damping;
     m.matrices = linear.matrices;
     m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linear::SampledModel;
+
+    /// The parameter farthest out of its range is named, with the value it
+    /// is held at: a spring at its declared value, a modal ratio at the
+    /// median of the others not held; global numbers never.
+    #[test]
+    fn the_worst_implausible_parameter_is_held_at_its_centre() {
+        let free = [
+            LinearParam::Spring(0),
+            LinearParam::Spring(1),
+            LinearParam::ModalRatio(0),
+            LinearParam::ModalRatio(1),
+            LinearParam::ModalRatio(2),
+            LinearParam::ModalRatio(3),
+            LinearParam::RayleighAlpha,
+        ];
+        let s = CalibrationSettings::default();
+        // spring 2 at +65 % (beyond a factor 1.5 by 0.095 in log), ratio 4
+        // at e^-1 against a median e^1.1 of the others (beyond a factor 4
+        // by 0.71), alpha far off but global
+        let q = DVector::from_vec(vec![0.1, 0.5, 1.0, 1.1, 1.2, -1.0, 9.0]);
+        let h = implausible(&free, &q, &[], &s).unwrap();
+        assert_eq!(h.index, 5);
+        assert!((h.q - 1.1).abs() < 1e-12 && (h.ran_to + 1.0).abs() < 1e-12);
+        // with the ratio held, the spring is next, held at its declared value
+        let h2 = implausible(&free, &q, &[h], &s).unwrap();
+        assert_eq!((h2.index, h2.q), (1, 0.0));
+        // with both held nothing else is out of range
+        assert!(implausible(&free, &q, &[h, h2], &s).is_none());
+        // a wider spring range lets the spring pass
+        let wide = CalibrationSettings {
+            spring_factor: 2.0,
+            ..s
+        };
+        assert!(implausible(&free, &q, &[h], &wide).is_none());
+    }
+
+    fn chain(k12: f64) -> Model {
+        Model::from_toml_str(
+            &format!(
+                r#"
+name = "chain"
+masses = [1.0, 1.0, 1.0]
+[[spring]]
+dofs = [1]
+stiffness = 1000.0
+[[spring]]
+dofs = [1, 2]
+stiffness = {k12}
+[[spring]]
+dofs = [2, 3]
+stiffness = 1500.0
+[damping]
+kind = "rayleigh"
+alpha = 0.5
+beta = 2e-4
+"#
+            ),
+            "chain",
+        )
+        .unwrap()
+    }
+
+    /// Accelerations of `truth` at every DOF under a force at DOF 1.
+    fn record_of(truth: &Model, fs: f64, n: usize) -> Data {
+        let sm = SampledModel::from_model(truth, fs, 10).unwrap();
+        let force = DMatrix::from_fn(3, n, |i, k| {
+            let t = k as f64;
+            if i == 0 {
+                (t * 0.37).sin() * 3.0 + (t * 0.091).cos() * 2.0 + (t * 1.3).sin()
+            } else {
+                0.0
+            }
+        });
+        let xs = sm.simulate(&DVector::zeros(6), &force);
+        let channels: Vec<_> = (0..3).map(|d| (Quantity::Accel, d)).collect();
+        let (cy, dy) = sm.outputs(&channels).unwrap();
+        Data {
+            source: "chain".into(),
+            fs,
+            measured: &cy * &xs + &dy * &force,
+            force,
+            channels,
+            names: vec!["a1".into(), "a2".into(), "a3".into()],
+            warmup: 0,
+        }
+    }
+
+    /// A spring three times its declared stiffness (a record the declared
+    /// spring cannot explain) runs out of the plausible range: it is held
+    /// at its declared value, what it ran to is reported (the truth, on a
+    /// noise-free record), and it is not called significant.
+    #[test]
+    fn a_spring_run_out_of_range_is_held_and_reported() {
+        let data = record_of(&chain(6000.0), 100.0, 2000);
+        let s = CalibrationSettings {
+            substeps: 10,
+            ..Default::default()
+        };
+        let cal = calibrate(&chain(2000.0), std::slice::from_ref(&data), &s).unwrap();
+        let k12 = &cal.corrections[1];
+        assert!(k12.held, "{:?}", cal.corrections);
+        let ran = k12.ran_to.unwrap();
+        assert!((ran / 6000.0 - 1.0).abs() < 0.01, "ran to {ran}");
+        assert_eq!(k12.calibrated, 2000.0);
+        assert!(!k12.significant && k12.std_error.is_infinite());
+        // the same record with the plausible range opened: calibrated
+        let open = CalibrationSettings {
+            spring_factor: f64::INFINITY,
+            ..s
+        };
+        let cal = calibrate(&chain(2000.0), &[data], &open).unwrap();
+        let k = cal.corrections[1].calibrated;
+        assert!(
+            (k / 6000.0 - 1.0).abs() < 1e-3 && !cal.corrections[1].held,
+            "{k}"
+        );
+        assert_eq!(cal.status, CalibrationStatus::Converged);
+    }
 }

@@ -170,9 +170,20 @@ pub fn diagnose_calibrated(
     if cal.off {
         return super::diagnose(declared, rec, validation, sensors, settings, progress);
     }
+    // a model whose linear values are marked free gives starting values
+    // only: no plausible range around them
+    let (spring_factor, damping_factor) = match declared.free {
+        Some(_) => (f64::INFINITY, f64::INFINITY),
+        None => (
+            cal.calibration.spring_factor,
+            cal.calibration.damping_factor,
+        ),
+    };
     let cal = &CalibratedSettings {
         calibration: CalibrationSettings {
             freedom: declared.free.unwrap_or(cal.calibration.freedom),
+            spring_factor,
+            damping_factor,
             ..cal.calibration.clone()
         },
         ..cal.clone()
@@ -226,14 +237,19 @@ pub fn diagnose_calibrated(
         Some(c) => c,
         None => calibrate_on(vec![rec])?,
     };
-    let d = super::diagnose(
-        &calibration.model,
-        rec,
-        validation,
-        sensors,
-        settings,
-        progress,
-    )?;
+    // a calibration that absorbs a localized effect keeps the declared
+    // values: the diagnosis on them is the trusted one
+    let d = match (&calibration.status, trusted.as_ref()) {
+        (calibrate::CalibrationStatus::Absorbs { .. }, Some(t)) => t.clone(),
+        _ => super::diagnose(
+            &calibration.model,
+            rec,
+            validation,
+            sensors,
+            settings,
+            progress,
+        )?,
+    };
     let ctx = Context {
         declared,
         low_level: !linear_records.is_empty(),
@@ -246,7 +262,12 @@ pub fn diagnose_calibrated(
     };
     progress("refine the linear part with the effects");
     let first = ctx.refined(d, &calibration.model)?;
-    let from_calibrated = ctx.more_rounds(first)?;
+    let mut from_calibrated = ctx.more_rounds(first)?;
+    if let Some(unheld) = calibration.unheld.as_ref() {
+        if !ctx.at_noise(&from_calibrated.d) {
+            from_calibrated = ctx.unheld_alternative(from_calibrated, unheld)?;
+        }
+    }
     let Some(trusted) = trusted else {
         // linear values marked free, or the declared ones off on the
         // low-level records: the calibrated diagnosis is the only one
@@ -363,6 +384,42 @@ impl Context<'_> {
         Ok(best)
     }
 
+    /// The calibration held parameters out of their plausible range
+    /// ([`calibrate::Held`]): the diagnosis from the calibration with every
+    /// parameter free (`unheld`), refined and in rounds, is the
+    /// alternative; the lower multiple-shooting error on the record is
+    /// kept (the held start can leave a one-sided contact a spurious
+    /// companion that the biased spring did not). Not run when the held
+    /// path explains the record up to the noise.
+    fn unheld_alternative(&self, held: RefinedPath, unheld: &Model) -> Result<RefinedPath> {
+        (self.progress)("diagnose from the calibration without held parameters");
+        let d = super::diagnose(
+            unheld,
+            self.rec,
+            self.validation,
+            self.sensors,
+            self.settings,
+            self.progress,
+        )?;
+        let first = self.refined(d, unheld)?;
+        let mut other = self.more_rounds(first)?;
+        let (e_held, e_other) = (held.d.after.relative_error, other.d.after.relative_error);
+        let compared = format!(
+            "multiple-shooting error on the record from the calibration with parameters held {}, with none held {}",
+            pct(e_held),
+            pct(e_other)
+        );
+        Ok(if lower(e_other, e_held) {
+            other.note = format!("{}; {compared}: none held kept", other.note);
+            other
+        } else {
+            RefinedPath {
+                note: format!("{}; {compared}: held kept", held.note),
+                ..held
+            }
+        })
+    }
+
     /// Whether `d` explains the record up to the noise: its
     /// multiple-shooting error at most [`AT_NOISE`] times the noise level it
     /// ran at ([`Diagnosis::noise_level`]).
@@ -472,6 +529,9 @@ impl Context<'_> {
             std = est.unwrap_or(std);
         }
         update_effects(&mut d, &std, &self.cal.calibration);
+        if let Some(n) = drop_negligible(&mut d, vcmp, self.progress) {
+            note = format!("{note}; {n}");
+        }
         let start_errors = std::mem::replace(&mut d.before, declared_errors);
         let mut start_validation_errors = None;
         if let (Some(v), Some(b)) = (d.validation.as_mut(), declared_validation) {
@@ -912,6 +972,65 @@ fn update_effects(d: &mut Diagnosis, std: &[Estimated], s: &CalibrationSettings)
         .filter(|(_, k)| *k)
         .map(|(pair, _)| pair);
     (d.effects, d.added) = pairs.unzip();
+}
+
+/// A rise of the record's multiple-shooting error, as a fraction of it,
+/// below which an effect switched off explains nothing the rest of the
+/// model does not ([`drop_negligible`]).
+const NEGLIGIBLE: f64 = 0.01;
+
+/// Drop the nonlinear effects the final model does not need: each is
+/// switched off in turn ([`effects::without`]: its stiffness, coefficient
+/// or level to zero) and, when the record's multiple-shooting error rises
+/// by less than [`NEGLIGIBLE`] of itself, it is no longer named (the model
+/// keeps it switched off; the validation record is scored again). A
+/// refinement can take an effect proposed beside the right one to nothing
+/// (a clearance of 71 N/m beside a cubic spring) without the stop rules
+/// seeing it. The note says what was dropped; None when nothing was.
+fn drop_negligible(
+    d: &mut Diagnosis,
+    vcmp: Option<&super::Comparison>,
+    progress: &dyn Fn(&str),
+) -> Option<String> {
+    let sim = sim_of(d);
+    let mut dropped = vec![];
+    for i in (0..d.added.len()).rev() {
+        let e = &d.added[i];
+        if matches!(
+            e.candidate.kind,
+            EffectKind::Stiffness | EffectKind::Damping
+        ) {
+            continue;
+        }
+        let with = d.after.relative_error?;
+        progress("score the model with an effect switched off");
+        let off = effects::without(&d.model, e);
+        let (after, pred) = d.prepared.comparison.errors(&off, sim);
+        if !after
+            .relative_error
+            .is_some_and(|x| x <= with * (1.0 + NEGLIGIBLE))
+        {
+            continue;
+        }
+        dropped.push(format!(
+            "{} dropped (switched off: {} against {})",
+            e.label,
+            pct(after.relative_error),
+            pct(Some(with))
+        ));
+        d.model = off;
+        d.after = after;
+        d.predictions.1 = pred;
+        d.added.remove(i);
+        d.effects.remove(i);
+    }
+    if dropped.is_empty() {
+        return None;
+    }
+    if let (Some(c), Some(v)) = (vcmp, d.validation.as_mut()) {
+        v.after = c.errors(&d.model, sim).0;
+    }
+    Some(dropped.join("; "))
 }
 
 /// The linear corrections of the final model against the declared one
