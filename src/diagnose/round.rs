@@ -100,8 +100,15 @@ pub(super) fn run(
     }
     progress(&format!("trace, round {}", index + 1));
     let tr = trace_round(ctx, st, index);
-    let screened = !tr.selected.is_empty();
-    let pool = screen::pool(&tr, &st.added, ctx.located.as_ref());
+    // a law against ground at a located ground DOF of a free-free model,
+    // screened on the identified force with the rigid-body wander
+    // (`super::ground`), ahead of the trace's choice
+    let ground = super::ground::propose(ctx, st);
+    let screened = ground.is_some() || !tr.selected.is_empty();
+    let pool = match ground {
+        Some(g) => vec![g],
+        None => screen::pool(&tr, &st.added, ctx.located.as_ref()),
+    };
     if pool.is_empty() {
         let reason = tr.stop_reason.clone();
         st.rounds
