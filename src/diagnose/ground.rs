@@ -61,7 +61,13 @@ impl Law {
         match self.kind {
             EffectKind::Cubic => 3.0 * p[0] * z * z,
             EffectKind::Quadratic => 2.0 * p[0] * z,
-            EffectKind::Contact => if z > p[0] { p[1] } else { 0.0 },
+            EffectKind::Contact => {
+                if z > p[0] {
+                    p[1]
+                } else {
+                    0.0
+                }
+            }
             _ => p[0],
         }
     }
@@ -307,7 +313,12 @@ fn normal(
 
 /// Levenberg–Marquardt on the wander `c` and the laws' parameters listed
 /// in `free` (`(law index, parameter index)`), from `(laws, c)`.
-fn refine(data: &Data<'_>, laws: &mut [(usize, Law)], c: &mut [f64], free: &[(usize, usize)]) -> f64 {
+fn refine(
+    data: &Data<'_>,
+    laws: &mut [(usize, Law)],
+    c: &mut [f64],
+    free: &[(usize, usize)],
+) -> f64 {
     let sc = scales(data);
     let pscale: Vec<f64> = free
         .iter()
@@ -528,10 +539,22 @@ pub fn rigid_vector(sm: &SampledModel, cy: &DMatrix<f64>) -> Option<DVector<f64>
 pub fn ground_laws(model: &Model) -> Vec<(usize, Law)> {
     let mut out = vec![];
     for c in model.cubics.iter().filter(|c| c.dofs.len() == 1) {
-        out.push((c.dofs[0] - 1, Law { kind: EffectKind::Cubic, params: vec![c.k3] }));
+        out.push((
+            c.dofs[0] - 1,
+            Law {
+                kind: EffectKind::Cubic,
+                params: vec![c.k3],
+            },
+        ));
     }
     for q in model.quadratics.iter().filter(|q| q.dofs.len() == 1) {
-        out.push((q.dofs[0] - 1, Law { kind: EffectKind::Quadratic, params: vec![q.k2] }));
+        out.push((
+            q.dofs[0] - 1,
+            Law {
+                kind: EffectKind::Quadratic,
+                params: vec![q.k2],
+            },
+        ));
     }
     for c in model.contacts.iter().filter(|c| c.dofs.len() == 1) {
         out.push((
@@ -560,7 +583,12 @@ fn knots(prep: &Prepared) -> Vec<usize> {
 }
 
 /// The rows of a wander fit at the 0-based `dofs` of `prep`.
-fn rows<'a>(prep: &'a Prepared, r: &DVector<f64>, dofs: &[usize], buf: &'a [(Vec<f64>, Vec<f64>)]) -> Data<'a> {
+fn rows<'a>(
+    prep: &'a Prepared,
+    r: &DVector<f64>,
+    dofs: &[usize],
+    buf: &'a [(Vec<f64>, Vec<f64>)],
+) -> Data<'a> {
     let _ = prep;
     Data {
         rows: dofs
@@ -583,7 +611,11 @@ fn series(prep: &Prepared, d: usize) -> (Vec<f64>, Vec<f64>) {
 }
 
 /// The laws screened at a located ground DOF.
-pub const LAWS: [EffectKind; 3] = [EffectKind::Cubic, EffectKind::Contact, EffectKind::GroundSpring];
+pub const LAWS: [EffectKind; 3] = [
+    EffectKind::Cubic,
+    EffectKind::Contact,
+    EffectKind::GroundSpring,
+];
 
 /// The best law at the 0-based ground DOF `d` of a free-free `declared`
 /// model's record `prep` ([`fit_law`] for each of [`LAWS`]), with every
@@ -623,7 +655,12 @@ pub fn apply(prep: &Prepared, r: &DVector<f64>, w: &Wander) -> Prepared {
         }
     }
     let st = &p.recon.states;
-    for s in p.comparison.segments.iter_mut().chain([&mut p.comparison.whole]) {
+    for s in p
+        .comparison
+        .segments
+        .iter_mut()
+        .chain([&mut p.comparison.whole])
+    {
         for i in 0..n {
             s.u0[i] = st[(i, s.start)];
             s.v0[i] = st[(n + i, s.start)];
@@ -652,18 +689,29 @@ pub fn corrected(model: &Model, prep: &Prepared) -> Option<Prepared> {
     Some(apply(prep, &r, &fit.wander))
 }
 
-/// Least fraction of the identified force at a located ground DOF a law
-/// must explain ([`screen`]) to be proposed ahead of the trace's choice.
-pub const MIN_EXPLAINED: f64 = 0.5;
+/// A law is proposed ahead of the trace's choice when it explains at
+/// least this fraction of the identified force at the located ground DOF
+/// ([`screen`]; the trace's minimum gain)...
+pub const MIN_EXPLAINED: f64 = 0.05;
+
+/// ...and leaves at most this fraction of what a linear spring to ground
+/// with the same wander leaves unexplained (measured: a cubic spring at 3
+/// leaves 0.14 against the spring's 0.28; a stop at 8 with friction on
+/// every mass 0.86 against 0.997).
+pub const MAX_LEFT_VS_SPRING: f64 = 0.9;
 
 /// The law against ground proposed at the located ground DOF of a
 /// free-free declared model ([`screen`]), ahead of the trace: when the
 /// force was located at one DOF to ground, no spring to ground is in the
 /// declared or current model, no effect acts at that DOF yet, and the best
 /// law is not a linear spring (which the trace fits on its own
-/// reconstruction) and explains at least [`MIN_EXPLAINED`] of the force
-/// there.
-pub(super) fn propose(ctx: &super::state::Context<'_>, st: &super::state::State) -> Option<RankedEffect> {
+/// reconstruction), explains at least [`MIN_EXPLAINED`] of the force
+/// there, leaving at most [`MAX_LEFT_VS_SPRING`] of what the spring
+/// leaves.
+pub(super) fn propose(
+    ctx: &super::state::Context<'_>,
+    st: &super::state::State,
+) -> Option<RankedEffect> {
     use super::prepare::grounded;
     let loc = ctx.prep.located.as_ref()?;
     let d = loc.directions.iter().find(|x| x.dofs.len() == 1)?.dofs[0] - 1;
@@ -674,7 +722,14 @@ pub(super) fn propose(ctx: &super::state::Context<'_>, st: &super::state::State)
         return None;
     }
     let list = screen(ctx.prep, &ctx.cy, d)?;
+    let spring = list
+        .iter()
+        .find(|x| x.0.laws[0].1.kind == EffectKind::GroundSpring)
+        .map_or(0.0, |x| x.0.explained.max(0.0));
     let (best, ranked) = list.into_iter().next()?;
-    (best.laws[0].1.kind != EffectKind::GroundSpring && best.explained >= MIN_EXPLAINED)
+    let left = 1.0 - best.explained;
+    (best.laws[0].1.kind != EffectKind::GroundSpring
+        && best.explained >= MIN_EXPLAINED
+        && left <= MAX_LEFT_VS_SPRING * (1.0 - spring))
         .then_some(ranked)
 }
