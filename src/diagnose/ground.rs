@@ -733,3 +733,81 @@ pub(super) fn propose(
         && left <= MAX_LEFT_VS_SPRING * (1.0 - spring))
         .then_some(ranked)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand_distr::{Distribution, StandardNormal};
+
+    #[test]
+    fn wander_interpolates_between_knots_and_gives_the_slope() {
+        let w = Wander {
+            knots: vec![0, 10, 30],
+            values: vec![0.0, 1.0, -1.0],
+        };
+        assert_eq!(w.at(0), 0.0);
+        assert!((w.at(5) - 0.5).abs() < 1e-12);
+        assert!((w.at(20) - 0.0).abs() < 1e-12);
+        assert_eq!(w.at(30), -1.0);
+        // per second at 10 samples/s: 1 over 1 s, then −2 over 2 s
+        assert!((w.rate(3, 10.0) - 1.0).abs() < 1e-12);
+        assert!((w.rate(10, 10.0) + 1.0).abs() < 1e-12);
+    }
+
+    /// A displacement `u` (two tones), the identified force of a cubic
+    /// spring to ground on it with 30 % white noise, and the
+    /// reconstruction off by a slow wander 20 times the motion.
+    fn cubic_record(k3: f64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let n = 2048;
+        let mut g = crate::signal::rng(5);
+        let u: Vec<f64> = (0..n)
+            .map(|k| {
+                let t = k as f64 / 512.0;
+                3e-4 * (2.0 * std::f64::consts::PI * 23.0 * t).sin()
+                    + 2e-4 * (2.0 * std::f64::consts::PI * 41.0 * t + 1.0).sin()
+            })
+            .collect();
+        let wander: Vec<f64> = (0..n)
+            .map(|k| {
+                let t = k as f64 / 512.0;
+                6e-3 * (0.7 * t).sin() + 2e-3 * t
+            })
+            .collect();
+        let f: Vec<f64> = (0..n)
+            .map(|k| {
+                let mean = 0.5 * k3 * (u[k].powi(3) + u[(k + 1).min(n - 1)].powi(3));
+                {
+                    let e: f64 = StandardNormal.sample(&mut g);
+                    mean + 0.3 * 5.0 * e
+                }
+            })
+            .collect();
+        let rec: Vec<f64> = u.iter().zip(&wander).map(|(a, b)| a - b).collect();
+        (u, rec, f)
+    }
+
+    #[test]
+    fn cubic_law_and_wander_are_fitted_from_the_force() {
+        let k3 = 5e11;
+        let (u, rec, f) = cubic_record(k3);
+        let knots: Vec<usize> = (0..2048).step_by(51).chain([2047]).collect();
+        let data = Data {
+            rows: vec![(2, 1.0, &rec, &f)],
+            knots,
+        };
+        let fit = fit_law(&data, 2, EffectKind::Cubic).unwrap();
+        let k = fit.laws[0].1.params[0];
+        assert!((k / k3 - 1.0).abs() < 0.03, "k3 {k}");
+        assert!(fit.explained > 0.8, "{}", fit.explained);
+        // the corrected displacement within 5 % of the motion's RMS
+        let err: f64 = (0..2048)
+            .map(|i| (rec[i] + fit.wander.at(i) - u[i]).powi(2))
+            .sum::<f64>()
+            / 2048.0;
+        let rms: f64 = u.iter().map(|x| x * x).sum::<f64>() / 2048.0;
+        assert!(err.sqrt() < 0.05 * rms.sqrt(), "{} vs {}", err.sqrt(), rms.sqrt());
+        // a linear spring to ground with the same freedom explains less
+        let spring = fit_law(&data, 2, EffectKind::GroundSpring).unwrap();
+        assert!(spring.explained < fit.explained - 0.05, "{}", spring.explained);
+    }
+}
