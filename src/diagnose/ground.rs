@@ -243,7 +243,6 @@ fn normal(
     let mut idx = Vec::with_capacity(np + 4);
     let mut val = Vec::with_capacity(np + 4);
     for (dof, r, u, f) in &data.rows {
-        let here: Vec<&Law> = laws.iter().filter(|l| l.0 == *dof).map(|l| &l.1).collect();
         for k in 0..u.len().saturating_sub(1) {
             idx.clear();
             val.clear();
@@ -271,7 +270,6 @@ fn normal(
                 idx.push(np + j + 1);
                 val.push(a * slope * r * uscale / fscale);
             }
-            let _ = &here;
             let rho = (f[k] - g) / fscale;
             cost += rho * rho;
             for (x, &i) in idx.iter().enumerate() {
@@ -584,12 +582,11 @@ fn knots(prep: &Prepared) -> Vec<usize> {
 
 /// The rows of a wander fit at the 0-based `dofs` of `prep`.
 fn rows<'a>(
-    prep: &'a Prepared,
+    prep: &Prepared,
     r: &DVector<f64>,
     dofs: &[usize],
     buf: &'a [(Vec<f64>, Vec<f64>)],
 ) -> Data<'a> {
-    let _ = prep;
     Data {
         rows: dofs
             .iter()
@@ -707,7 +704,7 @@ pub const MAX_LEFT_VS_SPRING: f64 = 0.9;
 /// law is not a linear spring (which the trace fits on its own
 /// reconstruction), explains at least [`MIN_EXPLAINED`] of the force
 /// there, leaving at most [`MAX_LEFT_VS_SPRING`] of what the spring
-/// leaves.
+/// leaves; once per DOF (a law withdrawn is not proposed again).
 pub(super) fn propose(
     ctx: &super::state::Context<'_>,
     st: &super::state::State,
@@ -719,6 +716,18 @@ pub(super) fn propose(
         return None;
     }
     if st.added.iter().any(|a| a.effect.candidate.dofs == [d]) {
+        return None;
+    }
+    // a law fitted at that DOF in an earlier round and withdrawn
+    let tried: Vec<String> = LAWS
+        .iter()
+        .map(|&k| Candidate::new(k, vec![d]).label())
+        .collect();
+    if st
+        .rounds
+        .iter()
+        .any(|r| r.proposed.as_ref().is_some_and(|p| tried.contains(p)))
+    {
         return None;
     }
     let list = screen(ctx.prep, &ctx.cy, d)?;
@@ -805,9 +814,18 @@ mod tests {
             .sum::<f64>()
             / 2048.0;
         let rms: f64 = u.iter().map(|x| x * x).sum::<f64>() / 2048.0;
-        assert!(err.sqrt() < 0.05 * rms.sqrt(), "{} vs {}", err.sqrt(), rms.sqrt());
+        assert!(
+            err.sqrt() < 0.05 * rms.sqrt(),
+            "{} vs {}",
+            err.sqrt(),
+            rms.sqrt()
+        );
         // a linear spring to ground with the same freedom explains less
         let spring = fit_law(&data, 2, EffectKind::GroundSpring).unwrap();
-        assert!(spring.explained < fit.explained - 0.05, "{}", spring.explained);
+        assert!(
+            spring.explained < fit.explained - 0.05,
+            "{}",
+            spring.explained
+        );
     }
 }
