@@ -33,6 +33,9 @@ use crate::model::Model;
 use crate::trace::{Candidate, EffectKind, RankedEffect};
 use nalgebra::{DMatrix, DVector};
 
+/// Laws with the 0-based DOF each acts at.
+type Laws = Vec<(usize, Law)>;
+
 /// A law from one DOF to ground in its absolute displacement `z`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Law {
@@ -496,7 +499,7 @@ pub fn fit_law(data: &Data<'_>, d: usize, kind: EffectKind) -> Option<Fitted> {
         _ => vec![(0, 0)],
     };
     let strength = free.len() - 1;
-    let mut best: Option<(f64, Vec<(usize, Law)>, Vec<f64>)> = None;
+    let mut best: Option<(f64, Laws, Vec<f64>)> = None;
     for e in -8..=8 {
         let mut laws = vec![(d, law(base * 10f64.powf(e as f64 / 4.0)))];
         let mut c = start_wander(data, &laws);
