@@ -19,6 +19,11 @@
 //!    open-loop simulation error (`simulation_error`).
 //! 5. **Rounds** (`round`), while the error is above the noise floor and
 //!    an effect pays, at most [`ScreenSettings::max_effects`]:
+//!    - *against ground* ([`ground`]): on a free-free model with the force
+//!      located at one DOF to ground, the laws there (cubic, stop, linear
+//!      spring) fitted to the identified force with the rigid-body wander
+//!      of the reconstruction; the best fitted first when it pays on the
+//!      force, the trace's choice when its fit does not;
 //!    - *trace* ([`crate::trace`]): rank the candidate effects by how much
 //!      of the segment residual they remove (BIC, minimum gain), those
 //!      acting along the located directions first;
@@ -54,6 +59,7 @@ pub mod effects;
 pub mod errors;
 mod figures;
 mod fit;
+pub mod ground;
 pub mod joint;
 mod laws;
 pub mod noise;

@@ -541,6 +541,13 @@ pub(super) fn grounded(model: &Model) -> bool {
 /// left to its prior drives a force and is seen. From the declared model's
 /// reconstruction the exact model of a contact with a ground spring scored
 /// 73 %; from its own, 3.7 %. None otherwise.
+///
+/// A model with a law against ground in the absolute displacement (a
+/// cubic, quadratic or contact to ground; [`super::ground`]) and no spring
+/// to ground, on a free-free declared model: the declared reconstruction
+/// (`base` when given, else made) corrected along the rigid-body
+/// displacement by the wander fitted with its laws
+/// ([`super::ground::corrected`]).
 pub(super) fn rescore_prep(
     declared: &Model,
     model: &Model,
@@ -548,9 +555,24 @@ pub(super) fn rescore_prep(
     sensors: Option<&[usize]>,
     settings: &DiagnoseSettings,
     located: Option<&locate::Located>,
+    base: Option<&Prepared>,
 ) -> Result<Option<Prepared>> {
-    if grounded(declared) || !grounded(model) {
+    if grounded(declared) {
         return Ok(None);
     }
-    prepare_located(model, rec, sensors, settings, located).map(Some)
+    if grounded(model) {
+        return prepare_located(model, rec, sensors, settings, located).map(Some);
+    }
+    if super::ground::ground_laws(model).is_empty() {
+        return Ok(None);
+    }
+    let made;
+    let prep = match base {
+        Some(p) => p,
+        None => {
+            made = prepare_located(model, rec, sensors, settings, located)?;
+            &made
+        }
+    };
+    Ok(super::ground::corrected(model, prep))
 }

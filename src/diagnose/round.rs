@@ -100,6 +100,15 @@ pub(super) fn run(
     }
     progress(&format!("trace, round {}", index + 1));
     let tr = trace_round(ctx, st, index);
+    // a law against ground at a located ground DOF of a free-free model,
+    // screened on the identified force with the rigid-body wander
+    // (`super::ground`), fitted ahead of the trace's choice; the trace's
+    // choice follows when it does not pay
+    if let Some(g) = super::ground::propose(ctx, st) {
+        if let Next::Continue = ground_round(ctx, st, g, progress)? {
+            return Ok(Next::Continue);
+        }
+    }
     let screened = !tr.selected.is_empty();
     let pool = screen::pool(&tr, &st.added, ctx.located.as_ref());
     if pool.is_empty() {
@@ -139,6 +148,32 @@ pub(super) fn run(
         simulations: fit_sims,
     });
     Ok(apply(st, trial, judged))
+}
+
+/// Fit the law against ground `g` ([`super::ground::propose`]) and keep
+/// it when it pays (`Continue`); a withdrawn one is recorded as a round
+/// and leaves the model as it was (`Stop`: the trace's choice is tried).
+fn ground_round(
+    ctx: &Context<'_>,
+    st: &mut State,
+    g: RankedEffect,
+    progress: &dyn Fn(&str),
+) -> Result<Next> {
+    progress(&format!("fit {} (against ground)", g.label));
+    let trial = fit_scored(ctx, st, g, None, None)?;
+    let judged = decide::judge(ctx, st, &trial, None);
+    let kept = matches!(judged.decision, Decision::Kept { .. });
+    st.rounds.push(Round {
+        proposed: Some(trial.best.label.clone()),
+        decision: judged.decision.clone(),
+        fit: Some(trial.fit.note.clone()),
+        alternative: None,
+        simulations: trial.fit.simulations,
+    });
+    if kept {
+        return Ok(apply(st, trial, judged));
+    }
+    Ok(Next::Stop)
 }
 
 /// The trace of the current residual; the first round's ranking kept.

@@ -160,6 +160,8 @@ impl<'a> Context<'a> {
     /// the failure is recorded).
     pub fn own_prep(&self, model: &Model, rec: &Record) -> Option<Prepared> {
         let located = self.prep.located.as_ref();
+        // the record's own reconstruction is at hand
+        let base = std::ptr::eq(rec, self.rec).then_some(self.prep);
         match rescore_prep(
             self.declared,
             model,
@@ -167,10 +169,11 @@ impl<'a> Context<'a> {
             self.sensors,
             self.settings,
             located,
+            base,
         ) {
             Ok(p) => p,
             Err(e) => {
-                let step = "reconstruction with the model's spring to ground";
+                let step = "reconstruction with the model's spring or law to ground";
                 self.tolerate(step, e, "the declared model's reconstruction");
                 None
             }
