@@ -54,6 +54,7 @@ pub mod effects;
 pub mod errors;
 mod figures;
 mod fit;
+pub mod interface;
 pub mod joint;
 mod laws;
 pub mod noise;
