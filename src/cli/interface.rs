@@ -115,6 +115,10 @@ pub fn run(inp: &Inputs<'_>, declared: &Model, d: &Diagnosis, dir: &Path) -> any
     Ok(())
 }
 
+/// The validation record and every ranked model's RMS error per channel.
+type Scores = (PathBuf, Vec<(String, Vec<f64>)>);
+type Validated = Option<Scores>;
+
 /// Every ranked model's open-loop RMS error per channel on the validation
 /// record (reported, not used to choose).
 fn validation_scores(
@@ -123,7 +127,7 @@ fn validation_scores(
     declared: &Model,
     models: &[(String, Model)],
     warm_up: usize,
-) -> anyhow::Result<(PathBuf, Vec<(String, Vec<f64>)>)> {
+) -> anyhow::Result<Scores> {
     let r = load(p, inp.rec, None, declared)?;
     let mut out = vec![];
     for (name, m) in models {
@@ -135,8 +139,6 @@ fn validation_scores(
     }
     Ok((p.to_path_buf(), out))
 }
-
-type Validated = Option<(PathBuf, Vec<(String, Vec<f64>)>)>;
 
 /// interface.json, interface.md, model-interface.toml and the restoring
 /// force figure.
@@ -186,10 +188,7 @@ fn write(
 }
 
 /// interface.md: the ranking, the participations, where it couples.
-fn markdown(
-    offer: &interface::Offer,
-    validation: Option<&(PathBuf, Vec<(String, Vec<f64>)>)>,
-) -> String {
+fn markdown(offer: &interface::Offer, validation: Option<&Scores>) -> String {
     let mut s = String::from("# The interface candidate\n\n");
     s += &format!(
         "Ranked by the weighted open-loop error on the estimation records ({}); chosen: **{}**.\n\n",
