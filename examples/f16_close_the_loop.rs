@@ -3,9 +3,10 @@
 //! close-the-loop diagnosis on a high-level record with the linear part
 //! calibrated, and the open-loop RMS error per channel (m/s², steady-state
 //! periods) before and after on that record and on a validation record.
-//! Writes OUT/report.json (`validation.before.rms_per_channel`,
-//! `validation.after.rms_per_channel`, the effects found), the linear
-//! model OUT/f16-linear.toml and the fitted model OUT/model-fitted.toml.
+//! Writes OUT/report.json (`validation.before.rms_per_channel`: the
+//! Level-1 model; `validation.after.rms_per_channel`: the model after;
+//! `effects_found` with the points each joins), the linear model
+//! OUT/f16-linear.toml and the model after OUT/model-fitted.toml.
 //!
 //! `cargo run --release --example f16_close_the_loop -- --data DIR
 //! --linear FILE --estimate FILE --validate FILE -o OUT`
@@ -24,22 +25,25 @@
 //! held|free` holds the Level-1 linear part (default) or fits the
 //! coupling spring and the wing bending and torsion damping with it;
 //! `--interface-damper quadratic|cubic` chooses the damper's law (default
-//! cubic). `--jenkins` fits the Level-1 model with a Jenkins element
-//! (stick–slip friction) between wing and payload taking part of their
-//! coupling spring, on the linear record and the estimation record
-//! together, by open-loop output error with finite differences, and
-//! scores it per channel and per frequency band on every level file in
-//! DIR (report.json `jenkins`, OUT/model-jenkins.toml);
-//! `--residual-damping Z|identified` sets the damping ratio of the
-//! residual mode above the band in that model (default 0.3),
-//! `--jenkins-elements N` puts N Jenkins elements in parallel (an Iwan
-//! model; default 1); `--jenkins-direction coordinate|points` puts the
-//! element on the interface coordinate (default: an unmeasured point
-//! whose participation in every in-band mode is fitted with the slip
-//! force, started from the fit of the element between the wing and
-//! payload points) or between the wing and payload points;
-//! `--max-simulations N` limits the simulations of that fit (default 150
-//! for the coordinate, 60 between the points).
+//! cubic).
+//!
+//! By default the interface candidate of `tacit::diagnose::interface`
+//! is fitted on the linear and the estimation record (and the
+//! `--also-estimate` files): a Jenkins element between the pair the trace
+//! located, then on the interface as a coordinate of its own, then (with
+//! `--interface-elements N`, default 4; 1: none) an Iwan model there; every model (the
+//! Level-1 model, the diagnosed model, the interface models) is ranked by
+//! the open-loop error on the estimation records, and the first is the
+//! model after (report.json `after_model`, `effects_found`, `interface`;
+//! OUT/restoring_interface.png/.svg the interface force against its
+//! displacement and the relative motion of the pair). `--no-interface`
+//! leaves the diagnosed model as the model after; `--max-simulations N`
+//! limits the coordinate fits (default 150); `--residual-damping
+//! Z|identified` sets the damping ratio of the residual mode above the
+//! band in the interface models (default 0.3); `--also-estimate FILE`
+//! (repeatable) adds an estimation record; `--levels` scores every ranked
+//! model per channel and per frequency band on every level file in DIR
+//! (report.json `levels`).
 
 use std::path::{Path, PathBuf};
 use tacit::cases::f16;
@@ -55,11 +59,12 @@ struct Args {
     interface_fit: bool,
     interface_linear: f16::LinearPart,
     interface_damper: f16::Damper,
-    jenkins: bool,
+    interface: bool,
     residual_damping: Option<f64>,
-    jenkins_elements: usize,
-    jenkins_direction: f16::jenkins::Direction,
+    interface_elements: usize,
     max_simulations: Option<usize>,
+    also_estimate: Vec<PathBuf>,
+    levels: bool,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -74,11 +79,12 @@ fn args() -> anyhow::Result<Args> {
         interface_fit: false,
         interface_linear: f16::LinearPart::Held,
         interface_damper: f16::Damper::Cubic,
-        jenkins: false,
+        interface: true,
         residual_damping: Some(0.3),
-        jenkins_elements: 1,
-        jenkins_direction: f16::jenkins::Direction::Coordinate,
+        interface_elements: 4,
         max_simulations: None,
+        also_estimate: vec![],
+        levels: false,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let mut it = argv.iter();
@@ -87,8 +93,12 @@ fn args() -> anyhow::Result<Args> {
             a.interface_fit = true;
             continue;
         }
-        if flag == "--jenkins" {
-            a.jenkins = true;
+        if flag == "--no-interface" {
+            a.interface = false;
+            continue;
+        }
+        if flag == "--levels" {
+            a.levels = true;
             continue;
         }
         let value = it
@@ -103,20 +113,18 @@ fn args() -> anyhow::Result<Args> {
             };
             continue;
         }
-        if flag == "--jenkins-direction" {
-            a.jenkins_direction = match value.as_str() {
-                "points" => f16::jenkins::Direction::Points,
-                "coordinate" => f16::jenkins::Direction::Coordinate,
-                _ => anyhow::bail!("--jenkins-direction {value}: expected points or coordinate"),
-            };
+        if flag == "--also-estimate" {
+            a.also_estimate.push(value.into());
             continue;
         }
         if flag == "--max-simulations" {
             a.max_simulations = Some(value.parse()?);
             continue;
         }
-        if flag == "--jenkins-elements" {
-            a.jenkins_elements = value.parse()?;
+        if flag == "--interface-elements" {
+            a.interface_elements = value
+                .parse()
+                .map_err(|e| anyhow::anyhow!("--interface-elements {value}: {e}"))?;
             continue;
         }
         if flag == "--min-gain" {
@@ -154,12 +162,14 @@ fn args() -> anyhow::Result<Args> {
             "--validate" => &mut a.validate,
             "-o" | "--output" => &mut a.out,
             _ => anyhow::bail!(
-                "unknown option {flag}: expected --data, --linear, --estimate, --validate, -o"
+                "unknown option {flag}: expected --data, --linear, --estimate, --validate, -o \
+                 or an option of the module documentation"
             ),
         };
         *slot = PathBuf::from(value);
     }
-    for p in [&mut a.linear, &mut a.estimate, &mut a.validate] {
+    let files = [&mut a.linear, &mut a.estimate, &mut a.validate];
+    for p in files.into_iter().chain(a.also_estimate.iter_mut()) {
         if !p.exists() {
             *p = a.data.join(&*p);
         }
@@ -172,61 +182,37 @@ fn args() -> anyhow::Result<Args> {
 
 fn main() -> anyhow::Result<()> {
     let a = args()?;
-    let mut settings = f16::Settings {
-        calibration: a.calibration,
-        ..Default::default()
-    };
-    if let Some(g) = a.min_gain {
-        // the share of the residual an effect must remove to be selected
-        // and kept (`trace.min_gain`, `screen.min_improvement`)
-        settings.diagnose.trace.min_gain = g;
-        settings.diagnose.screen.min_improvement = g;
-    }
-    let (r, fitted, linear_text) =
-        f16::run(&a.linear, &a.estimate, &a.validate, &settings, &|m| {
-            eprintln!("{m}")
-        })?;
+    let settings = settings(&a)?;
+    let out = f16::run(&a.linear, &a.estimate, &a.validate, &settings, &|m| {
+        eprintln!("{m}")
+    })?;
+    let r = &out.result;
     tacit::io::ensure_dir(&a.out)?;
-    std::fs::write(a.out.join("f16-linear.toml"), linear_text)?;
-    std::fs::write(a.out.join("model-fitted.toml"), fitted.to_toml_string())?;
-    std::fs::write(a.out.join("report.json"), serde_json::to_string_pretty(&r)?)?;
-    println!("{}", r.summary());
-    let mut json = serde_json::to_value(&r)?;
-    if a.interface_fit {
-        let levels: Vec<PathBuf> = (1..=7)
-            .map(|n| a.data.join(format!("F16Data_FullMSine_Level{n}.mat")))
-            .filter(|p| p.exists())
-            .collect();
-        let refs: Vec<&Path> = levels.iter().map(|p| p.as_path()).collect();
-        let (fit, model) = f16::interface_study(
-            &a.linear,
-            &a.estimate,
-            &refs,
-            (a.interface_linear, a.interface_damper),
-            &settings,
-        )?;
-        println!(
-            "interface fit: k3 {:.4e} N/m^3, c2 {:.4e} N s^2/m^2, c3 {:.4e} N s^3/m^3; {:?} after {} iterations",
-            fit.k3, fit.c2, fit.c3, fit.termination, fit.iterations
+    std::fs::write(a.out.join("f16-linear.toml"), &out.linear_text)?;
+    std::fs::write(a.out.join("model-fitted.toml"), out.after.to_toml_string())?;
+    if let Some(rf) = &out.restoring {
+        let fig = tacit::diagnose::interface::restoring_figure(
+            rf,
+            &format!("restoring force of the interface ({})", r.after_model),
         );
-        for p in &fit.parameters {
-            println!(
-                "  {}: start {:.4e}, fitted {:.4e} ({:+.1} % of nominal){}",
-                p.name,
-                p.start,
-                p.value,
-                p.percent_change,
-                if p.at_bound { ", at its bound" } else { "" }
-            );
-        }
-        for (file, before, after) in &fit.errors {
-            println!("interface model on {file}: Level-1 model {before:.3?}, interface model {after:.3?} m/s^2");
-        }
-        std::fs::write(a.out.join("model-interface.toml"), model.to_toml_string())?;
-        json["interface_fit"] = serde_json::to_value(&fit)?;
+        tacit::plot::save(&fig, &a.out.join("restoring_interface"))?;
     }
-    if a.jenkins {
-        json["jenkins"] = jenkins_study(&a, &settings)?;
+    println!("{}", r.summary());
+    let mut json = serde_json::to_value(r)?;
+    if let Some(rf) = &out.restoring {
+        json["restoring_interface"] = serde_json::json!({
+            "record": rf.record,
+            "pair": rf.pair,
+            "slip_force": rf.slip_force,
+            "follows": rf.follows,
+            "figure": "restoring_interface.svg",
+        });
+    }
+    if a.interface_fit {
+        json["interface_fit"] = cubic_study(&a, &settings)?;
+    }
+    if a.levels {
+        json["levels"] = levels(&a, &out, &settings)?;
     }
     std::fs::write(
         a.out.join("report.json"),
@@ -236,59 +222,56 @@ fn main() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The Jenkins interface fitted and scored on every level file; prints its
-/// table and writes OUT/model-jenkins.toml.
-fn jenkins_study(a: &Args, settings: &f16::Settings) -> anyhow::Result<serde_json::Value> {
-    let levels: Vec<PathBuf> = (1..=7)
+/// The case's settings from the options.
+fn settings(a: &Args) -> anyhow::Result<f16::Settings> {
+    let mut s = f16::Settings {
+        calibration: a.calibration,
+        also_estimate: a.also_estimate.clone(),
+        ..Default::default()
+    };
+    if let Some(g) = a.min_gain {
+        // the share of the residual an effect must remove to be selected
+        // and kept (`trace.min_gain`, `screen.min_improvement`)
+        s.diagnose.trace.min_gain = g;
+        s.diagnose.screen.min_improvement = g;
+    }
+    s.interface = match a.interface {
+        false => None,
+        true => {
+            let mut o = tacit::diagnose::interface::OfferSettings::default();
+            if let Some(n) = a.max_simulations {
+                o.spec.max_simulations = n;
+            }
+            o.spec.upper_residual_damping = a.residual_damping;
+            o.iwan = Some(a.interface_elements).filter(|&n| n > 1);
+            Some(o)
+        }
+    };
+    Ok(s)
+}
+
+/// The level files in DIR.
+fn level_files(a: &Args) -> Vec<PathBuf> {
+    (1..=7)
         .map(|n| a.data.join(format!("F16Data_FullMSine_Level{n}.mat")))
         .filter(|p| p.exists())
-        .collect();
-    let refs: Vec<&Path> = levels.iter().map(|p| p.as_path()).collect();
-    let defaults = f16::jenkins::FitSpec::default();
-    let spec = f16::jenkins::FitSpec {
-        direction: a.jenkins_direction,
-        max_simulations: a.max_simulations.unwrap_or(match a.jenkins_direction {
-            f16::jenkins::Direction::Points => defaults.max_simulations,
-            f16::jenkins::Direction::Coordinate => 150,
-        }),
-        upper_residual_damping: a.residual_damping,
-        elements: a.jenkins_elements,
-        substeps: settings.substeps,
-        warm_up: settings.warm_up,
-        ..defaults
-    };
-    let (st, model) = f16::jenkins::study(&a.linear, &a.estimate, &refs, &spec, settings)?;
-    let f = &st.fitted;
-    println!(
-        "jenkins interface {}-{}: k_J {:.4e} N/m of the coupling {:.4e} N/m, slip force {:.4e} N \
-         (slip at {:.3e} m), {} element(s); cost {:.4} -> {:.4}, {} after {} simulations, {:.1} s",
-        f.points[0],
-        f.points[1],
-        f.stiffness,
-        f.coupling,
-        f.slip_force,
-        f.slip_displacement,
-        f.elements,
-        f.cost.0,
-        f.cost.1,
-        f.termination,
-        f.simulations,
-        f.seconds
-    );
-    for (hz, d) in &f.participations {
-        println!("  interface participation of the {hz:.2}-Hz mode: {d:+.4}");
+        .collect()
+}
+
+/// Every ranked model scored per channel and per band on every level file.
+fn levels(a: &Args, out: &f16::Outputs, s: &f16::Settings) -> anyhow::Result<serde_json::Value> {
+    let l1 = &out.models[0].1;
+    let mut recs = vec![];
+    for p in level_files(a) {
+        let mut r = f16::read(&p)?;
+        l1.resolve_channels(&mut r)?;
+        recs.push(r);
     }
-    println!(
-        "  stuck modes {:.3?} Hz\n  slipped modes {:.3?} Hz",
-        f.stuck_hz, f.slipped_hz
-    );
-    if let Some(p) = &st.pair {
-        println!(
-            "  started from the pair's element: k_J {:.4e} N/m, slip force {:.4e} N",
-            p.stiffness, p.slip_force
-        );
-    }
-    for x in &st.scores {
+    let refs: Vec<&tacit::record::Record> = recs.iter().collect();
+    let models: Vec<(&str, &tacit::model::Model)> =
+        out.models.iter().map(|(n, m)| (n.as_str(), m)).collect();
+    let scores = f16::score(&models, &refs, s.warm_up, s.substeps)?;
+    for x in &scores {
         let file = Path::new(&x.record)
             .file_name()
             .map_or(x.record.clone(), |n| n.to_string_lossy().into_owned());
@@ -300,6 +283,28 @@ fn jenkins_study(a: &Args, settings: &f16::Settings) -> anyhow::Result<serde_jso
             x.rms_per_band
         );
     }
-    std::fs::write(a.out.join("model-jenkins.toml"), model.to_toml_string())?;
-    Ok(serde_json::to_value(&st)?)
+    Ok(serde_json::to_value(&scores)?)
+}
+
+/// The cubic-spring-and-damper interface fitted on the estimation record
+/// and scored on every level file; writes OUT/model-interface.toml.
+fn cubic_study(a: &Args, settings: &f16::Settings) -> anyhow::Result<serde_json::Value> {
+    let levels = level_files(a);
+    let refs: Vec<&Path> = levels.iter().map(|p| p.as_path()).collect();
+    let (fit, model) = f16::interface_study(
+        &a.linear,
+        &a.estimate,
+        &refs,
+        (a.interface_linear, a.interface_damper),
+        settings,
+    )?;
+    println!(
+        "interface fit: k3 {:.4e} N/m^3, c2 {:.4e} N s^2/m^2, c3 {:.4e} N s^3/m^3; {:?} after {} iterations",
+        fit.k3, fit.c2, fit.c3, fit.termination, fit.iterations
+    );
+    for (file, before, after) in &fit.errors {
+        println!("interface model on {file}: Level-1 model {before:.3?}, interface model {after:.3?} m/s^2");
+    }
+    std::fs::write(a.out.join("model-interface.toml"), model.to_toml_string())?;
+    Ok(serde_json::to_value(&fit)?)
 }

@@ -14,15 +14,13 @@
 use crate::correlate::modelfit::{identify_model, ModelFit, ModelFitSettings};
 use crate::correlate::{FitSettings, FrfSettings, Window};
 use crate::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
-use crate::diagnose::{DiagnoseSettings, EffectReport};
+use crate::diagnose::{interface, DiagnoseSettings, EffectReport};
 use crate::error::{Result, TacitError};
 use crate::integrate::{Integrator, SimSettings};
 use crate::model::{modal, Model};
 use crate::record::{self, MatChannel, MatMapping, MatRate, Quantity, Record, WarmUp};
 use serde::Serialize;
 use std::path::Path;
-
-pub mod jenkins;
 
 /// The points, in the order of the `Acceleration` rows.
 pub const POINTS: [&str; 3] = ["exc", "wing", "payload"];
@@ -43,6 +41,14 @@ pub struct Settings {
     pub substeps: usize,
     /// How the linear part is calibrated on the record diagnosed.
     pub calibration: Calibration,
+    /// The interface candidate ([`interface::offer`]) fitted on the linear
+    /// and the estimation record and ranked with the Level-1 model and the
+    /// diagnosed model on them (None: the diagnosed model is the model
+    /// after).
+    pub interface: Option<interface::OfferSettings>,
+    /// More estimation records for the interface candidate's fit and
+    /// ranking (beside the linear and the estimation record).
+    pub also_estimate: Vec<std::path::PathBuf>,
     /// The diagnosis.
     #[serde(skip)]
     pub diagnose: DiagnoseSettings,
@@ -57,6 +63,8 @@ impl Default for Settings {
             orders: (10, 100),
             substeps: 10,
             calibration: Calibration::Reidentify,
+            interface: Some(Default::default()),
+            also_estimate: vec![],
             diagnose: DiagnoseSettings {
                 // the lifted smoother stops on this model ("the
                 // initial-state system is not positive definite"); the
@@ -154,41 +162,14 @@ pub fn rms_per_channel(
 
 /// Open-loop simulation of `model` from rest under the record's force:
 /// per output channel, simulated minus measured acceleration (m/s²) at
-/// the samples after `warm_up`.
+/// the samples after `warm_up` ([`interface::open_loop_errors`]).
 pub fn simulate_errors(
     model: &Model,
     rec: &Record,
     warm_up: usize,
     substeps: usize,
 ) -> Result<Vec<Vec<f64>>> {
-    let n = rec.len();
-    let nd = model.ndof();
-    let force = crate::signal::force_matrix(rec, nd);
-    let sim = SimSettings {
-        substeps,
-        ..Default::default()
-    };
-    let run =
-        Integrator::new(model, rec.fs, sim)?.run(force.as_view(), &vec![0.0; nd], &vec![0.0; nd]);
-    if !run.completed() || run.len() < n {
-        return Err(TacitError::Numerical(format!(
-            "open-loop simulation of {} stopped: {}",
-            rec.source.display(),
-            crate::simulate::describe_status(&run.status)
-        )));
-    }
-    let mut out = Vec::with_capacity(rec.outputs.len());
-    for c in &rec.outputs {
-        if c.quantity != Quantity::Accel {
-            return Err(TacitError::record(
-                rec.source.clone(),
-                format!("channel {} is not an acceleration", c.name()),
-            ));
-        }
-        let d = c.dof - 1;
-        out.push((warm_up..n).map(|k| run.a[(d, k)] - c.data[k]).collect());
-    }
-    Ok(out)
+    interface::open_loop_errors(model, rec, warm_up, substeps)
 }
 
 /// The frequency bands (Hz) of [`crate::signal::band_rms`] on this case: below the
@@ -217,8 +198,75 @@ pub struct BeforeAfter {
     pub before: Errors,
     /// The linear model calibrated on the record diagnosed, without effects.
     pub calibrated: Errors,
-    /// The diagnosed model.
+    /// The model after ([`F16Result::after_model`]).
     pub after: Errors,
+}
+
+/// An effect of the model after.
+#[derive(Debug, Clone, Serialize)]
+pub struct FoundEffect {
+    /// What it is.
+    pub label: String,
+    /// The points it joins (`ground` for a point to ground).
+    pub points: Vec<String>,
+    /// With an effect on the interface coordinate: the measured relative
+    /// motion it follows most in the simulation of the estimation record
+    /// (pair, correlation of the velocities; [`interface::Restoring::follows`]).
+    pub couples_most: Option<(String, f64)>,
+    /// Parameters, SI.
+    pub parameters: Vec<(String, f64)>,
+}
+
+impl FoundEffect {
+    /// The interface effect of `f` (an [`interface::Fitted`] on the
+    /// coordinate).
+    fn interface(f: &interface::Fitted, couples: Option<&(String, f64)>) -> FoundEffect {
+        let label = match f.elements {
+            1 => "jenkins (stick–slip friction) on the interface coordinate".to_string(),
+            n => format!("iwan ({n} jenkins elements) on the interface coordinate"),
+        };
+        let mut parameters = vec![
+            ("stiffness".to_string(), f.stiffness),
+            ("slip_force".to_string(), f.slip_force),
+            ("spread".to_string(), f.spread),
+        ];
+        for (hz, d) in &f.participations {
+            parameters.push((format!("participation_{hz:.2}_hz"), *d));
+        }
+        FoundEffect {
+            label,
+            points: f.points.to_vec(),
+            couples_most: couples.cloned(),
+            parameters,
+        }
+    }
+
+    /// The Jenkins element between the pair.
+    fn interface_pair(f: &interface::Fitted) -> FoundEffect {
+        FoundEffect {
+            label: "jenkins (stick–slip friction) between two points".into(),
+            points: f.points.to_vec(),
+            couples_most: None,
+            parameters: vec![
+                ("stiffness".into(), f.stiffness),
+                ("slip_force".into(), f.slip_force),
+            ],
+        }
+    }
+
+    /// A diagnosed effect of `model`.
+    fn diagnosed(e: &EffectReport, model: &Model) -> FoundEffect {
+        let mut points: Vec<String> = e.dofs.iter().map(|&k| model.dof_name(k)).collect();
+        if points.len() == 1 {
+            points.push("ground".into());
+        }
+        FoundEffect {
+            label: e.label.clone(),
+            points,
+            couples_most: None,
+            parameters: e.parameters.clone().into_iter().collect(),
+        }
+    }
 }
 
 /// Errors of one model on one record.
@@ -238,6 +286,15 @@ pub struct F16Result {
     pub estimation: BeforeAfter,
     /// On the validation record.
     pub validation: BeforeAfter,
+    /// The model after: the name of the model ranked first on the
+    /// estimation records ([`interface::Offer::ranking`]), or the
+    /// diagnosed model without the interface candidate.
+    pub after_model: String,
+    /// The effects of the model after, with the points each joins.
+    pub effects_found: Vec<FoundEffect>,
+    /// The interface candidate: its stages, where it couples, every model
+    /// ranked on the estimation records.
+    pub interface: Option<interface::Offer>,
     /// The diagnosis's verdict.
     pub verdict: String,
     /// Effects found (kind, points, parameters).
@@ -255,8 +312,8 @@ pub struct F16Result {
     /// The modes re-identified on the record diagnosed
     /// ([`Calibration::Reidentify`]).
     pub calibrated_modes: Vec<crate::model::modal::ModalMode>,
-    /// Seconds: identification, diagnosis, scoring.
-    pub seconds: (f64, f64, f64),
+    /// Seconds: identification, diagnosis, interface candidate, scoring.
+    pub seconds: (f64, f64, f64, f64),
     /// Settings.
     pub settings: Settings,
 }
@@ -283,30 +340,176 @@ fn before_after(rec: &Record, models: [&Model; 3], s: &Settings) -> Result<Befor
     })
 }
 
+/// Name of the Level-1 model in the ranking.
+pub const LEVEL1: &str = "level-1 model";
+/// Name of the diagnosed model (the linear part calibrated on the
+/// estimation record, with the effects the diagnosis found) in the ranking.
+pub const DIAGNOSED: &str = "diagnosed model";
+
+/// What [`run`] returns.
+pub struct Outputs {
+    /// The result (report.json).
+    pub result: F16Result,
+    /// The model after ([`F16Result::after_model`]).
+    pub after: Model,
+    /// The text of the Level-1 modal model file.
+    pub linear_text: String,
+    /// Every model ranked, by name (the Level-1 model, the diagnosed model,
+    /// the interface models).
+    pub models: Vec<(String, Model)>,
+    /// With an interface model after: its restoring force in the
+    /// simulation of the estimation record (the last period).
+    pub restoring: Option<interface::Restoring>,
+}
+
 /// The whole case: identify on `linear`, diagnose `estimate` (without
-/// its warm-up), score on `estimate` and `validate`. With `out`, writes
-/// the linear model file and the diagnosis report there.
+/// its warm-up), offer the interface candidate ([`Settings::interface`]),
+/// rank the models on `linear` and `estimate` and score the first
+/// (the model after) with the Level-1 and the calibrated model on
+/// `estimate` and `validate`.
 pub fn run(
     linear: &Path,
     estimate: &Path,
     validate: &Path,
     s: &Settings,
     progress: &dyn Fn(&str),
-) -> Result<(F16Result, Model, String)> {
+) -> Result<Outputs> {
     let t0 = std::time::Instant::now();
-    let lin = read(linear)?;
-    let (fit, text) = linear_model(&lin, s)?;
-    let mut est = read(estimate)?;
-    let mut val = read(validate)?;
+    let (fit, text) = linear_model(&read(linear)?, s)?;
     let model = modal::from_toml_str(&text, "f16-linear")?;
-    model.resolve_channels(&mut est)?;
-    model.resolve_channels(&mut val)?;
+    let load = |p: &Path| -> Result<Record> {
+        let mut r = read(p)?;
+        model.resolve_channels(&mut r)?;
+        Ok(r)
+    };
+    let (r1, est, val) = (load(linear)?, load(estimate)?, load(validate)?);
     let t1 = t0.elapsed().as_secs_f64();
+    let (d, linear_cal, calibrated_modes) = diagnose_step(&model, &est, &val, s, progress)?;
+    let t2 = t0.elapsed().as_secs_f64();
+    let pair = interface::trace_pair(&d).unwrap_or([2, 3]);
+    let alternatives = vec![
+        (LEVEL1.to_string(), model.clone()),
+        (DIAGNOSED.to_string(), d.model.clone()),
+    ];
+    let (offer, models) = match &s.interface {
+        Some(o) => {
+            let o = offer_settings(o, pair, s);
+            let more = s
+                .also_estimate
+                .iter()
+                .map(|p| load(p))
+                .collect::<Result<Vec<_>>>()?;
+            let mut recs = vec![&r1, &est];
+            recs.extend(more.iter());
+            let (f, m) = interface::offer(&fit.section, &recs, alternatives, &o, progress)?;
+            (Some(f), m)
+        }
+        None => (None, alternatives),
+    };
+    let after_model = offer.as_ref().map_or(DIAGNOSED, |o| o.chosen()).to_string();
+    let after = by_name(&models, &after_model)?.clone();
+    let t3 = t0.elapsed().as_secs_f64();
+    let estimation = before_after(&est, [&model, &linear_cal, &after], s)?;
+    let validation = before_after(&val, [&model, &linear_cal, &after], s)?;
+    let restoring = match after.points.iter().any(|p| p == interface::INTERFACE) {
+        true => Some(interface::restoring(
+            &after, &est, pair, s.substeps, s.period,
+        )?),
+        false => None,
+    };
+    let t4 = t0.elapsed().as_secs_f64();
+    let follows = restoring.as_ref().and_then(|r| r.follows.first());
+    let effects_found = effects_of(&after_model, &after, &d, offer.as_ref(), follows);
+    let result = F16Result {
+        linear: fit,
+        estimation,
+        validation,
+        after_model,
+        effects_found,
+        interface: offer,
+        verdict: d.verdict.clone(),
+        effects: d.effects.clone(),
+        effect_points: effect_points(&d),
+        ranking: trace_ranking(&d),
+        noise: d.noise.clone(),
+        linear_corrections: corrections(&d),
+        calibrated_modes,
+        seconds: (t1, t2 - t1, t3 - t2, t4 - t3),
+        settings: s.clone(),
+    };
+    Ok(Outputs {
+        result,
+        after,
+        linear_text: text,
+        models,
+        restoring,
+    })
+}
+
+/// The interface candidate's settings for this case: the pair the trace
+/// located, the case's sub-steps and warm-up.
+fn offer_settings(
+    o: &interface::OfferSettings,
+    pair: [usize; 2],
+    s: &Settings,
+) -> interface::OfferSettings {
+    let mut o = o.clone();
+    o.spec.pair = pair;
+    o.spec.substeps = s.substeps;
+    o.spec.warm_up = s.warm_up;
+    o
+}
+
+/// The model named `name` in `models`.
+fn by_name<'a>(models: &'a [(String, Model)], name: &str) -> Result<&'a Model> {
+    models
+        .iter()
+        .find(|m| m.0 == name)
+        .map(|m| &m.1)
+        .ok_or_else(|| TacitError::Numerical(format!("no model named {name} was ranked")))
+}
+
+/// The effects of the model after: the interface's, or the diagnosis's.
+fn effects_of(
+    name: &str,
+    after: &Model,
+    d: &crate::diagnose::Diagnosis,
+    offer: Option<&interface::Offer>,
+    follows: Option<&(String, f64)>,
+) -> Vec<FoundEffect> {
+    match offer {
+        Some(o) if name == interface::JENKINS || name == interface::IWAN => {
+            let f = match name {
+                interface::IWAN => o.iwan.as_ref().unwrap_or(&o.jenkins),
+                _ => &o.jenkins,
+            };
+            vec![FoundEffect::interface(f, follows)]
+        }
+        Some(o) if name == interface::PAIR => vec![FoundEffect::interface_pair(&o.pair)],
+        _ if name == DIAGNOSED => d
+            .effects
+            .iter()
+            .map(|e| FoundEffect::diagnosed(e, after))
+            .collect(),
+        _ => vec![],
+    }
+}
+
+/// The diagnosis of the estimation record with the linear part calibrated
+/// ([`Settings::calibration`]): the diagnosis, the calibrated linear model
+/// and the re-identified modes.
+fn diagnose_step(
+    model: &Model,
+    est: &Record,
+    val: &Record,
+    s: &Settings,
+    progress: &dyn Fn(&str),
+) -> Result<(crate::diagnose::Diagnosis, Model, Vec<modal::ModalMode>)> {
     let est_ss = est.without_warm_up(WarmUp::Samples(s.warm_up))?;
     let val_ss = val.without_warm_up(WarmUp::Samples(s.warm_up))?;
     let (declared, calibrated_modes, off) = match s.calibration {
         Calibration::Reidentify => {
-            let (fit7, text7) = linear_model(&est, s)?;
+            let (fit7, text7) = linear_model(est, s)?;
             let m = modal::from_toml_str(&text7, "f16-calibrated")?;
             (m, fit7.section.modes, true)
         }
@@ -326,21 +529,24 @@ pub fn run(
         &cal,
         progress,
     )?;
-    let t2 = t0.elapsed().as_secs_f64();
     let linear_cal = match s.calibration {
-        Calibration::Reidentify => declared.clone(),
+        Calibration::Reidentify => declared,
         Calibration::Diagnosis => d.model.linear_part(),
     };
-    let estimation = before_after(&est, [&model, &linear_cal, &d.model], s)?;
-    let validation = before_after(&val, [&model, &linear_cal, &d.model], s)?;
-    let t3 = t0.elapsed().as_secs_f64();
-    let effect_points = d
-        .effects
+    Ok((d, linear_cal, calibrated_modes))
+}
+
+/// The points each effect of the diagnosis joins.
+fn effect_points(d: &crate::diagnose::Diagnosis) -> Vec<Vec<String>> {
+    d.effects
         .iter()
         .map(|e| e.dofs.iter().map(|&k| d.model.dof_name(k)).collect())
-        .collect();
-    let ranking = d
-        .ranking
+        .collect()
+}
+
+/// The first trace round's ranking: label, share, points.
+fn trace_ranking(d: &crate::diagnose::Diagnosis) -> Vec<(String, f64, Vec<String>)> {
+    d.ranking
         .iter()
         .map(|r| {
             let pts = r
@@ -351,9 +557,12 @@ pub fn run(
                 .collect();
             (r.label.clone(), r.residual_explained, pts)
         })
-        .collect();
-    let linear_corrections = d
-        .calibration
+        .collect()
+}
+
+/// The calibration's linear corrections (name, declared, final).
+fn corrections(d: &crate::diagnose::Diagnosis) -> Vec<(String, f64, f64)> {
+    d.calibration
         .as_ref()
         .map(|c| {
             c.corrections
@@ -361,22 +570,7 @@ pub fn run(
                 .map(|x| (x.name.clone(), x.declared, x.value))
                 .collect()
         })
-        .unwrap_or_default();
-    let r = F16Result {
-        linear: fit,
-        estimation,
-        validation,
-        verdict: d.verdict.clone(),
-        effects: d.effects.clone(),
-        effect_points,
-        ranking,
-        noise: d.noise.clone(),
-        linear_corrections,
-        calibrated_modes,
-        seconds: (t1, t2 - t1, t3 - t2),
-        settings: s.clone(),
-    };
-    Ok((r, d.model, text))
+        .unwrap_or_default()
 }
 
 impl F16Result {
@@ -387,7 +581,22 @@ impl F16Result {
             s += &format!("noise: {}\n", n.summary());
         }
         for (e, pts) in self.effects.iter().zip(&self.effect_points) {
-            s += &format!("effect {} between {}\n", e.label, pts.join(" and "));
+            s += &format!(
+                "diagnosis: effect {} between {}\n",
+                e.label,
+                pts.join(" and ")
+            );
+        }
+        if let Some(o) = &self.interface {
+            s += "models ranked on the estimation records:\n";
+            s += &o.summary();
+        }
+        s += &format!("model after: {}\n", self.after_model);
+        for e in &self.effects_found {
+            let c = e.couples_most.as_ref().map_or(String::new(), |(p, c)| {
+                format!(" (follows most the motion {p}: correlation {c:+.3})")
+            });
+            s += &format!("effect {} between {}{c}\n", e.label, e.points.join(" and "));
         }
         for (what, ba) in [
             ("record", &self.estimation),
@@ -405,8 +614,8 @@ impl F16Result {
             }
         }
         s += &format!(
-            "seconds: identification {:.1}, diagnosis {:.1}, scoring {:.1}\n",
-            self.seconds.0, self.seconds.1, self.seconds.2
+            "seconds: identification {:.1}, diagnosis {:.1}, interface {:.1}, scoring {:.1}\n",
+            self.seconds.0, self.seconds.1, self.seconds.2, self.seconds.3
         );
         s
     }

@@ -96,6 +96,18 @@ pub struct Args {
     /// over the whole record.
     #[arg(long)]
     refine_open_loop: bool,
+    /// After the diagnosis of a modal model (from `tacit modal`), offer the
+    /// interface as a coordinate of its own (a Jenkins element, then an
+    /// Iwan model with --interface-elements, on an unmeasured point whose
+    /// participation in every mode is fitted), fitted and ranked with the
+    /// declared and the diagnosed model by the open-loop error on the
+    /// record and the --linear-record files: interface.json,
+    /// interface.md, model-interface.toml, restoring_interface.svg.
+    #[arg(long)]
+    interface: bool,
+    /// Jenkins elements of the interface's Iwan stage (1: none).
+    #[arg(long, default_value_t = 1, requires = "interface")]
+    interface_elements: usize,
     #[command(flatten)]
     rec: RecordOpts,
     /// Output directory (created with its parents; written whole at the
@@ -225,6 +237,28 @@ fn print_summary(d: &diagnose::Diagnosis, output: &std::path::Path) -> anyhow::R
     Ok(())
 }
 
+/// The interface candidate after the diagnosis ([`super::interface`]).
+fn interface_step(
+    a: &Args,
+    model: &Model,
+    d: &diagnose::Diagnosis,
+    dir: &std::path::Path,
+) -> anyhow::Result<()> {
+    let mut records = vec![a.record.as_path()];
+    records.extend(a.linear_records.iter().map(|p| p.as_path()));
+    let inputs = super::interface::Inputs {
+        model_path: &a.model,
+        records,
+        validation: a.validate.as_deref(),
+        rec: &a.rec,
+        samples: a.samples,
+        warm_up: a.warm_up,
+        elements: a.interface_elements,
+        substeps: d.substeps.1.max(1),
+    };
+    super::interface::run(&inputs, model, d, dir)
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
     let settings = settings(&a)?;
     super::check::diagnose_options(
@@ -233,6 +267,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         settings.substeps.base,
     )?;
     settings.validate()?;
+    if a.interface {
+        super::interface::check_model(&a.model)?;
+    }
     let staging = super::output::Staging::begin(&a.output, a.force)?;
     let (mut rec, mut val, mut linear) = load_records(&a)?;
     // a model from matrices is reduced onto the records' points
@@ -293,6 +330,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             .collect();
         tacit::model::matrix::append_report(staging.dir(), r, &effects)
             .map_err(|e| staging.user_message(e.into()))?;
+    }
+    if a.interface {
+        interface_step(&a, &model, &d, staging.dir()).map_err(|e| staging.user_message(e))?;
     }
     staging.commit()?;
     print_summary(&d, &a.output)

@@ -4,6 +4,7 @@ mod campaign;
 pub mod check;
 mod diagnose;
 mod identify;
+mod interface;
 mod modal;
 pub mod out;
 pub mod output;

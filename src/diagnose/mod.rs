@@ -60,6 +60,7 @@ pub mod errors;
 mod figures;
 mod fit;
 pub mod ground;
+pub mod interface;
 pub mod joint;
 mod laws;
 pub mod noise;

@@ -191,17 +191,7 @@ impl ModalSection {
 /// [`Model`] (module documentation; [`Model::from_file`] reads the file);
 /// elements are placed by point label; `src` names the source in errors.
 pub fn from_toml_str(text: &str, src: &str) -> Result<Model> {
-    let mut rest: toml::Table = text
-        .parse()
-        .map_err(|e: toml::de::Error| TacitError::model(src, e.to_string().trim_end()))?;
-    let section: ModalSection = rest
-        .remove("modal")
-        .ok_or_else(|| TacitError::model(src, "no [modal] section"))?
-        .try_into()
-        .map_err(|e: toml::de::Error| {
-            TacitError::model(src, format!("[modal]: {}", e.to_string().trim_end()))
-        })?;
-    section.validate(src)?;
+    let (section, rest) = split(text, src)?;
     for key in ["masses", "damping", "matrices"] {
         if rest.contains_key(key) {
             return Err(TacitError::model(
@@ -213,6 +203,28 @@ pub fn from_toml_str(text: &str, src: &str) -> Result<Model> {
         }
     }
     assemble(&section, rest, src)
+}
+
+/// The `[modal]` section of a model file's text, checked; `src` names the
+/// source in errors.
+pub fn section_from_toml_str(text: &str, src: &str) -> Result<ModalSection> {
+    Ok(split(text, src)?.0)
+}
+
+/// The checked `[modal]` section and the rest of the table.
+fn split(text: &str, src: &str) -> Result<(ModalSection, toml::Table)> {
+    let mut rest: toml::Table = text
+        .parse()
+        .map_err(|e: toml::de::Error| TacitError::model(src, e.to_string().trim_end()))?;
+    let section: ModalSection = rest
+        .remove("modal")
+        .ok_or_else(|| TacitError::model(src, "no [modal] section"))?
+        .try_into()
+        .map_err(|e: toml::de::Error| {
+            TacitError::model(src, format!("[modal]: {}", e.to_string().trim_end()))
+        })?;
+    section.validate(src)?;
+    Ok((section, rest))
 }
 
 /// The dense model: masses = diagonal of M, springs = negative couplings
