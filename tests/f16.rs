@@ -336,7 +336,7 @@ fn jenkins_interface_keeps_level1_and_improves_level5() {
 
 /// The interface's participation in the seven in-band modes (2.96, 3.47,
 /// 3.96, 5.19, 6.61, 7.32, 9.17 Hz) and the slip force (N), as fitted by
-/// the example's `--jenkins` (docs/f16.md).
+/// the interface fit of `diagnose::interface` on Levels 1 + 7 (docs/f16.md).
 const PARTICIPATIONS: [f64; 7] = [
     0.43523, 0.18298, 0.19369, 0.18105, 0.22471, 0.32557, 0.25887,
 ];
