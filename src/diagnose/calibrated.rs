@@ -55,6 +55,7 @@ use crate::record::Record;
 use crate::trace::EffectKind;
 use crate::update::{Parameter, Target};
 use serde::Serialize;
+use std::borrow::Cow;
 
 /// Settings of the calibrated diagnosis.
 #[derive(Debug, Clone, Serialize)]
@@ -501,14 +502,25 @@ impl Context<'_> {
                 )
             })
             .transpose()?;
-        let vcmp = vprep.as_ref().map(|p| &p.comparison);
         let sim0 = SimSettings {
             substeps: d.substeps.0,
             ..Default::default()
         };
         (self.progress)("the declared model's errors");
         let declared_errors = d.prepared.comparison.errors(self.declared, sim0).0;
-        let declared_validation = vcmp.map(|c| c.errors(self.declared, sim0).0);
+        let declared_validation = vprep
+            .as_ref()
+            .map(|p| p.comparison.errors(self.declared, sim0).0);
+        // a model with laws against ground is refined and scored from the
+        // reconstruction corrected for the rigid-body wander
+        // ([`super::ground`]), as the diagnosis scored it
+        let bases = Bases {
+            record: d.prepared.clone(),
+            validation: vprep,
+        };
+        if let Cow::Owned(p) = own(&d.model, &bases.record) {
+            d.prepared = p;
+        }
         // on a linear part calibrated on low-level records, a diagnosis at
         // the noise leaves the refinement nothing to win
         let (mut note, mut std) = if self.low_level && self.at_noise(&d) {
@@ -521,15 +533,16 @@ impl Context<'_> {
                 vec![],
             )
         } else {
-            refine_once(&mut d, self.cal, self.settings, vcmp, self.progress)?
+            refine_once(&mut d, self.cal, self.settings, &bases, self.progress)?
         };
         if self.cal.open_loop {
-            let (n, est) = self.open_loop(&mut d, vcmp)?;
+            let vprep = bases.validation.as_ref().map(|v| own(&d.model, v));
+            let (n, est) = self.open_loop(&mut d, vprep.as_ref().map(|p| &p.comparison))?;
             note = format!("{note}; {n}");
             std = est.unwrap_or(std);
         }
         update_effects(&mut d, &std, &self.cal.calibration);
-        if let Some(n) = drop_negligible(&mut d, vcmp, self.progress) {
+        if let Some(n) = drop_negligible(&mut d, &bases, self.progress) {
             note = format!("{note}; {n}");
         }
         let start_errors = std::mem::replace(&mut d.before, declared_errors);
@@ -612,13 +625,14 @@ fn refine_once(
     d: &mut Diagnosis,
     cal: &CalibratedSettings,
     settings: &DiagnoseSettings,
-    vcmp: Option<&super::Comparison>,
+    bases: &Bases,
     progress: &dyn Fn(&str),
 ) -> Result<(String, Vec<Estimated>)> {
-    Ok(match refine(d, cal, settings, progress)? {
+    Ok(match refine(d, &bases.record, cal, settings, progress)? {
         Refined::Kept(k) => {
             let Kept {
                 model,
+                prepared,
                 after,
                 pred,
                 params,
@@ -626,17 +640,43 @@ fn refine_once(
                 note,
             } = *k;
             d.model = model;
+            if let Some(p) = prepared {
+                d.prepared = p;
+            }
             d.after = after;
             d.predictions.1 = pred;
             let sim = sim_of(d);
             progress("the refined model's errors on the validation record");
-            if let (Some(c), Some(v)) = (vcmp, d.validation.as_mut()) {
-                v.after = c.errors(&d.model, sim).0;
+            if let (Some(b), Some(v)) = (bases.validation.as_ref(), d.validation.as_mut()) {
+                v.after = own(&d.model, b).comparison.errors(&d.model, sim).0;
             }
             (note, params.into_iter().zip(std).collect())
         }
         Refined::NotKept(note) => (note, vec![]),
     })
+}
+
+/// The linear part's reconstructions of the record and of the validation
+/// record, from which each model's own is made ([`own`]).
+struct Bases {
+    record: super::prepare::Prepared,
+    validation: Option<super::prepare::Prepared>,
+}
+
+/// The reconstruction `model` is simulated and scored from: for a model
+/// with laws against ground in the absolute displacement and no spring to
+/// ground, `base` corrected for the rigid-body wander fitted with its laws
+/// ([`super::ground::corrected`], as the diagnosis scores it); else `base`.
+fn own<'a>(model: &Model, base: &'a super::prepare::Prepared) -> Cow<'a, super::prepare::Prepared> {
+    owned(model, base).map_or(Cow::Borrowed(base), Cow::Owned)
+}
+
+/// [`own`] when it differs from `base`.
+fn owned(model: &Model, base: &super::prepare::Prepared) -> Option<super::prepare::Prepared> {
+    if super::prepare::grounded(model) {
+        return None;
+    }
+    super::ground::corrected(model, base)
 }
 
 fn sim_of(d: &Diagnosis) -> SimSettings {
@@ -692,6 +732,9 @@ enum Refined {
 /// A kept refinement.
 struct Kept {
     model: Model,
+    /// The reconstruction the model is scored from when it differs from
+    /// the diagnosis's ([`own`]).
+    prepared: Option<super::prepare::Prepared>,
     after: ErrorSet,
     pred: Option<nalgebra::DMatrix<f64>>,
     params: Vec<Parameter>,
@@ -700,9 +743,12 @@ struct Kept {
 }
 
 /// Refit every parameter of the diagnosed model together with the segment
-/// start states; kept when it lowers the record's error.
+/// start states; kept when it lowers the record's error. `d.prepared` is
+/// the reconstruction `d.model` is scored from, `base` the linear part's
+/// (they differ for a model with laws against ground: [`own`]).
 fn refine(
     d: &Diagnosis,
+    base: &super::prepare::Prepared,
     cs: &CalibratedSettings,
     settings: &DiagnoseSettings,
     progress: &dyn Fn(&str),
@@ -723,7 +769,9 @@ fn refine(
         };
     let refined = problem.model_at(&jf.x);
     progress("score the refined model");
-    let (refined_starts, after, pred) = scored(cmp, &refined, sim);
+    let prepared = owned(&refined, base);
+    let own_cmp = prepared.as_ref().map_or(cmp, |p| &p.comparison);
+    let (refined_starts, after, pred) = scored(own_cmp, &refined, sim);
     let mut note = format!(
         "{} parameters refined with the start states of {} segments ({}, {} steps, fit cost {:.3e} → {:.3e}): multiple-shooting error {} → {}",
         problem.parameters.len(),
@@ -740,15 +788,15 @@ fn refine(
         100.0 * weighted(cmp, &jf.segments, Some(&jf.segment_costs), None),
         100.0 * weighted(cmp, &jf.segments, None, pred.as_ref())
     );
-    let mut best = (problem, refined, jf.segments, after, pred);
+    let mut best = (problem, refined, jf.segments, after, pred, prepared);
     progress("joint refinement on long segments");
-    if let Some((long, n)) = long_stage(d, &best, refined_starts, cs, settings)? {
+    if let Some((long, n)) = long_stage(d, base, &best, refined_starts, cs, settings)? {
         note = format!("{note}; {n}");
         if lower(long.3.relative_error, best.3.relative_error) {
             best = long;
         }
     }
-    let (problem, refined, segments, after, pred) = best;
+    let (problem, refined, segments, after, pred, prepared) = best;
     if !lower(after.relative_error, d.after.relative_error) {
         return Ok(Refined::NotKept(format!("{note}; not kept")));
     }
@@ -758,6 +806,7 @@ fn refine(
     let (params, std) = std_errors_at(&problem, &refined, segments, &d.added, cal, level)?;
     Ok(Refined::Kept(Box::new(Kept {
         model: refined,
+        prepared,
         after,
         pred,
         params,
@@ -774,13 +823,15 @@ fn stall(settings: &DiagnoseSettings) -> joint::Stall {
 }
 
 /// A refinement's outcome: the problem it solved, the refined model, the
-/// fitted segments, the record's errors and predictions.
+/// fitted segments, the record's errors and predictions, and the
+/// reconstruction the model was scored from when it is its own ([`own`]).
 type Stage = (
     crate::update::Problem,
     Model,
     Vec<crate::update::Segment>,
     ErrorSet,
     Option<nalgebra::DMatrix<f64>>,
+    Option<super::prepare::Prepared>,
 );
 
 /// The refinement continued from `at` on long segments
@@ -790,6 +841,7 @@ type Stage = (
 /// modes shows; None when off. The note says what it did.
 fn long_stage(
     d: &Diagnosis,
+    base: &super::prepare::Prepared,
     at: &Stage,
     starts: Vec<crate::update::Segment>,
     cs: &CalibratedSettings,
@@ -811,8 +863,11 @@ fn long_stage(
             )))
         }
     };
-    let cmp = &d.prepared.comparison;
     let refined = problem.model_at(&jf.x);
+    let prepared = owned(&refined, base);
+    let cmp = prepared
+        .as_ref()
+        .map_or(&d.prepared.comparison, |p| &p.comparison);
     let (after, pred) = cmp.errors(&refined, sim_of(d));
     let note = format!(
         "then on {} segments of {} samples ({}, {} steps): multiple-shooting error {} [weighted: fit {:.2} %, scored {:.2} %]",
@@ -824,7 +879,10 @@ fn long_stage(
         100.0 * weighted(cmp, &jf.segments, Some(&jf.segment_costs), None),
         100.0 * weighted(cmp, &jf.segments, None, pred.as_ref())
     );
-    Ok(Some(((problem, refined, jf.segments, after, pred), note)))
+    Ok(Some((
+        (problem, refined, jf.segments, after, pred, prepared),
+        note,
+    )))
 }
 
 /// The joint refinement of `model`'s linear parameters and `d`'s effects
@@ -989,7 +1047,7 @@ const NEGLIGIBLE: f64 = 0.01;
 /// seeing it. The note says what was dropped; None when nothing was.
 fn drop_negligible(
     d: &mut Diagnosis,
-    vcmp: Option<&super::Comparison>,
+    bases: &Bases,
     progress: &dyn Fn(&str),
 ) -> Option<String> {
     let sim = sim_of(d);
@@ -1005,7 +1063,11 @@ fn drop_negligible(
         let with = d.after.relative_error?;
         progress("score the model with an effect switched off");
         let off = effects::without(&d.model, e);
-        let (after, pred) = d.prepared.comparison.errors(&off, sim);
+        let prepared = owned(&off, &bases.record);
+        let cmp = prepared
+            .as_ref()
+            .map_or(&d.prepared.comparison, |p| &p.comparison);
+        let (after, pred) = cmp.errors(&off, sim);
         if !after
             .relative_error
             .is_some_and(|x| x <= with * (1.0 + NEGLIGIBLE))
@@ -1019,6 +1081,9 @@ fn drop_negligible(
             pct(Some(with))
         ));
         d.model = off;
+        if let Some(p) = prepared {
+            d.prepared = p;
+        }
         d.after = after;
         d.predictions.1 = pred;
         d.added.remove(i);
@@ -1027,8 +1092,8 @@ fn drop_negligible(
     if dropped.is_empty() {
         return None;
     }
-    if let (Some(c), Some(v)) = (vcmp, d.validation.as_mut()) {
-        v.after = c.errors(&d.model, sim).0;
+    if let (Some(b), Some(v)) = (bases.validation.as_ref(), d.validation.as_mut()) {
+        v.after = own(&d.model, b).comparison.errors(&d.model, sim).0;
     }
     Some(dropped.join("; "))
 }
