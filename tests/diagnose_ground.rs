@@ -70,10 +70,7 @@ fn cubic_to_ground_with_the_linear_part_calibrated() {
         ratio: Some(0.03),
         ratios: vec![],
     };
-    truth.cubics = vec![Cubic {
-        dofs: vec![3],
-        k3,
-    }];
+    truth.cubics = vec![Cubic { dofs: vec![3], k3 }];
     let (rec, val) = diagnose_common::records(&truth, &[1, 2, 3, 4, 5, 6, 7, 8], 63);
     let cal = CalibratedSettings {
         long_segments: 0,
@@ -81,12 +78,25 @@ fn cubic_to_ground_with_the_linear_part_calibrated() {
         ..Default::default()
     };
     let settings = DiagnoseSettings::default();
-    let d = diagnose_calibrated(&lanl(), &rec, Some(&val), &[], None, &settings, &cal, &|_| {})
-        .unwrap();
+    let d = diagnose_calibrated(
+        &lanl(),
+        &rec,
+        Some(&val),
+        &[],
+        None,
+        &settings,
+        &cal,
+        &|_| {},
+    )
+    .unwrap();
     let c = d.calibration.as_ref().expect("calibrated");
     eprintln!("{}\n{}", c.refinement, c.choice);
     assert!(c.used, "{}", c.choice);
-    let e: Vec<_> = d.effects.iter().filter(|e| e.kind.name() == "cubic").collect();
+    let e: Vec<_> = d
+        .effects
+        .iter()
+        .filter(|e| e.kind.name() == "cubic")
+        .collect();
     assert_eq!(e.len(), 1, "{}", d.verdict);
     assert_eq!(e[0].dofs, vec![3]);
     let x = e[0].parameters["k3"];

@@ -31,7 +31,12 @@
 //!    fit does not leave), and the refinement continues on segments of
 //!    [`CalibratedSettings::long_segments`] consecutive ones over the whole
 //!    record, where the damping of the lowest modes shows. Each stage is
-//!    kept when it lowers the record's multiple-shooting error.
+//!    kept when it lowers the record's multiple-shooting error. A model
+//!    with laws against ground on a free-free structure is refined and
+//!    scored, on the record and the validation record, from the linear
+//!    part's reconstruction corrected for the rigid-body wander fitted with
+//!    its laws ([`super::ground::corrected`]), as the diagnosis scores it;
+//!    each refined model from its own.
 //!
 //! Stages that cannot usefully win are not run: once a diagnosis explains
 //! the record up to the noise (multiple-shooting error at most 1.5 × its
@@ -1045,11 +1050,7 @@ const NEGLIGIBLE: f64 = 0.01;
 /// refinement can take an effect proposed beside the right one to nothing
 /// (a clearance of 71 N/m beside a cubic spring) without the stop rules
 /// seeing it. The note says what was dropped; None when nothing was.
-fn drop_negligible(
-    d: &mut Diagnosis,
-    bases: &Bases,
-    progress: &dyn Fn(&str),
-) -> Option<String> {
+fn drop_negligible(d: &mut Diagnosis, bases: &Bases, progress: &dyn Fn(&str)) -> Option<String> {
     let sim = sim_of(d);
     let mut dropped = vec![];
     for i in (0..d.added.len()).rev() {
