@@ -701,7 +701,10 @@ struct Refining<'a> {
 /// start and evaluation at the end (None when it could not be evaluated),
 /// its cost at the start when it was evaluated there, and the simulations
 /// run.
-type SegmentOutcome = (SegmentRun, Option<(Segment, SegEval)>, Option<f64>, usize);
+type SegmentOutcome = (SegmentRun, Option<Trial>, Option<f64>, usize);
+
+/// A segment's start with its evaluation.
+type Trial = (Segment, SegEval);
 
 impl Refining<'_> {
     /// True when segment `i + 1` starts where segment `i` ends.
@@ -868,7 +871,7 @@ impl Refining<'_> {
         };
         // the trials from the predecessors as they are now, evaluated in
         // parallel; the tape is kept where the trial is better
-        let trials: Vec<(usize, Option<(Segment, SegEval)>, usize)> = idx
+        let trials: Vec<(usize, Option<Trial>, usize)> = idx
             .par_iter()
             .map(|&i| {
                 let (t, mut sims) = start_after(i, &this.segs, &this.ends);
