@@ -11,6 +11,9 @@
 //! against data/lanl8dof.toml with its linear part calibrated on a record
 //! of the structure without the bumper (`--linear-record`).
 //!
+//! The same job without the linear record (`-- diagnose_held`): the
+//! linear part calibrated on the record diagnosed itself.
+//!
 //! Before timing, each diagnosis is run once and its result, simulations
 //! and stage timings are printed.
 //!
@@ -116,7 +119,24 @@ fn testbed_record(model: &Model, seed: u64) -> Record {
 }
 
 fn bench_calibrated(c: &mut Criterion) {
-    if !wanted("diagnose_calibrated/testbed_with_linear_record_and_validation") {
+    calibrated_group(
+        c,
+        "diagnose_calibrated",
+        "testbed_with_linear_record_and_validation",
+        true,
+    );
+}
+
+/// The same job without the linear record: the linear part calibrated on
+/// the record diagnosed itself.
+fn bench_held(c: &mut Criterion) {
+    calibrated_group(c, "diagnose_held", "testbed_with_validation", false);
+}
+
+/// The testbed's calibrated diagnosis as group `group`, function `name`,
+/// with the low-level record or without.
+fn calibrated_group(c: &mut Criterion, group: &str, name: &str, with_linear: bool) {
+    if !wanted(&format!("{group}/{name}")) {
         return;
     }
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -128,7 +148,11 @@ fn bench_calibrated(c: &mut Criterion) {
     );
     let rec = testbed_record(&truth, 17);
     let val = testbed_record(&truth, 34);
-    let low = vec![testbed_record(&linear, 5)];
+    let low = if with_linear {
+        vec![testbed_record(&linear, 5)]
+    } else {
+        vec![]
+    };
     let (settings, cal) = (bench_settings(), CalibratedSettings::default());
     let run_with = |progress: &dyn Fn(&str)| {
         diagnose_calibrated(
@@ -153,11 +177,9 @@ fn bench_calibrated(c: &mut Criterion) {
     }
     let run = || run_with(&|_| {});
     print_result(&run());
-    let mut g = c.benchmark_group("diagnose_calibrated");
+    let mut g = c.benchmark_group(group);
     g.sample_size(10);
-    g.bench_function("testbed_with_linear_record_and_validation", |b| {
-        b.iter(|| black_box(run()))
-    });
+    g.bench_function(name, |b| b.iter(|| black_box(run())));
     g.finish();
 }
 
@@ -207,5 +229,5 @@ fn print_calibration(d: &Diagnosis) {
     }
 }
 
-criterion_group!(benches, bench, bench_calibrated);
+criterion_group!(benches, bench, bench_calibrated, bench_held);
 criterion_main!(benches);

@@ -119,7 +119,18 @@ impl Comparison {
     /// Both errors of `model`, and its segment predictions (p × N; None
     /// when a segment simulation failed).
     pub fn errors(&self, model: &Model, sim: SimSettings) -> (ErrorSet, Option<DMatrix<f64>>) {
-        self.errors_of(model, sim, self.shoot(model, sim))
+        // the open-loop run is one long simulation: beside the segments'
+        let (shot, whole) = rayon::join(|| self.shoot(model, sim), || self.open_loop(model, sim));
+        self.errors_with(shot, whole)
+    }
+
+    /// The open-loop prediction of `model` over the whole record (p × N).
+    fn open_loop(
+        &self,
+        model: &Model,
+        sim: SimSettings,
+    ) -> std::result::Result<DMatrix<f64>, ShotError> {
+        self.predict(model, std::slice::from_ref(&self.whole), sim)
     }
 
     /// [`Comparison::errors`] with the multiple shooting of `model` at
@@ -129,6 +140,16 @@ impl Comparison {
         model: &Model,
         sim: SimSettings,
         shot: ShotResult,
+    ) -> (ErrorSet, Option<DMatrix<f64>>) {
+        self.errors_with(shot, self.open_loop(model, sim))
+    }
+
+    /// [`Comparison::errors_of`] with the open-loop prediction done
+    /// ([`Comparison::open_loop`]).
+    fn errors_with(
+        &self,
+        shot: ShotResult,
+        open_loop: std::result::Result<DMatrix<f64>, ShotError>,
     ) -> (ErrorSet, Option<DMatrix<f64>>) {
         let mut status = ErrorStatus::default();
         let mut starts = None;
@@ -142,7 +163,7 @@ impl Comparison {
                 None
             }
         };
-        let whole = match self.predict(model, std::slice::from_ref(&self.whole), sim) {
+        let whole = match open_loop {
             Ok(y) => Some(self.scored(y)),
             Err(e) => {
                 status.open_loop = Some(e);

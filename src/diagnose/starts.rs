@@ -160,17 +160,17 @@ fn residual(cmp: &Comparison, seg: &Segment, y: &DMatrix<f64>) -> Option<(DVecto
     Some((r, s))
 }
 
-/// The observed channels of a segment's simulation (p × len), as
-/// [`Comparison::predict`] extracts them.
-fn observed(cmp: &Comparison, run: &crate::integrate::Simulation) -> DMatrix<f64> {
-    let mut y = DMatrix::zeros(cmp.observations.len(), run.len());
+/// The observed channels of a segment's simulation over its first `len`
+/// samples (p × len), as [`Comparison::predict`] extracts them.
+fn observed(cmp: &Comparison, run: &crate::integrate::Simulation, len: usize) -> DMatrix<f64> {
+    let mut y = DMatrix::zeros(cmp.observations.len(), len);
     for (c, o) in cmp.observations.iter().enumerate() {
         let src = match o.quantity {
             Quantity::Disp => &run.u,
             Quantity::Vel => &run.v,
             _ => &run.a,
         };
-        y.row_mut(c).copy_from(&src.row(o.dof - 1));
+        y.row_mut(c).copy_from(&src.view((o.dof - 1, 0), (1, len)));
     }
     y
 }
@@ -257,76 +257,6 @@ fn sens_step(
     let smax = svd.singular_values.max();
     let d = svd.solve(r, 1e-8 * smax).ok()?;
     Some(d.component_mul(scale))
-}
-
-/// Continuity starts: every segment that directly follows another is tried
-/// from the state where the previous one ends (its simulation carried one
-/// sample further); the trial is kept when it lowers the segment's error.
-/// The segments are taken in order, each from its predecessor as it is
-/// then: when the predecessor has just taken its own trial, the trial is
-/// simulated again from there, so a run of segments in a wrong basin is
-/// replaced by the model's simulation from the last good one (a state the
-/// segments do not see, such as a free-free structure's rigid-body
-/// displacement under a stop or a spring to ground, is carried along);
-/// the other trials are simulated beforehand in parallel. Returns the
-/// segments changed.
-fn continuity(
-    cmp: &Comparison,
-    model: &Model,
-    sim: SimSettings,
-    segs: &mut [Segment],
-    y: &mut DMatrix<f64>,
-    res: &mut [Option<(DVector<f64>, f64)>],
-    count: &mut usize,
-) -> Vec<usize> {
-    let Ok(integ) = Integrator::new(model, cmp.fs, sim) else {
-        return vec![];
-    };
-    let n = model.ndof();
-    let ns = cmp.force.ncols();
-    let follows = |i: usize| i > 0 && segs[i - 1].start + segs[i - 1].len == segs[i].start;
-    let idx: Vec<usize> = (1..segs.len())
-        .filter(|&i| follows(i) && segs[i].start < ns)
-        .collect();
-    *count += idx.len();
-    let trials: Vec<Option<Segment>> = idx
-        .par_iter()
-        .map(|&i| carried(&integ, cmp, &segs[i - 1], &segs[i], n))
-        .collect();
-    let ok: Vec<(usize, Segment)> = idx
-        .into_iter()
-        .zip(trials)
-        .filter_map(|(i, t)| Some((i, t?)))
-        .collect();
-    let trial_segs: Vec<Segment> = ok.iter().map(|(_, t)| t.clone()).collect();
-    let yt = predict_each(cmp, model, &trial_segs, sim, count);
-    let mut changed: Vec<usize> = vec![];
-    for (i, t) in &ok {
-        let i = *i;
-        let old = res[i].as_ref().map_or(f64::INFINITY, |r| r.1);
-        let kept = if changed.last() == Some(&(i - 1)) {
-            // the predecessor has just moved: its end again, simulated alone
-            *count += 2;
-            carried(&integ, cmp, &segs[i - 1], &segs[i], n)
-                .and_then(|t| {
-                    let yi = cmp.predict(model, std::slice::from_ref(&t), sim).ok()?;
-                    let r = residual(cmp, &t, &yi)?;
-                    Some((t, r, Some(yi)))
-                })
-                .filter(|a| a.1 .1 < old)
-        } else {
-            residual(cmp, t, &yt)
-                .filter(|r| r.1 < old)
-                .map(|r| (t.clone(), r, None))
-        };
-        if let Some((t, r, yi)) = kept {
-            copy_segment(y, yi.as_ref().unwrap_or(&yt), &t);
-            segs[i] = t;
-            res[i] = Some(r);
-            changed.push(i);
-        }
-    }
-    changed
 }
 
 /// Segment `s` started from where its predecessor `p` ends (`p`
@@ -607,6 +537,9 @@ struct StartProblem<'a> {
     integ: Option<&'a Integrator>,
     /// Linearized by the sensitivities (a nonlinear model).
     sensitivities: bool,
+    /// Simulate one sample past the segment's end (where the record goes
+    /// on), for the state where it ends ([`SegEval::end`]).
+    ahead: bool,
     scale: &'a DVector<f64>,
     sims: usize,
 }
@@ -614,8 +547,57 @@ struct StartProblem<'a> {
 /// A segment's evaluation: weighted residual, its squared norm, the
 /// prediction of the segment's samples (p × len) and, for a nonlinear
 /// model, the simulation's tape (for the sensitivities at the point,
-/// [`sens_step`]).
-type SegEval = (DVector<f64>, f64, DMatrix<f64>, Option<Tape>);
+/// [`sens_step`]) and the state one sample past the segment's end.
+struct SegEval {
+    r: DVector<f64>,
+    cost: f64,
+    y: DMatrix<f64>,
+    tape: Option<Tape>,
+    /// `(u, v)` one sample past the end, when the simulation went there
+    /// ([`StartProblem::ahead`]): the start [`carried`] gives the segment
+    /// after, the same bits.
+    end: Option<State>,
+}
+
+/// A state `(u, v)`.
+type State = (Vec<f64>, Vec<f64>);
+
+impl StartProblem<'_> {
+    /// The simulation [`Comparison::predict`] runs of segment `s` (with
+    /// one more sample when `ahead` and the record goes on), with its tape
+    /// when the sensitivities will need it (cut to the segment).
+    fn simulate(&mut self, integ: &Integrator, s: &Segment) -> Option<SegEval> {
+        self.sims += 1;
+        let extra = usize::from(self.ahead && s.start + s.len < self.cmp.force.ncols());
+        let force = self.cmp.force.columns(s.start, s.len + extra);
+        let (run, tape) = if self.sensitivities {
+            let (run, mut tape) = integ.run_taped(force, &s.u0, &s.v0, false);
+            tape.truncate(s.len);
+            (run, Some(tape))
+        } else {
+            (integ.run(force, &s.u0, &s.v0), None)
+        };
+        // the segment itself completed (the sample past it may not have)
+        if run.len() < s.len {
+            return None;
+        }
+        let end = (extra == 1 && run.len() == s.len + 1).then(|| {
+            let n = integ.ndof();
+            let at = |m: &DMatrix<f64>| (0..n).map(|q| m[(q, s.len)]).collect();
+            (at(&run.u), at(&run.v))
+        });
+        let y = observed(self.cmp, &run, s.len);
+        let r = segment_residual(&self.cmp.observations, s, y.as_view())?;
+        let cost = r.norm_squared();
+        Some(SegEval {
+            r,
+            cost,
+            y,
+            tape,
+            end,
+        })
+    }
+}
 
 impl crate::lsq::Problem for StartProblem<'_> {
     type Point = Segment;
@@ -625,23 +607,7 @@ impl crate::lsq::Problem for StartProblem<'_> {
 
     fn evaluate(&mut self, s: &Segment) -> Option<SegEval> {
         if let Some(integ) = self.integ {
-            // the simulation [`Comparison::predict`] runs, with its tape
-            // when the sensitivities will need it
-            self.sims += 1;
-            let force = self.cmp.force.columns(s.start, s.len);
-            let (run, tape) = if self.sensitivities {
-                let (run, tape) = integ.run_taped(force, &s.u0, &s.v0, false);
-                (run, Some(tape))
-            } else {
-                (integ.run(force, &s.u0, &s.v0), None)
-            };
-            if !run.completed() {
-                return None;
-            }
-            let y = observed(self.cmp, &run);
-            let r = segment_residual(&self.cmp.observations, s, y.as_view())?;
-            let c = r.norm_squared();
-            return Some((r, c, y, tape));
+            return self.simulate(integ, s);
         }
         let y = predict_each(
             self.cmp,
@@ -650,20 +616,26 @@ impl crate::lsq::Problem for StartProblem<'_> {
             self.sim,
             &mut self.sims,
         );
-        let (r, c) = residual(self.cmp, s, &y)?;
-        Some((r, c, y.columns(s.start, s.len).into_owned(), None))
+        let (r, cost) = residual(self.cmp, s, &y)?;
+        Some(SegEval {
+            r,
+            cost,
+            y: y.columns(s.start, s.len).into_owned(),
+            tape: None,
+            end: None,
+        })
     }
 
     fn cost(&self, e: &SegEval) -> f64 {
-        e.1
+        e.cost
     }
 
     fn linearize(&mut self, s: &Segment, e: &SegEval) -> Result<DVector<f64>, String> {
         match (self.exact, self.integ) {
-            (Some(pinv), _) => Ok(pinv * &e.0),
+            (Some(pinv), _) => Ok(pinv * &e.r),
             (None, Some(integ)) if self.sensitivities => {
                 self.sims += 1;
-                sens_step(integ, self.cmp, s, (&e.0, e.3.as_ref()), self.scale)
+                sens_step(integ, self.cmp, s, (&e.r, e.tape.as_ref()), self.scale)
                     .ok_or_else(|| "the sensitivities failed".into())
             }
             (None, _) => Err("no integrator".into()),
@@ -684,10 +656,6 @@ impl crate::lsq::Problem for StartProblem<'_> {
         }
     }
 }
-
-/// A segment's refined start, its residual, cost and prediction, when it
-/// improved.
-type Improved = Option<(Segment, (DVector<f64>, f64, DMatrix<f64>))>;
 
 /// How one segment's refinement went: iterations in which it took part,
 /// whether the last of them failed to lower its cost, whether it is still
@@ -711,10 +679,56 @@ struct Refining<'a> {
     segs: Vec<Segment>,
     y: DMatrix<f64>,
     res: Vec<Option<(DVector<f64>, f64)>>,
+    /// Each segment's simulation tape at its current start, kept between
+    /// the calls of [`Refining::run`] for the segments still active.
+    tapes: Vec<Option<Tape>>,
+    /// Where each segment's simulation from its current start is one
+    /// sample past its end, when it went there ([`SegEval::end`]).
+    ends: Vec<Option<State>>,
+    /// Simulate the segments that another follows one sample past their
+    /// end (for [`Refining::continuity`]).
+    ahead: bool,
+    /// Weighted squared error summed over the segments at their starts.
+    cost0: f64,
+    /// The segments have not been evaluated yet: the first
+    /// [`Refining::run`] evaluates each in its own task, with its tape, and
+    /// fills `y` and `res` (a nonlinear model).
+    fresh: bool,
     sims: usize,
 }
 
+/// One segment's part of [`Refining::run`]: how its refinement went, its
+/// start and evaluation at the end (None when it could not be evaluated),
+/// its cost at the start when it was evaluated there, and the simulations
+/// run.
+type SegmentOutcome = (SegmentRun, Option<Trial>, Option<f64>, usize);
+
+/// A segment's start with its evaluation.
+type Trial = (Segment, SegEval);
+
 impl Refining<'_> {
+    /// True when segment `i + 1` starts where segment `i` ends.
+    fn followed(&self, i: usize) -> bool {
+        self.segs
+            .get(i + 1)
+            .is_some_and(|t| self.segs[i].start + self.segs[i].len == t.start)
+    }
+
+    /// The driver's problem for segment `i`.
+    fn problem(&self, i: usize) -> StartProblem<'_> {
+        StartProblem {
+            cmp: self.cmp,
+            model: self.model,
+            sim: self.sim,
+            exact: self.pinv.get(&self.segs[i].len).filter(|_| self.linear),
+            integ: self.integ.as_ref(),
+            sensitivities: !self.linear,
+            ahead: self.ahead && self.followed(i),
+            scale: &self.scale,
+            sims: 0,
+        }
+    }
+
     /// Up to `iterations` Gauss–Newton iterations of every segment marked
     /// in `active` (each its own problem of the least-squares driver, in
     /// parallel): a step that does not lower the segment's cost is halved
@@ -722,8 +736,10 @@ impl Refining<'_> {
     /// step gains less than [`super::settings::StartSettings::settled`] of
     /// it. Updates `active`; returns the iterations run (the most any
     /// segment took part in) and the segments whose last iteration, at that
-    /// count, failed.
-    fn run(&mut self, iterations: usize, active: &mut [bool]) -> (usize, usize) {
+    /// count, failed. `keep`: the segments still active keep their tapes
+    /// for the next call (whose first linearization then needs no
+    /// simulation).
+    fn run(&mut self, iterations: usize, active: &mut [bool], keep: bool) -> (usize, usize) {
         use crate::lsq;
         let stop = lsq::Stopping {
             max_iterations: iterations,
@@ -735,54 +751,167 @@ impl Refining<'_> {
         };
         let method = lsq::Method::LineSearch { min_t: 1.0 / 16.0 };
         let idx: Vec<usize> = (0..self.segs.len()).filter(|&i| active[i]).collect();
+        let tapes: Vec<Option<Tape>> = idx.iter().map(|&i| self.tapes[i].take()).collect();
         let this = &*self;
-        let runs: Vec<(SegmentRun, Improved, usize)> = idx
+        let runs: Vec<SegmentOutcome> = idx
             .par_iter()
-            .map(|&i| {
-                let Some((r, c)) = this.res[i].clone() else {
+            .zip(tapes)
+            .map(|(&i, tape)| {
+                let seg = &this.segs[i];
+                let mut q = this.problem(i);
+                // the start: evaluated here with its tape (a fresh
+                // segment), else as the last call left it
+                let (e0, cost0) = if this.fresh {
+                    let e = lsq::Problem::evaluate(&mut q, seg);
+                    let c = e.as_ref().map(|e| e.cost);
+                    (e, c)
+                } else {
+                    let e = this.res[i].clone().map(|(r, cost)| SegEval {
+                        r,
+                        cost,
+                        y: this.y.columns(seg.start, seg.len).into_owned(),
+                        tape,
+                        end: this.ends[i].clone(),
+                    });
+                    (e, None)
+                };
+                let Some(e0) = e0 else {
                     let failed = SegmentRun {
                         attempts: usize::from(iterations > 0),
                         last_failed: true,
                         active: false,
                     };
-                    return (failed, None, 0);
+                    return (failed, None, None, q.sims);
                 };
-                let seg = &this.segs[i];
-                let mut q = StartProblem {
-                    cmp: this.cmp,
-                    model: this.model,
-                    sim: this.sim,
-                    exact: this.pinv.get(&seg.len).filter(|_| this.linear),
-                    integ: this.integ.as_ref(),
-                    sensitivities: !this.linear,
-                    scale: &this.scale,
-                    sims: 0,
-                };
-                let y0 = this.y.columns(seg.start, seg.len).into_owned();
-                let out = lsq::minimize_from(&mut q, seg.clone(), (r, c, y0, None), method, &stop);
+                let out = lsq::minimize_from(&mut q, seg.clone(), e0, method, &stop);
                 let run = segment_run(&out.termination, out.iterations);
-                let improved = out.history.len() > 1;
-                // the tape is dropped here: one per segment at a time
-                let kept = improved.then(|| {
-                    let (r, c, y, _) = out.eval.expect("evaluated");
-                    (out.point, (r, c, y))
-                });
-                (run, kept, q.sims)
+                let mut e = out.eval.expect("evaluated");
+                // the tape of a segment worth another step is kept for the
+                // next call; the others are dropped here
+                if !(keep && run.active) {
+                    e.tape = None;
+                }
+                (run, Some((out.point, e)), cost0, q.sims)
             })
             .collect();
         let done = runs.iter().map(|r| r.0.attempts).max().unwrap_or(0);
         let mut stalled = 0;
-        for (&i, (run, kept, sims)) in idx.iter().zip(runs) {
+        let mut cost0 = vec![None; self.segs.len()];
+        for (&i, (run, last, c0, sims)) in idx.iter().zip(runs) {
             self.sims += sims;
             stalled += usize::from(run.attempts == done && run.last_failed);
             active[i] = run.active;
-            if let Some((seg, (r, c, y))) = kept {
-                self.y.columns_mut(seg.start, seg.len).copy_from(&y);
-                self.res[i] = Some((r, c));
-                self.segs[i] = seg;
+            cost0[i] = c0;
+            if let Some((seg, e)) = last {
+                self.set(i, seg, e);
             }
         }
+        if self.fresh {
+            self.fresh = false;
+            self.cost0 = cost0.iter().flatten().sum();
+        }
         (done, stalled)
+    }
+
+    /// Segment `i` starts at `seg`, evaluated as `e`.
+    fn set(&mut self, i: usize, seg: Segment, e: SegEval) {
+        self.y.columns_mut(seg.start, seg.len).copy_from(&e.y);
+        self.res[i] = Some((e.r, e.cost));
+        self.tapes[i] = e.tape;
+        self.ends[i] = e.end;
+        self.segs[i] = seg;
+    }
+
+    /// Continuity starts: every segment that directly follows another is
+    /// tried from the state where the previous one ends (where its
+    /// simulation from its start went one sample past its end, else that
+    /// simulation carried one sample further, [`carried`]); the trial is
+    /// kept when it lowers the segment's error. The segments are taken in
+    /// order, each from its predecessor as it is then: when the
+    /// predecessor has just taken its own trial, the trial starts where
+    /// that one's simulation ends, so a run of segments in a wrong basin is
+    /// replaced by the model's simulation from the last good one (a state
+    /// the segments do not see, such as a free-free structure's rigid-body
+    /// displacement under a stop or a spring to ground, is carried along);
+    /// the other trials are simulated beforehand in parallel. Returns the
+    /// segments changed (their tapes kept for the next iterations).
+    fn continuity(&mut self) -> Vec<usize> {
+        // the integrator, out of `self` while the segments change
+        let Some(integ) = self.integ.take() else {
+            return vec![];
+        };
+        let changed = self.continuity_with(&integ);
+        self.integ = Some(integ);
+        changed
+    }
+
+    /// [`Refining::continuity`] with the model's integrator.
+    fn continuity_with(&mut self, integ: &Integrator) -> Vec<usize> {
+        let (cmp, n) = (self.cmp, self.model.ndof());
+        let ns = cmp.force.ncols();
+        let idx: Vec<usize> = (1..self.segs.len())
+            .filter(|&i| self.followed(i - 1) && self.segs[i].start < ns)
+            .collect();
+        let this = &*self;
+        // the start where segment i − 1 ends, and the simulations run
+        let start_after = |i: usize, segs: &[Segment], ends: &[Option<State>]| match &ends[i - 1] {
+            Some((u0, v0)) => (
+                Some(Segment {
+                    start: segs[i].start,
+                    len: segs[i].len,
+                    u0: u0.clone(),
+                    v0: v0.clone(),
+                }),
+                0,
+            ),
+            None => (carried(integ, cmp, &segs[i - 1], &segs[i], n), 1),
+        };
+        let cost = |i: usize, res: &[Option<(DVector<f64>, f64)>]| {
+            res[i].as_ref().map_or(f64::INFINITY, |r| r.1)
+        };
+        // the trials from the predecessors as they are now, evaluated in
+        // parallel; the tape is kept where the trial is better
+        let trials: Vec<(usize, Option<Trial>, usize)> = idx
+            .par_iter()
+            .map(|&i| {
+                let (t, mut sims) = start_after(i, &this.segs, &this.ends);
+                let Some(t) = t else {
+                    return (i, None, sims);
+                };
+                let mut q = this.problem(i);
+                let e = q.simulate(integ, &t).map(|mut e| {
+                    if e.cost >= cost(i, &this.res) {
+                        e.tape = None;
+                    }
+                    e
+                });
+                sims += q.sims;
+                (i, e.map(|e| (t, e)), sims)
+            })
+            .collect();
+        let mut changed: Vec<usize> = vec![];
+        for (i, trial, sims) in trials {
+            self.sims += sims;
+            let old = cost(i, &self.res);
+            let kept = if changed.last() == Some(&(i - 1)) {
+                // the predecessor has just moved: from where it now ends
+                let (t, sims) = start_after(i, &self.segs, &self.ends);
+                self.sims += sims;
+                t.and_then(|t| {
+                    let mut q = self.problem(i);
+                    let e = q.simulate(integ, &t);
+                    self.sims += q.sims;
+                    Some((t, e?))
+                })
+            } else {
+                trial
+            };
+            if let Some((t, e)) = kept.filter(|(_, e)| e.cost < old) {
+                self.set(i, t, e);
+                changed.push(i);
+            }
+        }
+        changed
     }
 }
 
@@ -828,10 +957,24 @@ fn refine_local(
 ) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
     let mut sims = 0;
     let segs = segments.to_vec();
-    let y = predict_each(cmp, model, &segs, sim, &mut sims);
-    let res: Vec<Option<(DVector<f64>, f64)>> = segs.iter().map(|s| residual(cmp, s, &y)).collect();
-    let cost0: f64 = res.iter().flatten().map(|r| r.1).sum();
     let sampled = SampledModel::from_model(&model.linear_part(), cmp.fs, sim.substeps).ok();
+    let integ = Integrator::new(model, cmp.fs, sim).ok();
+    // a nonlinear model's segments are evaluated in the first iteration's
+    // tasks, each with the tape its first linearization replays
+    let fresh = model.is_nonlinear() && sampled.is_some() && integ.is_some();
+    let (y, res) = if fresh {
+        let p = cmp.observations.len();
+        (
+            DMatrix::from_element(p, cmp.force.ncols(), f64::NAN),
+            vec![None; segs.len()],
+        )
+    } else {
+        let y = predict_each(cmp, model, &segs, sim, &mut sims);
+        let res: Vec<Option<(DVector<f64>, f64)>> =
+            segs.iter().map(|s| residual(cmp, s, &y)).collect();
+        (y, res)
+    };
+    let cost0: f64 = res.iter().flatten().map(|r| r.1).sum();
     let Some(sm) = sampled else {
         let fit = StartFit {
             iterations: 0,
@@ -868,8 +1011,13 @@ fn refine_local(
         sim,
         pinv,
         linear: exact,
-        integ: Integrator::new(model, cmp.fs, sim).ok(),
+        integ,
         scale: sm.state_scale(),
+        tapes: vec![None; segs.len()],
+        ends: vec![None; segs.len()],
+        ahead: false,
+        fresh,
+        cost0,
         segs,
         y,
         res,
@@ -885,18 +1033,17 @@ fn refine_local(
     // is rough in a contact, docs/updating.md)
     let with_continuity = continue_from && !exact && iterations >= 2;
     let first = if with_continuity { 1 } else { iterations };
-    let (mut done, mut stalled) = run.run(first, &mut active);
+    run.ahead = with_continuity;
+    let (mut done, mut stalled) = run.run(first, &mut active, with_continuity);
     let mut continued = 0;
     if with_continuity {
-        let Refining {
-            segs, y, res, sims, ..
-        } = &mut run;
-        let changed = continuity(cmp, model, sim, segs, y, res, sims);
+        let changed = run.continuity();
+        run.ahead = false;
         continued = changed.len();
         for i in changed {
             active[i] = true;
         }
-        let (more, st) = run.run(iterations - 1, &mut active);
+        let (more, st) = run.run(iterations - 1, &mut active, false);
         if more > 0 {
             done += more;
             stalled = st;
@@ -910,7 +1057,7 @@ fn refine_local(
         rescued: 0,
         stuck: vec![],
         simulations: run.sims,
-        cost: (cost0, cost1),
+        cost: (run.cost0, cost1),
         stalled,
         note: String::new(),
     };

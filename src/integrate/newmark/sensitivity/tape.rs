@@ -84,6 +84,13 @@ impl Tape {
         self.done
     }
 
+    /// Keep the record of the first `samples` samples only (a run carried
+    /// past a segment's end, replayed over the segment): the replay stops
+    /// there.
+    pub fn truncate(&mut self, samples: usize) {
+        self.done = self.done.min(samples);
+    }
+
     /// Samples the run took whole by the sample map (no sub-step recorded).
     pub fn whole_samples(&self) -> usize {
         self.whole.iter().filter(|&&w| w).count()

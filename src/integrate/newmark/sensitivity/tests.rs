@@ -813,3 +813,36 @@ fn a_tape_refuses_what_it_cannot_replay() {
     let short = f.columns(0, 100).into_owned();
     assert!(err(&bare, &state, &short).contains("not made by this integrator"));
 }
+
+#[test]
+fn a_tape_cut_to_a_segment_replays_the_segment_bit_for_bit() {
+    // a run carried one sample past a segment's end, its tape cut to the
+    // segment: the segment's own run and derivatives, and the state one
+    // sample further where a run from there would start
+    let model = lanl_with_friction();
+    let integ = Integrator::new(&model, 512.0, settings(0.0)).unwrap();
+    let f = shaker(201, 20.0);
+    let seg = f.columns(0, 200).into_owned();
+    let (u0, v0) = ([0.0; 8], swinging());
+    let seeds = Seeds::initial_state(8);
+    let (sim, live) = integ
+        .run_sensitivities(seg.as_view(), &u0, &v0, &seeds)
+        .unwrap();
+    let (longer, mut tape) = integ.run_taped(f.as_view(), &u0, &v0, false);
+    assert_eq!(tape.samples(), 201);
+    tape.truncate(200);
+    assert_eq!(tape.samples(), 200);
+    assert_eq!(longer.u.columns(0, 200), sim.u);
+    assert_eq!(longer.a.columns(0, 200), sim.a);
+    let replay = integ
+        .sensitivities_from_tape(seg.as_view(), &u0, &v0, &tape, &seeds)
+        .unwrap();
+    for j in 0..seeds.len() {
+        assert_eq!(live.du[j], replay.du[j], "seed {j}: du");
+        assert_eq!(live.da[j], replay.da[j], "seed {j}: da");
+    }
+    // the carried state is where the longer run is one sample on
+    let carried = integ.run(f.columns(0, 201), &u0, &v0);
+    assert_eq!(carried.u.column(200), longer.u.column(200));
+    assert_eq!(carried.v.column(200), longer.v.column(200));
+}
