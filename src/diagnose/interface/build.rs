@@ -39,6 +39,22 @@ pub enum Direction {
     Coordinate,
 }
 
+/// An elastic softening beside the slider on the interface coordinate: a
+/// saturating spring ([`crate::model::Saturating`], `k_e q` clipped at
+/// `±F_e` in the coordinate's displacement `q`) whose stiffness `k_e` is
+/// taken out of the coordinate's linear stiffness, so that below `F_e`
+/// the model is still the linear model; once its force reaches `F_e` the
+/// interface loses `k_e` without dissipating (a preloaded contact that
+/// separates).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Softening {
+    /// `k_e / k_J`: its stiffness as a share of the Jenkins elements'
+    /// (> 0).
+    pub share: f64,
+    /// The bound of its force `F_e`, N (> 0).
+    pub force: f64,
+}
+
 /// What [`super::fit::fit`] fits.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FitSpec {
@@ -71,6 +87,14 @@ pub struct FitSpec {
     /// one per non-residual mode (None: the relative displacement of
     /// [`FitSpec::pair`], [`pair_participations`]).
     pub participations: Option<Vec<f64>>,
+    /// With [`Direction::Coordinate`]: hold the participations at
+    /// [`FitSpec::participations`] (which must then be given) instead of
+    /// fitting them.
+    pub hold_participations: bool,
+    /// With [`Direction::Coordinate`]: an elastic softening beside the
+    /// slider, its share and force bound fitted (on their logarithms) from
+    /// these starts (None: the slider alone).
+    pub softening: Option<Softening>,
     /// Linear parameters fitted with the interface (empty: the identified
     /// linear part held).
     pub modes: Vec<ModeParam>,
@@ -122,6 +146,20 @@ impl FitSpec {
         }
         if self.substeps == 0 || self.max_simulations == 0 || self.elements == 0 {
             return bad("substeps, elements and max_simulations must be > 0".into());
+        }
+        if self.hold_participations && self.participations.is_none() {
+            return bad("held participations must be given".into());
+        }
+        if let Some(e) = &self.softening {
+            if self.direction != Direction::Coordinate {
+                return bad("a softening acts on the interface coordinate only".into());
+            }
+            if !(e.share > 0.0 && e.share.is_finite() && e.force > 0.0 && e.force.is_finite()) {
+                return bad(format!(
+                    "softening share {} and force {} must be > 0",
+                    e.share, e.force
+                ));
+            }
         }
         Ok(())
     }
@@ -269,7 +307,10 @@ pub fn pair_participations(base: &modal::ModalSection, spec: &FitSpec) -> Result
 /// linear stiffness of that coordinate, so that stuck the model is the
 /// linear model and fully slipped the stiffness of the modes loses
 /// `k_J g gᵀ` (mode `r` alone: `ω_r² (1 − δ_r²)`). `k_J` is
-/// [`coordinate_stiffness`]; it only sets the coordinate's scale.
+/// [`coordinate_stiffness`]; it only sets the coordinate's scale. With
+/// [`FitSpec::softening`] a saturating spring `k_e = share · k_J` acts
+/// beside it and `k_e` is taken out too (slipped and saturated, mode `r`
+/// alone keeps `ω_r² (1 − δ_r² (1 + share))`).
 pub fn coordinate_model(
     base: &modal::ModalSection,
     spec: &FitSpec,
@@ -307,6 +348,14 @@ pub fn coordinate_model(
         .cloned()
         .ok_or_else(|| TacitError::Numerical("the modal model has no matrices".into()))?;
     lin.k_rest[(s - 1, s - 1)] -= k_j;
+    if let Some(e) = &spec.softening {
+        lin.k_rest[(s - 1, s - 1)] -= e.share * k_j;
+        m.saturating.push(crate::model::Saturating {
+            dofs: vec![s],
+            stiffness: e.share * k_j,
+            force: e.force,
+        });
+    }
     m.matrices = Some(Arc::new(lin));
     push_jenkins(&mut m, spec, vec![s], k_j, slip_force);
     Ok(m)
@@ -334,6 +383,8 @@ impl Default for FitSpec {
             spread: 1.0,
             fit_spread: false,
             participations: None,
+            hold_participations: false,
+            softening: None,
             upper_residual_factor: 1.0,
             upper_residual_damping: Some(0.3),
             modes: vec![],
