@@ -503,4 +503,59 @@ shape = [0.1, -0.4, 0.4]
         assert_eq!(d.len(), 3);
         assert!(d.iter().all(|v| v.abs() > 0.0));
     }
+
+    #[test]
+    fn elastic_softening_keeps_the_linear_model_below_its_bound_and_adds_its_share_saturated() {
+        let mut s = section();
+        s.modes.push(modal::ModalMode {
+            frequency_hz: 30.0,
+            damping: 0.05,
+            shape: vec![0.2, 0.1, -0.3],
+            residual: true,
+        });
+        let d = &held_model(&s).unwrap().springs[0].dofs;
+        let spec = FitSpec {
+            direction: Direction::Coordinate,
+            pair: [d[0], d[1]],
+            upper_residual_damping: None,
+            participations: Some(vec![0.0, 0.0, 0.6]),
+            hold_participations: true,
+            softening: Some(Softening {
+                share: 0.5,
+                force: 3.0,
+            }),
+            ..Default::default()
+        };
+        spec.validate().unwrap();
+        let m = coordinate_model(&s, &spec, &[], &[0.0, 0.0, 0.6], 1.0).unwrap();
+        assert_eq!(m.saturating.len(), 1);
+        assert_eq!(m.saturating[0].dofs, [4]);
+        let k_j = coordinate_stiffness(&s, &spec).unwrap();
+        approx::assert_relative_eq!(m.saturating[0].stiffness, 0.5 * k_j, max_relative = 1e-12);
+        // the parameter vector with held participations: (ln share_e,
+        // ln F_e, ln F_s); the model at it is the one above
+        let x = [0.5f64.ln(), 3.0f64.ln(), 1.0f64.ln()];
+        let p = super::super::fit::unpack(&spec, &x);
+        assert_eq!(p.middle, vec![0.0, 0.0, 0.6]);
+        approx::assert_relative_eq!(p.softening.unwrap().force, 3.0, max_relative = 1e-12);
+        let f = describe(&m, &s, &spec, &x).unwrap();
+        approx::assert_relative_eq!(f.softening_stiffness, 0.5 * k_j, max_relative = 1e-12);
+        // below every bound: the linear model's modes; slipped and
+        // saturated the 7-Hz mode keeps 1 − δ² (1 + share) of its ω²
+        for (got, w) in f.stuck_hz.iter().zip([3.0, 5.0, 7.0, 30.0]) {
+            assert!((got - w).abs() < 1e-7 * w, "stuck {:?}", f.stuck_hz);
+        }
+        let mut got = f.slipped_hz.clone();
+        got.sort_by(f64::total_cmp);
+        let soft = 7.0 * (1.0 - 0.36 * 1.5f64).sqrt();
+        for (g, w) in got.iter().zip([3.0, soft, 5.0, 30.0]) {
+            assert!((g - w).abs() < 1e-7 * w, "slipped {:?}", f.slipped_hz);
+        }
+        // a softening between two points is refused
+        let bad = FitSpec {
+            direction: Direction::Points,
+            ..spec.clone()
+        };
+        assert!(bad.validate().is_err());
+    }
 }
