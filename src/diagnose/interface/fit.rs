@@ -1,6 +1,7 @@
 //! The interface fitted by open-loop output error over the steady-state
 //! samples of one or more records: Levenberg–Marquardt on the logarithms
-//! of the slip force and the Jenkins share (the participations linear).
+//! of the slip force, the Jenkins share, the density's exponent and the
+//! elastic softening's share and bound (the participations linear).
 //! The Jenkins element's slip state has no derivative recursion in the
 //! integrator, so the Jacobian is taken by centered finite differences of
 //! the simulation (step [`FitSpec::fd_step`] in the logarithm), one
