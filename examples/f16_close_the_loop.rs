@@ -31,7 +31,10 @@
 //! is fitted on the linear and the estimation record (and the
 //! `--also-estimate` files): a Jenkins element between the pair the trace
 //! located, then on the interface as a coordinate of its own, then (with
-//! `--interface-elements N`, default 4; 1: none) an Iwan model there; every model (the
+//! `--interface-elements N`, default 4; 1: none) an Iwan model there, then
+//! (`--softening SHARE|none`, default 0.2: the start of `k_e / k_J`) the
+//! slider with an elastic softening (a saturating spring) on the same
+//! coordinate; every model (the
 //! Level-1 model, the diagnosed model, the interface models) is ranked by
 //! the open-loop error on the estimation records, and the first is the
 //! model after (report.json `after_model`, `effects_found`, `interface`;
@@ -62,6 +65,7 @@ struct Args {
     interface: bool,
     residual_damping: Option<f64>,
     interface_elements: usize,
+    softening: Option<f64>,
     max_simulations: Option<usize>,
     also_estimate: Vec<PathBuf>,
     levels: bool,
@@ -82,6 +86,7 @@ fn args() -> anyhow::Result<Args> {
         interface: true,
         residual_damping: Some(0.3),
         interface_elements: 4,
+        softening: Some(0.2),
         max_simulations: None,
         also_estimate: vec![],
         levels: false,
@@ -119,6 +124,15 @@ fn args() -> anyhow::Result<Args> {
         }
         if flag == "--max-simulations" {
             a.max_simulations = Some(value.parse()?);
+            continue;
+        }
+        if flag == "--softening" {
+            a.softening = match value.as_str() {
+                "none" => None,
+                v => Some(v.parse().map_err(|e| {
+                    anyhow::anyhow!("--softening {v}: {e} (a share of k_J or none)")
+                })?),
+            };
             continue;
         }
         if flag == "--interface-elements" {
@@ -244,6 +258,7 @@ fn settings(a: &Args) -> anyhow::Result<f16::Settings> {
             }
             o.spec.upper_residual_damping = a.residual_damping;
             o.iwan = Some(a.interface_elements).filter(|&n| n > 1);
+            o.softening = a.softening;
             Some(o)
         }
     };

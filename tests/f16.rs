@@ -348,9 +348,10 @@ const SLIP_FORCE: f64 = 225.23;
 /// stuck it is the Level-1 model, so Level 1 keeps the Level-1 model's
 /// error, and on Level 5 it leaves at most a third of the Level-1 model's
 /// error on every channel (measured 0.28 / 0.20 / 0.26), on Level 3 less
-/// than half (0.44 / 0.45 / 0.44).
+/// than half (0.44 / 0.45 / 0.44); with an elastic softening beside the
+/// slider, Level 3 within a third as well.
 #[test]
-fn interface_coordinate_keeps_level1_and_reaches_a_third_on_level5() {
+fn interface_coordinate_keeps_level1_and_reaches_a_third_on_level5_and_softened_on_level3() {
     let (Some(l1), Some(l3), Some(l5)) = (level(1), level(3), level(5)) else {
         return;
     };
@@ -379,4 +380,37 @@ fn interface_coordinate_keeps_level1_and_reaches_a_third_on_level5() {
         assert!(a3[c] < 0.5 * b3[c], "Level 3: {a3:?} vs {b3:?}");
         assert!(a1[c] < 1.1 * b1[c], "Level 1: {a1:?} vs {b1:?}");
     }
+    // the slider with an elastic softening at its fitted values
+    // (docs/f16.md: 4 Jenkins elements on the Iwan stage's coordinate, slip
+    // forces 116.52 (i/4)^0.5833 N, a saturating spring of 0.15698 k_J
+    // bounded at 24.185 N; fitted on Level 1 and Level 7): Level 3 too
+    // within a third of the Level-1 model's error (measured 0.31 / 0.30 /
+    // 0.30), Level 5 kept (0.28 / 0.18 / 0.26), Level 1 kept
+    let soft = interface::FitSpec {
+        elements: 4,
+        spread: 0.58332,
+        softening: Some(interface::Softening {
+            share: 0.156975,
+            force: 24.185,
+        }),
+        ..spec.clone()
+    };
+    let sm = interface::coordinate_model(&fit.section, &soft, &[], &SOFTENED_AT, 116.518).unwrap();
+    assert_eq!(sm.saturating.len(), 1);
+    let (s5, s3, s1) = (score(&l5, &sm), score(&l3, &sm), score(&l1, &sm));
+    for c in 0..3 {
+        assert!(s5[c] < b5[c] / 3.0, "Level 5: {s5:?} vs {b5:?}");
+        assert!(s3[c] < b3[c] / 3.0, "Level 3: {s3:?} vs {b3:?}");
+        assert!(
+            s3[c] < a3[c],
+            "Level 3: {s3:?} vs the Jenkins element's {a3:?}"
+        );
+        assert!(s1[c] < 1.1 * b1[c], "Level 1: {s1:?} vs {b1:?}");
+    }
 }
+
+/// The interface's participations of the Iwan stage (docs/f16.md), held in
+/// the softening stage.
+const SOFTENED_AT: [f64; 7] = [
+    0.48003, 0.21021, 0.18853, 0.20134, 0.25769, 0.35774, 0.28195,
+];

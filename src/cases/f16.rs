@@ -221,7 +221,7 @@ impl FoundEffect {
     /// The interface effect of `f` (an [`interface::Fitted`] on the
     /// coordinate).
     fn interface(f: &interface::Fitted, couples: Option<&(String, f64)>) -> FoundEffect {
-        let label = match f.elements {
+        let mut label = match f.elements {
             1 => "jenkins (stick–slip friction) on the interface coordinate".to_string(),
             n => format!("iwan ({n} jenkins elements) on the interface coordinate"),
         };
@@ -230,6 +230,11 @@ impl FoundEffect {
             ("slip_force".to_string(), f.slip_force),
             ("spread".to_string(), f.spread),
         ];
+        if let Some(e) = &f.softening {
+            label += " with an elastic softening (saturating spring)";
+            parameters.push(("softening_stiffness".into(), f.softening_stiffness));
+            parameters.push(("softening_force".into(), e.force));
+        }
         for (hz, d) in &f.participations {
             parameters.push((format!("participation_{hz:.2}_hz"), *d));
         }
@@ -478,11 +483,8 @@ fn effects_of(
     follows: Option<&(String, f64)>,
 ) -> Vec<FoundEffect> {
     match offer {
-        Some(o) if name == interface::JENKINS || name == interface::IWAN => {
-            let f = match name {
-                interface::IWAN => o.iwan.as_ref().unwrap_or(&o.jenkins),
-                _ => &o.jenkins,
-            };
+        Some(o) if [interface::JENKINS, interface::IWAN, interface::SOFTENED].contains(&name) => {
+            let f = o.fitted(name).unwrap_or(&o.jenkins);
             vec![FoundEffect::interface(f, follows)]
         }
         Some(o) if name == interface::PAIR => vec![FoundEffect::interface_pair(&o.pair)],

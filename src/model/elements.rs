@@ -31,6 +31,14 @@
 //!   once per accepted step ([`Element::committed_slip`]). Under an imposed
 //!   `δ = X sin ωt` with `X > F_s / k` the loop is a parallelogram of
 //!   area `4 F_s (X − F_s / k)` per cycle (Iwan 1966).
+//! - Saturating spring between two DOFs or to ground: `f = k δ` while
+//!   `|k δ| ≤ F`, `±F` beyond: an elastic (lossless, path-independent)
+//!   softening law, the stiffness `k` lost once the force reaches `F` — a
+//!   preloaded contact that separates when the load exceeds its preload.
+//!   Under `δ = X sin θ` with `X > F/k` its first-harmonic stiffness is
+//!   `(2k/π) (asin r + r √(1 − r²))`, `r = F / (k X)` (the saturation's
+//!   describing function; Gelb & Vander Velde, *Multiple-Input Describing
+//!   Functions and Nonlinear System Design*, 1968).
 
 use serde::{Deserialize, Serialize};
 
@@ -142,6 +150,19 @@ pub struct Jenkins {
     pub slip_force: f64,
 }
 
+/// Saturating spring: an elastic softening law, `f = k δ` clipped at
+/// `±F` (stiffness `k` below the bound, none beyond; no loss per cycle).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Saturating {
+    /// `[i, j]` or `[i]` (to ground).
+    pub dofs: Vec<usize>,
+    /// Stiffness below the bound, N/m (> 0).
+    pub stiffness: f64,
+    /// Bound of the force, N (> 0).
+    pub force: f64,
+}
+
 /// One nonlinear element in compiled, 0-based form for the integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Element {
@@ -224,6 +245,17 @@ pub enum Element {
         /// Slip force, N.
         fs: f64,
     },
+    /// Saturating spring `k δ` clipped at `±F`.
+    Saturating {
+        /// First DOF.
+        i: usize,
+        /// Second DOF.
+        j: Option<usize>,
+        /// Stiffness below the bound, N/m.
+        k: f64,
+        /// Bound of the force, N.
+        fmax: f64,
+    },
 }
 
 /// Gather the model's elements into compiled form.
@@ -284,6 +316,15 @@ pub fn compile(model: &super::Model) -> Vec<Element> {
             fs: e.slip_force,
         });
     }
+    for e in &model.saturating {
+        let (i, j) = ends(&e.dofs);
+        out.push(Element::Saturating {
+            i,
+            j,
+            k: e.stiffness,
+            fmax: e.force,
+        });
+    }
     out
 }
 
@@ -330,6 +371,8 @@ pub enum ElementList {
     Clearance,
     /// `model.jenkins`.
     Jenkins,
+    /// `model.saturating`.
+    Saturating,
 }
 
 /// Index in [`compile`]`(model)` of the (first) element compiled from entry
@@ -349,6 +392,7 @@ pub fn compiled_index(model: &super::Model, list: ElementList, index: usize) -> 
         ),
         (ElementList::Clearance, 2 * model.clearances.len()),
         (ElementList::Jenkins, model.jenkins.len()),
+        (ElementList::Saturating, model.saturating.len()),
     ];
     let before: usize = sizes
         .iter()
@@ -463,6 +507,16 @@ impl Element {
                 scatter(f, i, j, force);
                 slope
             }
+            Element::Saturating { i, j, k, fmax } => {
+                let trial = k * rel(u, i, j);
+                if trial.abs() <= fmax {
+                    scatter(f, i, j, trial);
+                    k
+                } else {
+                    scatter(f, i, j, fmax.copysign(trial));
+                    0.0
+                }
+            }
         }
     }
 
@@ -500,7 +554,8 @@ impl Element {
             Element::Contact { i, j, .. }
             | Element::Cubic { i, j, .. }
             | Element::Quadratic { i, j, .. }
-            | Element::Jenkins { i, j, .. } => scatter_tangent(t, n, i, j, cu * slope),
+            | Element::Jenkins { i, j, .. }
+            | Element::Saturating { i, j, .. } => scatter_tangent(t, n, i, j, cu * slope),
             Element::Friction { d, .. } => t[d * n + d] += cv * slope,
             Element::QuadraticDamper { i, j, .. } | Element::CubicDamper { i, j, .. } => {
                 scatter_tangent(t, n, i, j, cv * slope)
@@ -532,7 +587,8 @@ impl Element {
             | Element::Quadratic { i, j, .. }
             | Element::QuadraticDamper { i, j, .. }
             | Element::CubicDamper { i, j, .. }
-            | Element::Jenkins { i, j, .. } => (i, j),
+            | Element::Jenkins { i, j, .. }
+            | Element::Saturating { i, j, .. } => (i, j),
             Element::Friction { d, .. } => (d, None),
             Element::RelativeFriction { i, j, .. } => (i, Some(j)),
         }
@@ -552,7 +608,8 @@ impl Element {
             | Element::Quadratic { i, j, .. }
             | Element::QuadraticDamper { i, j, .. }
             | Element::CubicDamper { i, j, .. }
-            | Element::Jenkins { i, j, .. } => (*i, *j) = (i2, j2),
+            | Element::Jenkins { i, j, .. }
+            | Element::Saturating { i, j, .. } => (*i, *j) = (i2, j2),
             Element::Friction { d, .. } => *d = i2,
             Element::RelativeFriction { i, j, .. } => (*i, *j) = (i2, j2?),
         }
@@ -696,7 +753,8 @@ impl Element {
             Element::Contact { i, j, .. }
             | Element::Cubic { i, j, .. }
             | Element::Quadratic { i, j, .. }
-            | Element::Jenkins { i, j, .. } => scatter(y, i, j, cu * slope * rel(xu, i, j)),
+            | Element::Jenkins { i, j, .. }
+            | Element::Saturating { i, j, .. } => scatter(y, i, j, cu * slope * rel(xu, i, j)),
             Element::Friction { d, .. } => y[d] += cv * slope * xv[d],
             Element::QuadraticDamper { i, j, .. } | Element::CubicDamper { i, j, .. } => {
                 scatter(y, i, j, cv * slope * rel(xv, i, j))
@@ -805,6 +863,19 @@ mod tests {
                     level: 0.4,
                     vreg: 0.3,
                 },
+                // below its bound, and beyond it
+                Element::Saturating {
+                    i: 0,
+                    j: Some(2),
+                    k: 1e3,
+                    fmax: 10.0,
+                },
+                Element::Saturating {
+                    i: 1,
+                    j: None,
+                    k: 2e4,
+                    fmax: 5.0,
+                },
             ],
             [3e-3, 1e-3, -2e-3],
             [0.1, 4e-3, -0.2],
@@ -895,6 +966,8 @@ mod tests {
                 // no parameter derivatives (finite differences of the
                 // simulation: its slip state has no recursion)
                 (e @ Element::Jenkins { .. }, _) => e,
+                // no parameter derivatives
+                (e @ Element::Saturating { .. }, _) => e,
             }
         };
         let cases = [
@@ -1091,5 +1164,83 @@ mod tests {
             .sum();
         let exact = 4.0 * fs * (x - fs / k);
         approx::assert_relative_eq!(area, exact, max_relative = 2e-2);
+    }
+
+    /// The first-harmonic stiffness and the loop area of a saturating spring
+    /// under an imposed `δ = X sin θ` (`steps` points per cycle).
+    fn saturating_cycle(k: f64, fmax: f64, x: f64, steps: usize) -> (f64, f64) {
+        let e = Element::Saturating {
+            i: 0,
+            j: Some(1),
+            k,
+            fmax,
+        };
+        let (mut b1, mut area, mut prev) = (0.0, 0.0, (0.0, 0.0));
+        for n in 0..=steps {
+            let th = 2.0 * std::f64::consts::PI * n as f64 / steps as f64;
+            let u = [x * th.sin(), 0.0];
+            let mut f = [0.0; 2];
+            let slope = e.force_and_slope(&u, &[0.0; 2], &mut f);
+            assert!(slope == k || slope == 0.0);
+            assert!(f[0].abs() <= fmax && f[1] == -f[0]);
+            if n > 0 {
+                b1 += f[0] * th.sin() * 2.0 / steps as f64;
+                area += 0.5 * (f[0] + prev.1) * (u[0] - prev.0);
+            }
+            prev = (u[0], f[0]);
+        }
+        (b1 / x, area)
+    }
+
+    #[test]
+    fn saturating_spring_has_the_describing_function_of_a_saturation_and_no_loss() {
+        let (k, fmax) = (6.0e3, 3.0);
+        for x in [0.25e-3, 0.5e-3, 1.0e-3, 4.0e-3, 2.0e-2] {
+            let (kx, area) = saturating_cycle(k, fmax, x, 200_000);
+            let r: f64 = (fmax / (k * x)).min(1.0);
+            let exact = 2.0 * k / std::f64::consts::PI * (r.asin() + r * (1.0 - r * r).sqrt());
+            approx::assert_relative_eq!(kx, exact, max_relative = 1e-6);
+            assert!(area.abs() < 1e-9 * fmax * x, "X {x}: loop area {area}");
+        }
+        // below the bound it is the linear spring
+        let (kx, _) = saturating_cycle(k, fmax, 0.4 * fmax / k, 1000);
+        approx::assert_relative_eq!(kx, k, max_relative = 1e-9);
+    }
+
+    #[test]
+    fn saturating_spring_in_the_integrator_conserves_the_closed_form_energy() {
+        // a mass on a spring k0 and a saturating spring (k, F) to ground,
+        // undamped, released from x0 beyond F/k: the potential is
+        // k0 x²/2 + k x²/2 (|x| ≤ F/k) or F |x| − F²/(2k) (beyond), so the
+        // speed through 0 is √(2 V(x0) / m) and every turning point ±x0
+        let text = "masses = [1.0]\n[[spring]]\ndofs = [1]\nstiffness = 4000.0\n\
+                    [[saturating]]\ndofs = [1]\nstiffness = 6000.0\nforce = 3.0\n";
+        let model = crate::model::Model::from_toml_str(text, "test").unwrap();
+        assert_eq!(compile(&model).len(), 1);
+        let (m, k0, k, fmax, x0): (f64, f64, f64, f64, f64) = (1.0, 4.0e3, 6.0e3, 3.0, 2.0e-3);
+        let v_exact = (2.0 * (0.5 * k0 * x0 * x0 + fmax * x0 - fmax * fmax / (2.0 * k)) / m).sqrt();
+        let (rate, n) = (2000.0, 4000);
+        let force = nalgebra::DMatrix::zeros(1, n);
+        let settings = crate::integrate::SimSettings {
+            substeps: 8,
+            ..Default::default()
+        };
+        let sim = crate::integrate::Integrator::new(&model, rate, settings)
+            .unwrap()
+            .run(force.as_view(), &[x0], &[0.0]);
+        assert!(sim.completed(), "{:?}", sim.status);
+        let vmax = (0..n).map(|s| sim.v[(0, s)].abs()).fold(0.0, f64::max);
+        approx::assert_relative_eq!(vmax, v_exact, max_relative = 1e-3);
+        // no loss: the last swing still reaches −x0 and +x0
+        let last: Vec<f64> = (n - 200..n).map(|s| sim.u[(0, s)]).collect();
+        let (lo, hi) = last
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &u| (a.min(u), b.max(u)));
+        approx::assert_relative_eq!(hi, x0, max_relative = 2e-3);
+        approx::assert_relative_eq!(lo, -x0, max_relative = 2e-3);
+        // a bad bound is named
+        let bad = text.replace("force = 3.0", "force = -1.0");
+        let err = crate::model::Model::from_toml_str(&bad, "test").unwrap_err();
+        assert!(err.to_string().contains("saturating[0].force"), "{err}");
     }
 }

@@ -21,7 +21,7 @@ use std::sync::Arc;
 
 pub use elements::{
     Clearance, Contact, Cubic, CubicDamper, Friction, Jenkins, Quadratic, QuadraticDamper,
-    RelativeFriction,
+    RelativeFriction, Saturating,
 };
 
 /// A linear spring between two DOFs, or from a DOF to ground.
@@ -135,6 +135,9 @@ pub struct Model {
     /// Jenkins elements (a spring in series with a Coulomb slider).
     #[serde(default, rename = "jenkins", skip_serializing_if = "Vec::is_empty")]
     pub jenkins: Vec<Jenkins>,
+    /// Saturating springs (elastic softening: `k δ` clipped at `±F`).
+    #[serde(default, rename = "saturating", skip_serializing_if = "Vec::is_empty")]
+    pub saturating: Vec<Saturating>,
     /// Linear parameters marked free (`[free]`: `masses`, `springs`,
     /// `damping`, each true or false, defaults those of
     /// [`crate::calibrate::Freedom`]): their values are starting values,
@@ -309,7 +312,8 @@ impl Model {
             && self.cubic_dampers.is_empty()
             && self.clearances.is_empty()
             && self.relative_frictions.is_empty()
-            && self.jenkins.is_empty())
+            && self.jenkins.is_empty()
+            && self.saturating.is_empty())
     }
 
     /// A copy without nonlinear elements.
@@ -324,6 +328,7 @@ impl Model {
             clearances: vec![],
             relative_frictions: vec![],
             jenkins: vec![],
+            saturating: vec![],
             ..self.clone()
         }
     }
@@ -507,6 +512,18 @@ impl Model {
                     "jenkins[{i}].slip_force = {}: must be >= 0",
                     e.slip_force
                 ));
+            }
+        }
+        for (i, e) in self.saturating.iter().enumerate() {
+            check_dofs(format!("saturating[{i}]"), &e.dofs, true)?;
+            if !(e.stiffness.is_finite() && e.stiffness > 0.0) {
+                return err(format!(
+                    "saturating[{i}].stiffness = {}: must be > 0",
+                    e.stiffness
+                ));
+            }
+            if !(e.force.is_finite() && e.force > 0.0) {
+                return err(format!("saturating[{i}].force = {}: must be > 0", e.force));
             }
         }
         Ok(())

@@ -39,6 +39,22 @@ pub enum Direction {
     Coordinate,
 }
 
+/// An elastic softening beside the slider on the interface coordinate: a
+/// saturating spring ([`crate::model::Saturating`], `k_e q` clipped at
+/// `±F_e` in the coordinate's displacement `q`) whose stiffness `k_e` is
+/// taken out of the coordinate's linear stiffness, so that below `F_e`
+/// the model is still the linear model; once its force reaches `F_e` the
+/// interface loses `k_e` without dissipating (a preloaded contact that
+/// separates).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Softening {
+    /// `k_e / k_J`: its stiffness as a share of the Jenkins elements'
+    /// (> 0).
+    pub share: f64,
+    /// The bound of its force `F_e`, N (> 0).
+    pub force: f64,
+}
+
 /// What [`super::fit::fit`] fits.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FitSpec {
@@ -71,6 +87,14 @@ pub struct FitSpec {
     /// one per non-residual mode (None: the relative displacement of
     /// [`FitSpec::pair`], [`pair_participations`]).
     pub participations: Option<Vec<f64>>,
+    /// With [`Direction::Coordinate`]: hold the participations at
+    /// [`FitSpec::participations`] (which must then be given) instead of
+    /// fitting them.
+    pub hold_participations: bool,
+    /// With [`Direction::Coordinate`]: an elastic softening beside the
+    /// slider, its share and force bound fitted (on their logarithms) from
+    /// these starts (None: the slider alone).
+    pub softening: Option<Softening>,
     /// Linear parameters fitted with the interface (empty: the identified
     /// linear part held).
     pub modes: Vec<ModeParam>,
@@ -122,6 +146,20 @@ impl FitSpec {
         }
         if self.substeps == 0 || self.max_simulations == 0 || self.elements == 0 {
             return bad("substeps, elements and max_simulations must be > 0".into());
+        }
+        if self.hold_participations && self.participations.is_none() {
+            return bad("held participations must be given".into());
+        }
+        if let Some(e) = &self.softening {
+            if self.direction != Direction::Coordinate {
+                return bad("a softening acts on the interface coordinate only".into());
+            }
+            if !(e.share > 0.0 && e.share.is_finite() && e.force > 0.0 && e.force.is_finite()) {
+                return bad(format!(
+                    "softening share {} and force {} must be > 0",
+                    e.share, e.force
+                ));
+            }
         }
         Ok(())
     }
@@ -269,7 +307,10 @@ pub fn pair_participations(base: &modal::ModalSection, spec: &FitSpec) -> Result
 /// linear stiffness of that coordinate, so that stuck the model is the
 /// linear model and fully slipped the stiffness of the modes loses
 /// `k_J g gᵀ` (mode `r` alone: `ω_r² (1 − δ_r²)`). `k_J` is
-/// [`coordinate_stiffness`]; it only sets the coordinate's scale.
+/// [`coordinate_stiffness`]; it only sets the coordinate's scale. With
+/// [`FitSpec::softening`] a saturating spring `k_e = share · k_J` acts
+/// beside it and `k_e` is taken out too (slipped and saturated, mode `r`
+/// alone keeps `ω_r² (1 − δ_r² (1 + share))`).
 pub fn coordinate_model(
     base: &modal::ModalSection,
     spec: &FitSpec,
@@ -307,6 +348,14 @@ pub fn coordinate_model(
         .cloned()
         .ok_or_else(|| TacitError::Numerical("the modal model has no matrices".into()))?;
     lin.k_rest[(s - 1, s - 1)] -= k_j;
+    if let Some(e) = &spec.softening {
+        lin.k_rest[(s - 1, s - 1)] -= e.share * k_j;
+        m.saturating.push(crate::model::Saturating {
+            dofs: vec![s],
+            stiffness: e.share * k_j,
+            force: e.force,
+        });
+    }
     m.matrices = Some(Arc::new(lin));
     push_jenkins(&mut m, spec, vec![s], k_j, slip_force);
     Ok(m)
@@ -334,6 +383,8 @@ impl Default for FitSpec {
             spread: 1.0,
             fit_spread: false,
             participations: None,
+            hold_participations: false,
+            softening: None,
             upper_residual_factor: 1.0,
             upper_residual_damping: Some(0.3),
             modes: vec![],
@@ -451,5 +502,60 @@ shape = [0.1, -0.4, 0.4]
         let d = pair_participations(&s, &spec).unwrap();
         assert_eq!(d.len(), 3);
         assert!(d.iter().all(|v| v.abs() > 0.0));
+    }
+
+    #[test]
+    fn elastic_softening_keeps_the_linear_model_below_its_bound_and_adds_its_share_saturated() {
+        let mut s = section();
+        s.modes.push(modal::ModalMode {
+            frequency_hz: 30.0,
+            damping: 0.05,
+            shape: vec![0.2, 0.1, -0.3],
+            residual: true,
+        });
+        let d = &held_model(&s).unwrap().springs[0].dofs;
+        let spec = FitSpec {
+            direction: Direction::Coordinate,
+            pair: [d[0], d[1]],
+            upper_residual_damping: None,
+            participations: Some(vec![0.0, 0.0, 0.6]),
+            hold_participations: true,
+            softening: Some(Softening {
+                share: 0.5,
+                force: 3.0,
+            }),
+            ..Default::default()
+        };
+        spec.validate().unwrap();
+        let m = coordinate_model(&s, &spec, &[], &[0.0, 0.0, 0.6], 1.0).unwrap();
+        assert_eq!(m.saturating.len(), 1);
+        assert_eq!(m.saturating[0].dofs, [4]);
+        let k_j = coordinate_stiffness(&s, &spec).unwrap();
+        approx::assert_relative_eq!(m.saturating[0].stiffness, 0.5 * k_j, max_relative = 1e-12);
+        // the parameter vector with held participations: (ln share_e,
+        // ln F_e, ln F_s); the model at it is the one above
+        let x = [0.5f64.ln(), 3.0f64.ln(), 1.0f64.ln()];
+        let p = super::super::fit::unpack(&spec, &x);
+        assert_eq!(p.middle, vec![0.0, 0.0, 0.6]);
+        approx::assert_relative_eq!(p.softening.unwrap().force, 3.0, max_relative = 1e-12);
+        let f = describe(&m, &s, &spec, &x).unwrap();
+        approx::assert_relative_eq!(f.softening_stiffness, 0.5 * k_j, max_relative = 1e-12);
+        // below every bound: the linear model's modes; slipped and
+        // saturated the 7-Hz mode keeps 1 − δ² (1 + share) of its ω²
+        for (got, w) in f.stuck_hz.iter().zip([3.0, 5.0, 7.0, 30.0]) {
+            assert!((got - w).abs() < 1e-7 * w, "stuck {:?}", f.stuck_hz);
+        }
+        let mut got = f.slipped_hz.clone();
+        got.sort_by(f64::total_cmp);
+        let soft = 7.0 * (1.0 - 0.36 * 1.5f64).sqrt();
+        for (g, w) in got.iter().zip([3.0, soft, 5.0, 30.0]) {
+            assert!((g - w).abs() < 1e-7 * w, "slipped {:?}", f.slipped_hz);
+        }
+        // a softening between two points is refused
+        let bad = FitSpec {
+            direction: Direction::Points,
+            ..spec.clone()
+        };
+        assert!(bad.validate().is_err());
     }
 }

@@ -1,6 +1,7 @@
 //! The interface fitted by open-loop output error over the steady-state
 //! samples of one or more records: Levenberg–Marquardt on the logarithms
-//! of the slip force and the Jenkins share (the participations linear).
+//! of the slip force, the Jenkins share, the density's exponent and the
+//! elastic softening's share and bound (the participations linear).
 //! The Jenkins element's slip state has no derivative recursion in the
 //! integrator, so the Jacobian is taken by centered finite differences of
 //! the simulation (step [`FitSpec::fd_step`] in the logarithm), one
@@ -28,8 +29,8 @@ pub struct Fitted {
     pub participations: Vec<(f64, f64)>,
     /// Natural frequencies of the model stuck (the linear model), Hz.
     pub stuck_hz: Vec<f64>,
-    /// Natural frequencies with every slider slipping (the Jenkins
-    /// springs removed), Hz.
+    /// Natural frequencies with every slider slipping and the softening
+    /// saturated (the Jenkins and saturating springs removed), Hz.
     pub slipped_hz: Vec<f64>,
     /// The coupling spring of the identified model between the points of
     /// [`FitSpec::pair`], N/m.
@@ -44,6 +45,10 @@ pub struct Fitted {
     pub elements: usize,
     /// The exponent of the slip-force density ([`FitSpec::spread`]).
     pub spread: f64,
+    /// The elastic softening beside the slider ([`FitSpec::softening`]).
+    pub softening: Option<Softening>,
+    /// Its stiffness `k_e`, N/m (0 without).
+    pub softening_stiffness: f64,
     /// The linear parameters fitted with it: (parameter, factor).
     pub modes: Vec<(ModeParam, f64)>,
     /// Records fitted on.
@@ -76,27 +81,42 @@ pub(super) struct Parts {
     /// Factors on the linear parameters of [`FitSpec::modes`].
     pub factors: Vec<f64>,
     /// The share of the coupling ([`Direction::Points`]) or the
-    /// participations, scaled into `|δ| ≤ 0.95` ([`Direction::Coordinate`]).
+    /// participations, scaled so that the model fully slipped (and
+    /// saturated) stays stable: `|δ|² (1 + share_e) ≤ 0.95²`
+    /// ([`Direction::Coordinate`]).
     pub middle: Vec<f64>,
+    /// The elastic softening ([`FitSpec::softening`]).
+    pub softening: Option<Softening>,
     /// The exponent of the slip-force density.
     pub spread: f64,
     /// The (largest) slip force, N.
     pub slip_force: f64,
 }
 
-/// `x = [ln factors..., ln share | δ..., (ln p), ln F_s]`
-/// ([`Direction::Points`] | [`Direction::Coordinate`]; `ln p` with
-/// [`FitSpec::fit_spread`] and several elements).
+/// `x = [ln factors..., ln share | δ..., (ln share_e, ln F_e), (ln p), ln F_s]`
+/// ([`Direction::Points`] | [`Direction::Coordinate`], the `δ` absent when
+/// [`FitSpec::hold_participations`]; `ln share_e, ln F_e` with
+/// [`FitSpec::softening`]; `ln p` with [`FitSpec::fit_spread`] and several
+/// elements).
 pub(super) fn unpack(spec: &FitSpec, x: &[f64]) -> Parts {
     let nm = spec.modes.len();
     let n = x.len();
-    let with_p = fits_spread(spec);
-    let end = if with_p { n - 2 } else { n - 1 };
+    let with_p = fits_spread(spec) as usize;
+    let with_e = 2 * spec.softening.is_some() as usize;
+    let end = n - 1 - with_p - with_e;
+    let softening = spec.softening.map(|_| Softening {
+        share: x[end].exp(),
+        force: x[end + 1].exp(),
+    });
     let middle = match spec.direction {
         Direction::Points => vec![x[nm].exp().min(1.0)],
         Direction::Coordinate => {
-            let d = &x[nm..end];
-            let norm = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let d = match (&spec.participations, spec.hold_participations) {
+                (Some(p), true) => p.as_slice(),
+                _ => &x[nm..end],
+            };
+            let grow = 1.0 + softening.map_or(0.0, |e| e.share);
+            let norm = d.iter().map(|v| v * v).sum::<f64>().sqrt() * grow.sqrt();
             let scale = if norm > 0.95 { 0.95 / norm } else { 1.0 };
             d.iter().map(|v| v * scale).collect()
         }
@@ -104,7 +124,12 @@ pub(super) fn unpack(spec: &FitSpec, x: &[f64]) -> Parts {
     Parts {
         factors: x[..nm].iter().map(|v| v.exp()).collect(),
         middle,
-        spread: if with_p { x[n - 2].exp() } else { spec.spread },
+        softening,
+        spread: if with_p == 1 {
+            x[n - 2].exp()
+        } else {
+            spec.spread
+        },
         slip_force: x[n - 1].exp(),
     }
 }
@@ -119,6 +144,7 @@ pub(super) fn model_at(base: &modal::ModalSection, spec: &FitSpec, x: &[f64]) ->
     let p = unpack(spec, x);
     let spec = FitSpec {
         spread: p.spread,
+        softening: p.softening,
         ..spec.clone()
     };
     match spec.direction {
@@ -220,10 +246,14 @@ pub fn fit(
     let mut x0 = vec![0.0; nm];
     match spec.direction {
         Direction::Points => x0.push(spec.share.ln()),
+        Direction::Coordinate if spec.hold_participations => {}
         Direction::Coordinate => match &spec.participations {
             Some(d) => x0.extend(d),
             None => x0.extend(pair_participations(base, spec)?),
         },
+    }
+    if let Some(e) = &spec.softening {
+        x0.extend([e.share.ln(), e.force.ln()]);
     }
     if fits_spread(spec) {
         x0.push(spec.spread.ln());
@@ -297,9 +327,12 @@ pub(super) fn describe(
         }
     };
     let mut stuck = model.stiffness_matrix();
+    let ends = |d: &[usize]| (d[0] - 1, d.get(1).map(|d| d - 1));
     for e in &model.jenkins {
-        let ends = (e.dofs[0] - 1, e.dofs.get(1).map(|d| d - 1));
-        crate::model::add_spring(&mut stuck, ends, e.stiffness);
+        crate::model::add_spring(&mut stuck, ends(&e.dofs), e.stiffness);
+    }
+    for e in &model.saturating {
+        crate::model::add_spring(&mut stuck, ends(&e.dofs), e.stiffness);
     }
     let mass = model.mass_matrix();
     Ok(Fitted {
@@ -313,6 +346,8 @@ pub(super) fn describe(
         slip_displacement: j.slip_force / j.stiffness,
         elements: model.jenkins.len(),
         spread: parts.spread,
+        softening: parts.softening,
+        softening_stiffness: model.saturating.iter().map(|e| e.stiffness).sum(),
         modes: spec
             .modes
             .iter()

@@ -26,7 +26,15 @@
 //!    (started from the pair's relative displacement) and `F_s`;
 //! 3. with [`OfferSettings::iwan`] elements, an Iwan model on the same
 //!    coordinate, started from stage 2, the exponent of its slip-force
-//!    density fitted too.
+//!    density fitted too;
+//! 4. with [`OfferSettings::softening`], an elastic softening beside the
+//!    slider ([`Softening`]: a saturating spring on the same coordinate,
+//!    stiffness `k_e` lost once its force reaches `F_e`), started from
+//!    stage 3 (or 2) with the participations held: `k_e`, `F_e`, the
+//!    slider's slip force and density fitted. A friction law alone ties
+//!    the softening to the dissipation (both come from the same slipping
+//!    elements); this stage lets the interface soften before it
+//!    dissipates.
 //!
 //! Every interface model and the linear alternatives the caller gives (the
 //! declared model, the diagnosed model, a model identified at another
@@ -42,7 +50,7 @@ mod restoring;
 
 pub use build::{
     coordinate_model, coordinate_stiffness, model_with, pair_participations, Direction, FitSpec,
-    ModeParam, INTERFACE,
+    ModeParam, Softening, INTERFACE,
 };
 pub use fit::{fit, Fitted};
 pub use restoring::{restoring, restoring_figure, Restoring};
@@ -118,6 +126,10 @@ pub struct OfferSettings {
     pub pair_simulations: usize,
     /// Elements of the Iwan model of stage 3 (None or 1: no stage 3).
     pub iwan: Option<usize>,
+    /// Stage 4: the start of the elastic softening's share `k_e / k_J`
+    /// (its bound starts at the smallest slip force of the stage it
+    /// starts from); None: no stage 4.
+    pub softening: Option<f64>,
 }
 
 impl Default for OfferSettings {
@@ -130,6 +142,7 @@ impl Default for OfferSettings {
             },
             pair_simulations: 60,
             iwan: None,
+            softening: None,
         }
     }
 }
@@ -147,6 +160,13 @@ impl OfferSettings {
             return Err(TacitError::Setting(
                 "interface: an Iwan model needs at least one element".into(),
             ));
+        }
+        if let Some(e) = self.softening {
+            if !(e > 0.0 && e.is_finite()) {
+                return Err(TacitError::Setting(format!(
+                    "interface: the softening's share {e} must be > 0"
+                )));
+            }
         }
         Ok(())
     }
@@ -178,6 +198,8 @@ pub struct Offer {
     pub jenkins: Fitted,
     /// Stage 3: the Iwan model on the interface coordinate.
     pub iwan: Option<Fitted>,
+    /// Stage 4: the slider with an elastic softening on the coordinate.
+    pub softened: Option<Fitted>,
     /// Where the interface couples: per pair of measured points
     /// (`a–b`) and per point to ground (`a–ground`), the cosine between
     /// the fitted participations of the chosen interface model and those
@@ -193,11 +215,28 @@ impl Offer {
         self.ranking.first().map_or("", |r| r.name.as_str())
     }
 
-    /// The best interface model (its fit).
+    /// The best interface model on the coordinate (its fit).
     pub fn best_interface(&self) -> &Fitted {
-        match &self.iwan {
-            Some(i) if self.rank_of(IWAN) < self.rank_of(JENKINS) => i,
-            _ => &self.jenkins,
+        let mut best = (self.rank_of(JENKINS), &self.jenkins);
+        for (name, f) in [(IWAN, &self.iwan), (SOFTENED, &self.softened)] {
+            if let Some(f) = f {
+                if self.rank_of(name) < best.0 {
+                    best = (self.rank_of(name), f);
+                }
+            }
+        }
+        best.1
+    }
+
+    /// The fit of the interface model named `name` in [`Offer::ranking`]
+    /// (None for a model that is not an interface model).
+    pub fn fitted(&self, name: &str) -> Option<&Fitted> {
+        match name {
+            PAIR => Some(&self.pair),
+            JENKINS => Some(&self.jenkins),
+            IWAN => self.iwan.as_ref(),
+            SOFTENED => self.softened.as_ref(),
+            _ => None,
         }
     }
 
@@ -237,6 +276,8 @@ pub const PAIR: &str = "jenkins between the pair";
 pub const JENKINS: &str = "jenkins on the interface coordinate";
 /// Name of stage 3's model in [`Offer::ranking`].
 pub const IWAN: &str = "iwan on the interface coordinate";
+/// Name of stage 4's model in [`Offer::ranking`].
+pub const SOFTENED: &str = "slider and elastic softening on the interface coordinate";
 
 /// Fit the interface ([module docs](self)) of the modal model `section` on
 /// the estimation `records` (resolved to the model's points), and rank it
@@ -278,14 +319,25 @@ pub fn offer(
     let mut models = alternatives;
     models.push((PAIR.into(), pair_model));
     models.push((JENKINS.into(), jenkins_model));
-    let iwan = match s.iwan {
+    let (iwan, last) = match s.iwan {
         Some(n) if n > 1 => {
             progress("interface: the Iwan model on the interface coordinate");
-            let (f, m) = fit(section, records, &iwan_spec(&coord, &jenkins, n))?;
+            let spec = iwan_spec(&coord, &jenkins, n);
+            let (f, m) = fit(section, records, &spec)?;
             models.push((IWAN.into(), m));
+            (Some(f), spec)
+        }
+        _ => (None, coord.clone()),
+    };
+    let softened = match s.softening {
+        Some(share) => {
+            progress("interface: the slider and an elastic softening on the coordinate");
+            let from = iwan.as_ref().unwrap_or(&jenkins);
+            let (f, m) = fit(section, records, &softening_spec(&last, from, share))?;
+            models.push((SOFTENED.into(), m));
             Some(f)
         }
-        _ => None,
+        None => None,
     };
     progress("interface: ranking on the estimation records");
     let ranking = rank(&models, records, &s.spec, [&pair, &jenkins])?;
@@ -297,6 +349,7 @@ pub fn offer(
         pair,
         jenkins,
         iwan,
+        softened,
         coupling: vec![],
         ranking,
     };
@@ -317,6 +370,24 @@ fn iwan_spec(coord: &FitSpec, jenkins: &Fitted, n: usize) -> FitSpec {
         slip_force: jenkins.slip_force / sum,
         participations: Some(jenkins.participations.iter().map(|p| p.1).collect()),
         ..coord.clone()
+    }
+}
+
+/// Stage 4's settings: the slider of `from` (fitted with `spec`) with its
+/// participations held, and a saturating spring of `share · k_J` whose
+/// bound starts at the slider's smallest slip force.
+fn softening_spec(spec: &FitSpec, from: &Fitted, share: f64) -> FitSpec {
+    let n = spec.elements.max(1);
+    FitSpec {
+        spread: from.spread,
+        slip_force: from.slip_force,
+        participations: Some(from.participations.iter().map(|p| p.1).collect()),
+        hold_participations: true,
+        softening: Some(Softening {
+            share,
+            force: from.slip_force * (1.0 / n as f64).powf(from.spread),
+        }),
+        ..spec.clone()
     }
 }
 
@@ -341,7 +412,7 @@ fn rank(
         }
         let acts = match name.as_str() {
             PAIR => pair.points.join("–"),
-            JENKINS | IWAN => coord.points.join("–"),
+            JENKINS | IWAN | SOFTENED => coord.points.join("–"),
             _ => describe_effects(m),
         };
         out.push(Ranked {

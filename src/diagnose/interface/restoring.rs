@@ -23,7 +23,8 @@ pub struct Restoring {
     pub displacement: Vec<f64>,
     /// Relative displacement of the pair (first minus second), m.
     pub relative: Vec<f64>,
-    /// Force of the elements on the coordinate, N.
+    /// Force of the elements on the coordinate (the sliders' and the
+    /// elastic softening's), N.
     pub force: Vec<f64>,
     /// The slip force (the largest), N.
     pub slip_force: f64,
@@ -35,8 +36,8 @@ pub struct Restoring {
     pub follows: Vec<(String, f64)>,
 }
 
-/// Simulate `model` (with the [`INTERFACE`] point and its Jenkins
-/// elements) from rest under the record's force and return the elements'
+/// Simulate `model` (with the [`INTERFACE`] point, its Jenkins elements
+/// and any saturating spring on it) from rest under the record's force and return the elements'
 /// force over the last `samples` samples, with the interface displacement
 /// and the pair's relative displacement (`pair`: DOFs from 1). The slip of
 /// each element is replayed on the simulated displacement at the sample
@@ -63,6 +64,11 @@ pub fn restoring(
         .iter()
         .filter(|j| j.dofs == [dof + 1])
         .collect();
+    let soft: Vec<_> = model
+        .saturating
+        .iter()
+        .filter(|e| e.dofs == [dof + 1])
+        .collect();
     let mut slips = vec![0.0; els.len()];
     let (mut displacement, mut relative, mut force) = (vec![], vec![], vec![]);
     let (a, b) = (pair[0] - 1, pair[1] - 1);
@@ -73,6 +79,9 @@ pub fn restoring(
             let (fe, _) = crate::model::elements::jenkins_law(e.stiffness, e.slip_force, d, *z);
             *z = d - fe / e.stiffness;
             f += fe;
+        }
+        for e in &soft {
+            f += (e.stiffness * d).clamp(-e.force, e.force);
         }
         if k >= k0 {
             displacement.push(d);
