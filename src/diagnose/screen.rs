@@ -279,3 +279,36 @@ fn recentred(
     }
     leaves.then_some(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Friction;
+    use crate::update::param::Target;
+
+    /// A friction level traced at 8 mN with the fit's bounds (−99 %,
+    /// +1000 %) around it: a step to 0.09 N leaves them and is the start;
+    /// a step inside them, or to a negative level, is not.
+    #[test]
+    fn a_step_beyond_the_bounds_is_the_start_and_one_inside_is_not() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let mut model = Model::from_file(std::path::Path::new(p)).unwrap();
+        model.frictions = vec![Friction {
+            dof: 1,
+            level: 0.008,
+            velocity: 1e-3,
+        }];
+        let par = Parameter::relative(&model, Target::FrictionLevel(0))
+            .unwrap()
+            .with_relative_bounds(-0.99, 10.0);
+        let params = [par.clone()];
+        let (lo, hi) = (vec![par.to_x(par.lower)], vec![par.to_x(par.upper)]);
+        // linearized at no friction
+        let x = vec![par.to_x(0.0)];
+        let step = |v: f64| vec![par.to_x(v) - x[0]];
+        let got = recentred(&params, (&x, &step(0.09)), (&lo, &hi), 1).unwrap();
+        assert!((got[0] - 0.09).abs() < 1e-12, "{got:?}");
+        assert!(recentred(&params, (&x, &step(0.05)), (&lo, &hi), 1).is_none());
+        assert!(recentred(&params, (&x, &step(-0.2)), (&lo, &hi), 1).is_none());
+    }
+}
