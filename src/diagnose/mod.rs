@@ -189,6 +189,7 @@ pub fn diagnose(
         measured: prep.comparison.measured(),
         located: prep.located.as_ref().map(|l| l.matrix(declared.ndof())),
         tolerated: Default::default(),
+        measured_noise: noise.as_ref().map(|n| n.level),
     };
     let sim0 = substeps::resolved(declared, rec.fs, settings, &prep.recon.states);
     progress("errors before");

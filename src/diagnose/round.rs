@@ -45,16 +45,20 @@ fn fit_trial(
     )
 }
 
-/// Add `best` to the current model, fit every added effect and score
+/// Add `best` to the current model (its own parameters at `start` when
+/// given, else at the traced values), fit every added effect and score
 /// the fitted model.
 pub(super) fn fit_scored(
     ctx: &Context<'_>,
     st: &mut State,
     best: RankedEffect,
     correction: Option<&DMatrix<f64>>,
-    predicted: Option<&[Vec<f64>]>,
+    (predicted, start): (Option<&[Vec<f64>]>, Option<&[f64]>),
 ) -> Result<Trial> {
-    let (model, effect, all) = add_to(st, &best);
+    let (mut model, effect, all) = add_to(st, &best);
+    for (t, &v) in effect.targets.iter().zip(start.unwrap_or_default()) {
+        t.set(&mut model, v);
+    }
     let t = Instant::now();
     let fit = fit_trial(ctx, &model, &all, correction, predicted)?;
     st.simulations += fit.simulations;
@@ -92,7 +96,7 @@ pub(super) fn run(
     index: usize,
     progress: &dyn Fn(&str),
 ) -> Result<Next> {
-    let floor = ctx.settings.noise_floor();
+    let floor = stop_floor(ctx);
     if let Some(error) = st.error.filter(|&e| e <= floor) {
         let decision = Decision::AtNoise { error, floor };
         st.rounds.push(Round::unfitted(decision, 0));
@@ -131,7 +135,7 @@ pub(super) fn run(
         st,
         chosen.best,
         correction.as_ref(),
-        chosen.predicted.as_deref(),
+        (chosen.predicted.as_deref(), chosen.start.as_deref()),
     )?;
     let fit_sims = trial.fit.simulations;
     let (trial, alternative) = if screened {
@@ -150,6 +154,16 @@ pub(super) fn run(
     Ok(apply(st, trial, judged))
 }
 
+/// The multiple-shooting error at or below which the loop seeks no
+/// further effect: the noise floor, or [`super::NoiseSettings::stop_multiple`]
+/// × the level measured on the record when that is lower (a small effect
+/// above the measured noise is not taken for noise).
+fn stop_floor(ctx: &Context<'_>) -> f64 {
+    let floor = ctx.settings.noise_floor();
+    let stop = ctx.settings.noise.stop_multiple;
+    ctx.measured_noise.map_or(floor, |m| floor.min(stop * m))
+}
+
 /// Fit the law against ground `g` ([`super::ground::propose`]) and keep
 /// it when it pays (`Continue`); a withdrawn one is recorded as a round
 /// and leaves the model as it was (`Stop`: the trace's choice is tried).
@@ -160,7 +174,7 @@ fn ground_round(
     progress: &dyn Fn(&str),
 ) -> Result<Next> {
     progress(&format!("fit {} (against ground)", g.label));
-    let trial = fit_scored(ctx, st, g, None, None)?;
+    let trial = fit_scored(ctx, st, g, None, (None, None))?;
     let judged = decide::judge(ctx, st, &trial, None);
     let kept = matches!(judged.decision, Decision::Kept { .. });
     st.rounds.push(Round {
@@ -286,7 +300,7 @@ pub(super) fn try_cubic(
     };
     progress(&format!("fit {} (alternative)", alt.label));
     let start = alt.parameters.clone();
-    let second = fit_scored(ctx, st, alt, None, None)?;
+    let second = fit_scored(ctx, st, alt, None, (None, None))?;
     let (e1, e2) = (trial.scored.error, second.scored.error);
     let taken = e2.is_some_and(|e2| e1.is_none_or(|e| e2 < e));
     let tried = AlternativeTried {

@@ -22,6 +22,7 @@ use crate::error::Result;
 use crate::integrate::SimSettings;
 use crate::model::Model;
 use crate::trace::{self, EffectKind, RankedEffect, TraceResult};
+use crate::update::param::Parameter;
 use crate::update::shooting::Segment;
 use nalgebra::DMatrix;
 use std::time::Instant;
@@ -32,6 +33,10 @@ pub(super) struct Chosen {
     pub best: RankedEffect,
     /// Start values from the joint linearization's step (below the screen).
     pub predicted: Option<Vec<Vec<f64>>>,
+    /// The candidate's own parameters at the linearization's step, when
+    /// the step leaves the box the fit's bounds set around the traced
+    /// values: the fit starts there and its bounds follow ([`Recentred`]).
+    pub start: Option<Vec<f64>>,
 }
 
 /// The candidates of a round, in the order they are tried: the one the
@@ -98,6 +103,7 @@ pub(super) fn choose(
     for best in pool {
         let (model, _, all) = add_to(st, &best);
         let mut predicted = None;
+        let mut start = None;
         // (a spring to ground on a free-free model is judged on states
         // reconstructed with it, [`super::prepare::rescore_prep`]:
         // linearized on the declared model's reconstruction its gain is
@@ -109,13 +115,15 @@ pub(super) fn choose(
                 let t = Instant::now();
                 let strides = &ctx.settings.screen.gn_strides;
                 let gain = companion_gain(&model, &all, ctx.cmp(), (segs, *sim), strides);
-                let (g, n, at) = gain.unwrap_or_else(|e| {
+                let p = gain.unwrap_or_else(|e| {
                     let step = format!("predicted gain of {}", best.label);
                     ctx.tolerate(&step, e, "fitted without a predicted gain");
-                    (None, 0, None)
+                    Predicted::default()
                 });
-                sims += n;
-                predicted = at;
+                let g = p.gain;
+                sims += p.simulations;
+                predicted = p.at;
+                start = p.start;
                 add_time(&mut st.timings, "fit", t);
                 if let Some(g) = g.filter(|&g| g < below.screen) {
                     below.screened_out.push((best.label.clone(), g));
@@ -123,7 +131,12 @@ pub(super) fn choose(
                 }
             }
         }
-        return (Some(Chosen { best, predicted }), below, sims);
+        let chosen = Chosen {
+            best,
+            predicted,
+            start,
+        };
+        return (Some(chosen), below, sims);
     }
     (None, below, sims)
 }
@@ -140,9 +153,22 @@ fn companion_screen(err: Option<f64>, settings: &DiagnoseSettings) -> f64 {
     }
 }
 
-/// A predicted gain, the simulations spent and the parameter values at
-/// the strides of the linearization's step.
-type Predicted = (Option<f64>, usize, Option<Vec<Vec<f64>>>);
+/// What the joint linearization predicts for a candidate below the
+/// screen.
+#[derive(Default)]
+struct Predicted {
+    /// The fraction of the fit cost it is predicted to remove (None when a
+    /// simulation failed).
+    gain: Option<f64>,
+    /// Simulations spent.
+    simulations: usize,
+    /// Every parameter's value at the strides of the step, clamped to the
+    /// fit's bounds (starts for the fit).
+    at: Option<Vec<Vec<f64>>>,
+    /// The candidate's own parameters at one step, unclamped, when the
+    /// step leaves their bounds ([`recentred`]).
+    start: Option<Vec<f64>>,
+}
 
 /// The fraction of the fit cost a candidate below the screen (the last
 /// effect of `all` on `trial`, taken at no change: a spring at its declared
@@ -165,7 +191,7 @@ fn companion_gain(
         params.extend(effects::parameters(trial, e)?);
     }
     let Some(last) = all.last() else {
-        return Ok((None, 0, None));
+        return Ok(Predicted::default());
     };
     // the candidate's own parameters (the last ones); its damping
     // nuisance parameters before them are free with and without it
@@ -191,10 +217,12 @@ fn companion_gain(
     }
     match joint::predicted_gain(&problem, &x, extra) {
         Some((g, dx, n)) => {
+            let (lo, hi) = problem.x_bounds();
+            let own = last.targets.len();
+            let start = recentred(&problem.parameters, (&x, &dx), (&lo, &hi), own);
             // the Gauss–Newton step's parameter values: a start for the
             // fit (the trace's value of a companion comes from a
             // regression on states the effects found already absorb it in)
-            let (lo, hi) = problem.x_bounds();
             let at = strides
                 .iter()
                 .map(|f| {
@@ -206,8 +234,81 @@ fn companion_gain(
                         .collect()
                 })
                 .collect();
-            Ok((Some(g), n, Some(at)))
+            Ok(Predicted {
+                gain: Some(g),
+                simulations: n,
+                at: Some(at),
+                start,
+            })
         }
-        None => Ok((None, 0, None)),
+        None => Ok(Predicted::default()),
+    }
+}
+
+/// The last `own` parameters (the candidate's) at one linearization step
+/// `dx` from `x`, when that step takes one of them beyond its bounds and
+/// each lands on a value the fit can start from (finite, on the
+/// physical side of its floor and not zero: the fit's bounds are
+/// relative to it). The bounds are set around the traced values, and the
+/// trace's regression on the linear model's states can underrate an
+/// effect whose share the linear part took (a friction's share of the
+/// dissipation in a damping calibrated beside it: traced at 8 mN, the
+/// step asks for 0.09 N and the bound at 11 × the traced value holds it
+/// at 0.091 N); starting there moves the box with it. None when the step
+/// stays inside.
+fn recentred(
+    params: &[Parameter],
+    (x, dx): (&[f64], &[f64]),
+    (lo, hi): (&[f64], &[f64]),
+    own: usize,
+) -> Option<Vec<f64>> {
+    let np = params.len();
+    let first = np.checked_sub(own)?;
+    let mut out = Vec::with_capacity(own);
+    let mut leaves = false;
+    for i in first..np {
+        let p = &params[i];
+        let xi = x[i] + dx[i];
+        leaves |= xi > hi[i] || xi < lo[i];
+        let v = p.from_x(xi);
+        let floor = p.target.physical_floor();
+        if !v.is_finite() || v == 0.0 || floor.is_some_and(|f| v <= f) {
+            return None;
+        }
+        out.push(v);
+    }
+    leaves.then_some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Friction;
+    use crate::update::param::Target;
+
+    /// A friction level traced at 8 mN with the fit's bounds (−99 %,
+    /// +1000 %) around it: a step to 0.09 N leaves them and is the start;
+    /// a step inside them, or to a negative level, is not.
+    #[test]
+    fn a_step_beyond_the_bounds_is_the_start_and_one_inside_is_not() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let mut model = Model::from_file(std::path::Path::new(p)).unwrap();
+        model.frictions = vec![Friction {
+            dof: 1,
+            level: 0.008,
+            velocity: 1e-3,
+        }];
+        let par = Parameter::relative(&model, Target::FrictionLevel(0))
+            .unwrap()
+            .with_relative_bounds(-0.99, 10.0);
+        let params = [par.clone()];
+        let (lo, hi) = (vec![par.to_x(par.lower)], vec![par.to_x(par.upper)]);
+        // linearized at no friction
+        let x = vec![par.to_x(0.0)];
+        let step = |v: f64| vec![par.to_x(v) - x[0]];
+        let got = recentred(&params, (&x, &step(0.09)), (&lo, &hi), 1).unwrap();
+        assert!((got[0] - 0.09).abs() < 1e-12, "{got:?}");
+        assert!(recentred(&params, (&x, &step(0.05)), (&lo, &hi), 1).is_none());
+        assert!(recentred(&params, (&x, &step(-0.2)), (&lo, &hi), 1).is_none());
     }
 }

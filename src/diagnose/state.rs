@@ -46,6 +46,8 @@ pub(super) struct Context<'a> {
     pub located: Option<DMatrix<f64>>,
     /// Failures gone on past, each with its fallback.
     pub tolerated: RefCell<Vec<ToleratedFailure>>,
+    /// The noise level measured on the record (None when not measured).
+    pub measured_noise: Option<f64>,
 }
 
 /// A model's multiple shooting on the record.
