@@ -1068,6 +1068,9 @@ fn drop_negligible(d: &mut Diagnosis, bases: &Bases, progress: &dyn Fn(&str)) ->
         let cmp = prepared
             .as_ref()
             .map_or(&d.prepared.comparison, |p| &p.comparison);
+        if needed(cmp, &off, sim, d.predictions.1.as_ref()) {
+            continue;
+        }
         let (after, pred) = cmp.errors(&off, sim);
         if !after
             .relative_error
@@ -1097,6 +1100,58 @@ fn drop_negligible(d: &mut Diagnosis, bases: &Bases, progress: &dyn Fn(&str)) ->
         v.after = own(&d.model, b).comparison.errors(&d.model, sim).0;
     }
     Some(dropped.join("; "))
+}
+
+/// Every this many segments of the record, one is scored in the screen
+/// of an effect switched off ([`needed`]).
+const SCREEN_STRIDE: usize = 4;
+
+/// The rise of the multiple-shooting error on the screen's segments, as a
+/// fraction of the model's with the effect, above which the effect
+/// switched off is needed without scoring every segment ([`needed`]);
+/// 25 × [`NEGLIGIBLE`].
+const SCREEN_RISE: f64 = 0.25;
+
+/// Whether the model `off` (an effect switched off) is clearly worse than
+/// the model whose segment predictions on the record are `with` (p × N):
+/// scored the same way ([`super::Comparison::shoot`]) on every
+/// [`SCREEN_STRIDE`]-th segment only, its multiple-shooting error there
+/// exceeds the one of `with` on the same samples by more than
+/// [`SCREEN_RISE`]. False (score every segment) when it does not, or when a
+/// prediction failed.
+fn needed(
+    cmp: &super::Comparison,
+    off: &Model,
+    sim: SimSettings,
+    with: Option<&nalgebra::DMatrix<f64>>,
+) -> bool {
+    let Some(with) = with else {
+        return false;
+    };
+    let subset: Vec<_> = cmp
+        .segments
+        .iter()
+        .skip(SCREEN_STRIDE / 2)
+        .step_by(SCREEN_STRIDE)
+        .cloned()
+        .collect();
+    if subset.len() < 2 || cmp.starts.iterations == 0 {
+        return false;
+    }
+    let (segs, y, _) = super::starts::refine(cmp, off, sim, &subset, cmp.starts.iterations);
+    // both predictions on the screen's samples only (NaN elsewhere)
+    let blank = || nalgebra::DMatrix::from_element(with.nrows(), with.ncols(), f64::NAN);
+    let (mut a, mut b) = (blank(), blank());
+    for s in &segs {
+        let (ya, yb) = (y.columns(s.start, s.len), with.columns(s.start, s.len));
+        if ya.iter().chain(yb.iter()).any(|v| !v.is_finite()) {
+            return false;
+        }
+        a.columns_mut(s.start, s.len).copy_from(&ya);
+        b.columns_mut(s.start, s.len).copy_from(&yb);
+    }
+    let (e_off, e_with) = (cmp.total_error(&a), cmp.total_error(&b));
+    e_off > e_with * (1.0 + SCREEN_RISE)
 }
 
 /// The linear corrections of the final model against the declared one

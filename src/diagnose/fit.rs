@@ -3,7 +3,7 @@
 //! linearization's step, bracketing a cubic spring's `k3`, and from a scan
 //! of a contact's gap and stiffness (the cost is rough in the gap, see
 //! docs/theory.md); a short race of Levenberg–Marquardt from every start
-//! ([`crate::update::fit_multistart`]); the best carried on with the
+//! ([`crate::update::race`]); the best carried on with the
 //! segment start states ([`super::polish`]).
 
 use super::effects::{self, AddedEffect};
@@ -314,7 +314,7 @@ fn race_and_polish(
         ..fit
     };
     let t = Instant::now();
-    let (_, results) = crate::update::fit_multistart(problem, &race, &starts.list)?;
+    let results = crate::update::race(problem, &race, &starts.list)?;
     sims += results.iter().map(|r| r.simulations).sum::<usize>();
     stages[1].1 += t.elapsed().as_secs_f64();
     let t = Instant::now();

@@ -306,18 +306,7 @@ pub fn fit_multistart(
 ) -> Result<(Option<usize>, Vec<FitResult>)> {
     let mut results = Vec::with_capacity(starts.len());
     for (k, s) in starts.iter().enumerate() {
-        if s.len() != problem.parameters.len() {
-            return Err(crate::TacitError::Setting(format!(
-                "start {k} has {} values, the problem {} parameters",
-                s.len(),
-                problem.parameters.len()
-            )));
-        }
-        let mut p = problem.clone();
-        for (prm, &x) in p.parameters.iter_mut().zip(s) {
-            prm.start = prm.from_x(x).clamp(prm.lower, prm.upper);
-        }
-        results.push(fit(&p, settings)?);
+        results.push(fit(&at_start(problem, k, s)?, settings)?);
     }
     let best = results
         .iter()
@@ -326,6 +315,70 @@ pub fn fit_multistart(
         .min_by(|a, b| a.1.cost().total_cmp(&b.1.cost()))
         .map(|(i, _)| i);
     Ok((best, results))
+}
+
+/// Where a fit from one start ends, without the reports [`fit`] adds
+/// (errors before and after, identifiability): [`race`] keeps only this.
+#[derive(Debug, Clone)]
+pub struct Raced {
+    /// Final scaled parameters.
+    pub x: Vec<f64>,
+    /// Cost after each iteration, the start first.
+    pub cost_history: Vec<f64>,
+    /// How it ended.
+    pub termination: Termination,
+    /// Iterations.
+    pub iterations: usize,
+    /// Segment simulations run.
+    pub simulations: usize,
+}
+
+impl Raced {
+    /// Final cost (NaN when the start failed).
+    pub fn cost(&self) -> f64 {
+        self.cost_history.last().copied().unwrap_or(f64::NAN)
+    }
+}
+
+/// The minimization of [`fit_multistart`] from each start (scaled
+/// changes, one vector per start), in order, without the reports of
+/// [`fit`]: the same end points, costs and iterations, in fewer
+/// simulations (a start race needs only where each start ends).
+pub fn race(problem: &Problem, settings: &FitSettings, starts: &[Vec<f64>]) -> Result<Vec<Raced>> {
+    settings.validate()?;
+    let mut out = Vec::with_capacity(starts.len());
+    for (k, s) in starts.iter().enumerate() {
+        let p = at_start(problem, k, s)?;
+        p.validate()?;
+        let mut ev = Evaluator::new(&p);
+        let (lo, hi) = p.x_bounds();
+        let o = optimize::minimize(&mut ev, &p.x_start(), &lo, &hi, settings);
+        out.push(Raced {
+            x: o.x,
+            cost_history: o.history,
+            termination: o.termination,
+            iterations: o.iterations,
+            simulations: ev.counters().simulations,
+        });
+    }
+    Ok(out)
+}
+
+/// `problem` with its parameters started at the scaled changes `s` (start
+/// `k`, named in the error when `s` has the wrong length).
+fn at_start(problem: &Problem, k: usize, s: &[f64]) -> Result<Problem> {
+    if s.len() != problem.parameters.len() {
+        return Err(crate::TacitError::Setting(format!(
+            "start {k} has {} values, the problem {} parameters",
+            s.len(),
+            problem.parameters.len()
+        )));
+    }
+    let mut p = problem.clone();
+    for (prm, &x) in p.parameters.iter_mut().zip(s) {
+        prm.start = prm.from_x(x).clamp(prm.lower, prm.upper);
+    }
+    Ok(p)
 }
 
 /// Simulated channels at `x` over the whole record (NaN outside the
