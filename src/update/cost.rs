@@ -38,6 +38,7 @@
 
 use super::forward::{self, Failure, SegmentResponse};
 use super::problem::{Metric, Problem};
+use crate::integrate::Tape;
 use nalgebra::{DMatrix, DVector};
 
 /// The work counted by an [`Evaluator`].
@@ -87,6 +88,13 @@ pub struct Evaluator<'a> {
     pub sensitivity_fallbacks: usize,
     /// Wall time spent in Jacobians, s.
     pub jacobian_seconds: f64,
+    /// Keep the tapes of the last evaluation's runs, for the sensitivity
+    /// Jacobian at that point ([`Evaluator::sensitivity_jacobian`]; off by
+    /// default: it pays when the Jacobian follows the evaluation, as in
+    /// Levenberg–Marquardt).
+    pub keep_tapes: bool,
+    /// The last point evaluated with its responses and tapes.
+    taped: Option<(Vec<f64>, Vec<SegmentResponse>, Vec<Tape>)>,
 }
 
 impl<'a> Evaluator<'a> {
@@ -112,6 +120,8 @@ impl<'a> Evaluator<'a> {
             sensitivity_simulations: 0,
             sensitivity_fallbacks: 0,
             jacobian_seconds: 0.0,
+            keep_tapes: false,
+            taped: None,
         }
     }
 
@@ -134,9 +144,38 @@ impl<'a> Evaluator<'a> {
     /// Simulated responses at `x` (unweighted).
     pub fn responses(&mut self, x: &[f64]) -> Result<Vec<SegmentResponse>, Failure> {
         self.evaluations += 1;
-        let (res, n) = forward::simulate(self.problem, x);
+        if !self.keep_tapes {
+            let (res, n) = forward::simulate(self.problem, x);
+            self.simulations += n;
+            return res;
+        }
+        self.taped = None;
+        let (res, n) = forward::simulate_taped(self.problem, x);
         self.simulations += n;
-        res
+        let (resp, tapes) = res?;
+        if let Some(t) = tapes {
+            self.taped = Some((x.to_vec(), resp.clone(), t));
+        }
+        Ok(resp)
+    }
+
+    /// The derivatives at `x`: replayed from the last evaluation's tapes
+    /// when it was at `x`, else simulated; and the simulations run.
+    fn derivatives(
+        &self,
+        x: &[f64],
+    ) -> (
+        Result<Vec<super::sensitivity::SegmentDerivatives>, Failure>,
+        usize,
+    ) {
+        if let Some((tx, resp, tapes)) = &self.taped {
+            if tx.as_slice() == x {
+                if let Some(r) = super::sensitivity::from_tapes(self.problem, x, resp, tapes) {
+                    return (r, 0);
+                }
+            }
+        }
+        super::sensitivity::simulate(self.problem, x)
     }
 
     /// Residual vector `[r_data; √α x]` at `x`.
@@ -162,7 +201,7 @@ impl<'a> Evaluator<'a> {
     /// ([`super::sensitivity::unsupported`]) and when a simulation fails.
     pub fn sensitivity_jacobian(&mut self, x: &[f64], h: f64) -> Result<DMatrix<f64>, Failure> {
         self.evaluations += 1;
-        let (res, count) = super::sensitivity::simulate(self.problem, x);
+        let (res, count) = self.derivatives(x);
         self.simulations += count;
         self.sensitivity_simulations += count;
         let segs = res?;

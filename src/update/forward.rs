@@ -15,7 +15,7 @@
 //! leak into the retained modes.
 
 use super::problem::Problem;
-use crate::integrate::{Integrator, Simulation};
+use crate::integrate::{Integrator, Simulation, Tape};
 use crate::model::elements::{self, Element};
 use crate::model::Model;
 use crate::record::Quantity;
@@ -105,6 +105,58 @@ pub fn simulate(
         .collect();
     let count = runs.len();
     (runs.into_iter().collect(), count)
+}
+
+/// [`simulate`], each segment's run taped ([`Integrator::run_taped`], with
+/// the states: parameter seeds need them) so that the sensitivities at `x`
+/// can be replayed from the tapes ([`super::sensitivity::from_tapes`]);
+/// no tapes (None) for a reduced problem.
+#[allow(clippy::type_complexity)]
+pub(super) fn simulate_taped(
+    problem: &Problem,
+    x: &[f64],
+) -> (
+    std::result::Result<(Vec<SegmentResponse>, Option<Vec<Tape>>), Failure>,
+    usize,
+) {
+    let model = problem.model_at(x);
+    let compiled = match compile(problem, &model) {
+        Ok(c) => c,
+        Err(f) => return (Err(f), 0),
+    };
+    if compiled.tt.is_some() {
+        let (r, n) = simulate(problem, x);
+        return (r.map(|r| (r, None)), n);
+    }
+    // in parallel, collected in order (as [`simulate`])
+    let runs: Vec<std::result::Result<(SegmentResponse, Tape), Failure>> = problem
+        .segments
+        .par_iter()
+        .enumerate()
+        .map(|(i, seg)| {
+            let force = problem.force.columns(seg.start, seg.len);
+            let (sim, tape) = compiled.integ.run_taped(force, &seg.u0, &seg.v0, true);
+            if !sim.completed() {
+                return Err(Failure {
+                    segment: Some(i),
+                    reason: format!(
+                        "simulation stopped: {}",
+                        crate::simulate::describe_status(&sim.status)
+                    ),
+                });
+            }
+            Ok((extract(problem, &sim, &compiled.pos), tape))
+        })
+        .collect();
+    let count = runs.len();
+    let runs: std::result::Result<Vec<_>, Failure> = runs.into_iter().collect();
+    (
+        runs.map(|r| {
+            let (y, t): (Vec<_>, Vec<_>) = r.into_iter().unzip();
+            (y, Some(t))
+        }),
+        count,
+    )
 }
 
 /// The first segment whose simulation at `x` diverges (its energy above

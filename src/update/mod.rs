@@ -351,6 +351,7 @@ pub fn race(problem: &Problem, settings: &FitSettings, starts: &[Vec<f64>]) -> R
         let p = at_start(problem, k, s)?;
         p.validate()?;
         let mut ev = Evaluator::new(&p);
+        ev.keep_tapes = settings.jacobian.resolve(&p).0 == JacobianMethod::Sensitivity;
         let (lo, hi) = p.x_bounds();
         let o = optimize::minimize(&mut ev, &p.x_start(), &lo, &hi, settings);
         out.push(Raced {

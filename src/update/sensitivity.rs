@@ -27,7 +27,7 @@
 use super::forward::{self, Failure, SegmentResponse};
 use super::param::{Parameter, Target};
 use super::problem::Problem;
-use crate::integrate::{ElementSeed, ParamSeed, Seeds};
+use crate::integrate::{ElementSeed, ParamSeed, Seeds, Tape};
 use crate::model::elements::{self, ElementList, ElementParam};
 use crate::model::{Damping, Model};
 use nalgebra::DMatrix;
@@ -125,6 +125,57 @@ pub fn simulate_seeded(
         .collect();
     let count = runs.len();
     (runs.into_iter().collect(), count)
+}
+
+/// The derivatives [`simulate`] gives at `x`, replayed from the tapes of
+/// the runs at `x` ([`forward::simulate_taped`]; `responses` their
+/// channels) without simulating again: the same numbers
+/// ([`crate::integrate::Integrator::sensitivities_from_tape`]). None when
+/// the tapes cannot give them (then [`simulate`] must run), else what
+/// [`simulate`] would return, a failure included.
+pub fn from_tapes(
+    problem: &Problem,
+    x: &[f64],
+    responses: &[SegmentResponse],
+    tapes: &[Tape],
+) -> Option<std::result::Result<Vec<SegmentDerivatives>, Failure>> {
+    if unsupported(problem).is_some() || tapes.len() != problem.segments.len() {
+        return None;
+    }
+    let model = problem.model_at(x);
+    let compiled = forward::compile(problem, &model).ok()?;
+    let seeds = Seeds::params(model.ndof(), param_seeds(&model, &problem.parameters).ok()?);
+    let runs: Vec<Option<std::result::Result<SegmentDerivatives, Failure>>> = problem
+        .segments
+        .par_iter()
+        .zip(tapes)
+        .zip(responses)
+        .enumerate()
+        .map(|(i, ((seg, tape), y))| {
+            let force = problem.force.columns(seg.start, seg.len);
+            let sens = compiled
+                .integ
+                .sensitivities_from_tape(force, &seg.u0, &seg.v0, tape, &seeds)
+                .ok()?;
+            if let Some(t) = sens.singular_tangent {
+                let reason = format!("the converged tangent is singular at t = {t} s");
+                return Some(Err(Failure {
+                    segment: Some(i),
+                    reason,
+                }));
+            }
+            let pos = &compiled.pos;
+            let dy = (0..seeds.len())
+                .map(|j| {
+                    forward::extract_channels(problem, (&sens.du[j], &sens.dv[j], &sens.da[j]), pos)
+                })
+                .collect();
+            Some(Ok(SegmentDerivatives { y: y.clone(), dy }))
+        })
+        .collect();
+    runs.into_iter()
+        .collect::<Option<Vec<_>>>()
+        .map(|r| r.into_iter().collect())
 }
 
 /// The seeds `∂(M, C, K, elements)/∂x_j` of the parameters at `model`
