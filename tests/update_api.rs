@@ -355,3 +355,56 @@ fn contact_jacobian_follows_the_computed_trajectory_at_the_default_newton_tolera
         assert!((gs[0] - gf[0]).abs() < 1e-2 * gf[0].abs(), "{gs} {gf}");
     }
 }
+
+/// The sensitivity Jacobian at the point just evaluated, replayed from the
+/// tapes of that evaluation (`Evaluator::keep_tapes`), is the simulated
+/// one bit for bit and runs no simulation; at another point it simulates.
+#[test]
+fn sensitivity_jacobian_from_the_evaluation_tapes_is_the_simulated_one() {
+    let mut p = shooting_problem();
+    // element parameters only (gap, contact stiffness, friction level)
+    p.parameters.truncate(3);
+    let x = [0.12, -0.2, 0.3];
+    for metric in [update::Metric::Gls, update::Metric::pcd()] {
+        p.metric = metric;
+        let mut plain = Evaluator::new(&p);
+        let r = plain.residual(&x).unwrap();
+        let j = plain.sensitivity_jacobian(&x, 1e-5).unwrap();
+        let mut taped = Evaluator::new(&p);
+        taped.keep_tapes = true;
+        assert_eq!(taped.residual(&x).unwrap(), r);
+        let sims = taped.simulations;
+        assert_eq!(taped.sensitivity_jacobian(&x, 1e-5).unwrap(), j);
+        assert_eq!(taped.simulations, sims, "{metric:?}: replayed, not simulated");
+        // at a point not evaluated last: simulated, one run per segment
+        let y = [0.1, -0.2, 0.3];
+        let jy = plain.sensitivity_jacobian(&y, 1e-5).unwrap();
+        assert_eq!(taped.sensitivity_jacobian(&y, 1e-5).unwrap(), jy);
+        assert_eq!(taped.simulations, sims + p.segments.len());
+    }
+}
+
+/// The start race ends where the fits of `fit_multistart` end, start by
+/// start, in fewer simulations (no reports).
+#[test]
+fn race_ends_where_fit_multistart_ends() {
+    let p = shooting_problem();
+    let settings = FitSettings {
+        max_iterations: 3,
+        ..Default::default()
+    };
+    let starts = vec![vec![0.1, -0.1, 0.2, 0.02], vec![-0.05, 0.1, -0.2, 0.0]];
+    let (_, full) = update::fit_multistart(&p, &settings, &starts).unwrap();
+    let raced = update::race(&p, &settings, &starts).unwrap();
+    assert_eq!(raced.len(), 2);
+    for (r, f) in raced.iter().zip(&full) {
+        assert_eq!(r.x, f.x);
+        assert_eq!(r.cost_history, f.cost_history);
+        assert_eq!(r.iterations, f.iterations);
+        assert_eq!(format!("{:?}", r.termination), format!("{:?}", f.termination));
+        assert!(r.simulations < f.simulations, "{} vs {}", r.simulations, f.simulations);
+    }
+    // a start of the wrong length is an error naming it
+    let e = update::race(&p, &settings, &[vec![0.0; 3]]).unwrap_err();
+    assert!(e.to_string().contains("start 0 has 3 values"), "{e}");
+}
