@@ -375,7 +375,10 @@ fn sensitivity_jacobian_from_the_evaluation_tapes_is_the_simulated_one() {
         assert_eq!(taped.residual(&x).unwrap(), r);
         let sims = taped.simulations;
         assert_eq!(taped.sensitivity_jacobian(&x, 1e-5).unwrap(), j);
-        assert_eq!(taped.simulations, sims, "{metric:?}: replayed, not simulated");
+        assert_eq!(
+            taped.simulations, sims,
+            "{metric:?}: replayed, not simulated"
+        );
         // at a point not evaluated last: simulated, one run per segment
         let y = [0.1, -0.2, 0.3];
         let jy = plain.sensitivity_jacobian(&y, 1e-5).unwrap();
@@ -401,8 +404,16 @@ fn race_ends_where_fit_multistart_ends() {
         assert_eq!(r.x, f.x);
         assert_eq!(r.cost_history, f.cost_history);
         assert_eq!(r.iterations, f.iterations);
-        assert_eq!(format!("{:?}", r.termination), format!("{:?}", f.termination));
-        assert!(r.simulations < f.simulations, "{} vs {}", r.simulations, f.simulations);
+        assert_eq!(
+            format!("{:?}", r.termination),
+            format!("{:?}", f.termination)
+        );
+        assert!(
+            r.simulations < f.simulations,
+            "{} vs {}",
+            r.simulations,
+            f.simulations
+        );
     }
     // a start of the wrong length is an error naming it
     let e = update::race(&p, &settings, &[vec![0.0; 3]]).unwrap_err();
