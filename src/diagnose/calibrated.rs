@@ -1139,6 +1139,9 @@ fn needed(
         return false;
     }
     let (segs, y, _) = super::starts::refine(cmp, off, sim, &subset, cmp.starts.iterations);
+    if y.shape() != with.shape() {
+        return false;
+    }
     // both predictions on the screen's samples only (NaN elsewhere)
     let blank = || nalgebra::DMatrix::from_element(with.nrows(), with.ncols(), f64::NAN);
     let (mut a, mut b) = (blank(), blank());
