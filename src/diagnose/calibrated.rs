@@ -51,7 +51,7 @@
 
 use super::fit::spread;
 use super::report::pct;
-use super::{effects, joint, prepare_located, DiagnoseSettings, Diagnosis, ErrorSet};
+use super::{absorbed, effects, joint, prepare_located, DiagnoseSettings, Diagnosis, ErrorSet};
 use crate::calibrate::{self, params, Calibration, CalibrationSettings, LinearParam};
 use crate::error::Result;
 use crate::integrate::SimSettings;
@@ -274,6 +274,19 @@ pub fn diagnose_calibrated(
             from_calibrated = ctx.unheld_alternative(from_calibrated, unheld)?;
         }
     }
+    // a spring the calibration on the record moved far beside an effect
+    // named: calibrated again with it held ([`super::absorbed`])
+    let mut calibration = calibration;
+    if linear_records.is_empty() && !ctx.at_noise(&from_calibrated.d) {
+        let named: Vec<_> = (trusted.iter().chain([&from_calibrated.d]))
+            .flat_map(|d| d.added.iter().map(|e| &e.candidate))
+            .collect();
+        let suspect = absorbed::suspect_spring(&calibration.corrections, declared, &named);
+        if let Some(spring) = suspect {
+            (from_calibrated, calibration) =
+                ctx.held_spring_alternative(from_calibrated, calibration, spring)?;
+        }
+    }
     let Some(trusted) = trusted else {
         // linear values marked free, or the declared ones off on the
         // low-level records: the calibrated diagnosis is the only one
@@ -426,6 +439,64 @@ impl Context<'_> {
         })
     }
 
+    /// The diagnosis from a calibration on the record with `spring` held at
+    /// its declared stiffness (suspected of having absorbed an effect
+    /// beside it, [`super::absorbed`]), refined and in rounds, against
+    /// `best` from `calibration`: the lower multiple-shooting error on the
+    /// record is kept, with the calibration it started from. Not run when
+    /// that calibration absorbs or fails (the declared values are then
+    /// the start the trusted diagnosis already took).
+    fn held_spring_alternative(
+        &self,
+        best: RefinedPath,
+        calibration: Calibration,
+        spring: usize,
+    ) -> Result<(RefinedPath, Calibration)> {
+        let label = self.declared.springs[spring].label(spring);
+        (self.progress)(&format!(
+            "calibrate again with spring {label} held at its declared stiffness"
+        ));
+        let mut settings = self.cal.calibration.clone();
+        settings.frozen_springs.push(spring);
+        let data = [calibrate::data_of(self.rec, self.declared.ndof(), self.sensors, 0)?];
+        let held = calibrate::calibrate(self.declared, &data, &settings)?;
+        if !matches!(
+            held.status,
+            calibrate::CalibrationStatus::Converged | calibrate::CalibrationStatus::EvaluationLimit
+        ) {
+            let note = format!(
+                "{}; spring {label} suspected of absorbing an effect, the calibration with it held did not give a start ({:?})",
+                best.note, held.status
+            );
+            return Ok((RefinedPath { note, ..best }, calibration));
+        }
+        let held = absorbed::with_held(held, &calibration, spring);
+        (self.progress)(&format!("diagnose with spring {label} held"));
+        let d = super::diagnose(
+            &held.model,
+            self.rec,
+            self.validation,
+            self.sensors,
+            self.settings,
+            self.progress,
+        )?;
+        let first = self.refined(d, &held.model)?;
+        let mut other = self.more_rounds(first)?;
+        let (e_best, e_other) = (best.d.after.relative_error, other.d.after.relative_error);
+        let compared = format!(
+            "spring {label} suspected of absorbing an effect: multiple-shooting error on the record from the calibration with it free {}, held {}",
+            pct(e_best),
+            pct(e_other)
+        );
+        Ok(if lower(e_other, e_best) {
+            other.note = format!("{}; {compared}: held kept", other.note);
+            (other, held)
+        } else {
+            let note = format!("{}; {compared}: free kept", best.note);
+            (RefinedPath { note, ..best }, calibration)
+        })
+    }
+
     /// Whether `d` explains the record up to the noise: its
     /// multiple-shooting error at most [`AT_NOISE`] times the noise level it
     /// ran at ([`Diagnosis::noise_level`]).
@@ -545,6 +616,12 @@ impl Context<'_> {
             let (n, est) = self.open_loop(&mut d, vprep.as_ref().map(|p| &p.comparison))?;
             note = format!("{note}; {n}");
             std = est.unwrap_or(std);
+        }
+        if !self.at_noise(&d) {
+            if let Some((n, est)) = refit_without(&mut d, self.cal, self.settings, &bases, self.progress)? {
+                note = format!("{note}; {n}");
+                std = est;
+            }
         }
         update_effects(&mut d, &std, &self.cal.calibration);
         if let Some(n) = drop_negligible(&mut d, &bases, self.progress) {
@@ -1097,6 +1174,66 @@ fn drop_negligible(d: &mut Diagnosis, bases: &Bases, progress: &dyn Fn(&str)) ->
         v.after = own(&d.model, b).comparison.errors(&d.model, sim).0;
     }
     Some(dropped.join("; "))
+}
+
+/// Drop a spurious companion: with two nonlinear effects or more and the
+/// record's error above the noise, each is switched off in turn
+/// ([`effects::without`]) and the rest refined again without it
+/// ([`refine_once`]: the linear part, the other effects and the start
+/// states, from where the refinement with it ended); the lowest error so
+/// reached replaces `d` when it is at most 1 + [`NEGLIGIBLE`] times the
+/// error with the effect (fewer effects explaining the record as well). A
+/// quadratic spring named before a contact on the same pair, on a linear
+/// part the calibration biased, holds the refinement in a minimum the
+/// contact alone leaves. The note and the refined parameters with their
+/// standard errors; None when nothing was dropped.
+fn refit_without(
+    d: &mut Diagnosis,
+    cal: &CalibratedSettings,
+    settings: &DiagnoseSettings,
+    bases: &Bases,
+    progress: &dyn Fn(&str),
+) -> Result<Option<(String, Vec<Estimated>)>> {
+    let nonlinear: Vec<usize> = (0..d.added.len())
+        .filter(|&i| {
+            !matches!(
+                d.added[i].candidate.kind,
+                EffectKind::Stiffness | EffectKind::Damping
+            )
+        })
+        .collect();
+    let Some(with) = d.after.relative_error.filter(|_| nonlinear.len() >= 2) else {
+        return Ok(None);
+    };
+    let mut best: Option<(Diagnosis, String, Vec<Estimated>)> = None;
+    for &i in &nonlinear {
+        let label = d.added[i].label.clone();
+        progress(&format!("refine again without {label}"));
+        let mut t = d.clone();
+        t.model = effects::without(&d.model, &d.added[i]);
+        t.prepared = owned(&t.model, &bases.record).unwrap_or_else(|| bases.record.clone());
+        let (after, pred) = t.prepared.comparison.errors(&t.model, sim_of(&t));
+        (t.after, t.predictions.1) = (after, pred);
+        t.added.remove(i);
+        t.effects.remove(i);
+        let (n, est) = refine_once(&mut t, cal, settings, bases, progress)?;
+        let e = t.after.relative_error;
+        let better = best
+            .as_ref()
+            .is_none_or(|(b, _, _)| lower(e, b.after.relative_error));
+        if !est.is_empty() && better && e.is_some_and(|e| e <= with * (1.0 + NEGLIGIBLE)) {
+            let note = format!(
+                "{label} dropped (the rest refined again without it: {} against {} with it; {n})",
+                pct(e),
+                pct(Some(with))
+            );
+            best = Some((t, note, est));
+        }
+    }
+    Ok(best.map(|(t, note, est)| {
+        *d = t;
+        (note, est)
+    }))
 }
 
 /// The linear corrections of the final model against the declared one

@@ -51,6 +51,7 @@
 
 pub use crate::identify::{lifted, locate};
 
+mod absorbed;
 mod alternative;
 pub mod calibrated;
 pub mod comparison;
