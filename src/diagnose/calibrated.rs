@@ -36,7 +36,11 @@
 //!    scored, on the record and the validation record, from the linear
 //!    part's reconstruction corrected for the rigid-body wander fitted with
 //!    its laws ([`super::ground::corrected`]), as the diagnosis scores it;
-//!    each refined model from its own.
+//!    each refined model from its own. A refined model above the noise
+//!    with two nonlinear effects or more is refined again without each
+//!    in turn, and one explaining the record as well without it is
+//!    dropped (`refit_without`: a companion named beside an effect on a
+//!    linear part the calibration biased).
 //!
 //! Stages that cannot usefully win are not run: once a diagnosis explains
 //! the record up to the noise (multiple-shooting error at most 1.5 × its
@@ -51,7 +55,7 @@
 
 use super::fit::spread;
 use super::report::pct;
-use super::{absorbed, effects, joint, prepare_located, DiagnoseSettings, Diagnosis, ErrorSet};
+use super::{effects, joint, prepare_located, DiagnoseSettings, Diagnosis, ErrorSet};
 use crate::calibrate::{self, params, Calibration, CalibrationSettings, LinearParam};
 use crate::error::Result;
 use crate::integrate::SimSettings;
@@ -274,19 +278,6 @@ pub fn diagnose_calibrated(
             from_calibrated = ctx.unheld_alternative(from_calibrated, unheld)?;
         }
     }
-    // a spring the calibration on the record moved far beside an effect
-    // named: calibrated again with it held ([`super::absorbed`])
-    let mut calibration = calibration;
-    if linear_records.is_empty() && !ctx.at_noise(&from_calibrated.d) {
-        let named: Vec<_> = (trusted.iter().chain([&from_calibrated.d]))
-            .flat_map(|d| d.added.iter().map(|e| &e.candidate))
-            .collect();
-        let suspect = absorbed::suspect_spring(&calibration.corrections, declared, &named);
-        if let Some(spring) = suspect {
-            (from_calibrated, calibration) =
-                ctx.held_spring_alternative(from_calibrated, calibration, spring)?;
-        }
-    }
     let Some(trusted) = trusted else {
         // linear values marked free, or the declared ones off on the
         // low-level records: the calibrated diagnosis is the only one
@@ -439,64 +430,6 @@ impl Context<'_> {
         })
     }
 
-    /// The diagnosis from a calibration on the record with `spring` held at
-    /// its declared stiffness (suspected of having absorbed an effect
-    /// beside it, [`super::absorbed`]), refined and in rounds, against
-    /// `best` from `calibration`: the lower multiple-shooting error on the
-    /// record is kept, with the calibration it started from. Not run when
-    /// that calibration absorbs or fails (the declared values are then
-    /// the start the trusted diagnosis already took).
-    fn held_spring_alternative(
-        &self,
-        best: RefinedPath,
-        calibration: Calibration,
-        spring: usize,
-    ) -> Result<(RefinedPath, Calibration)> {
-        let label = self.declared.springs[spring].label(spring);
-        (self.progress)(&format!(
-            "calibrate again with spring {label} held at its declared stiffness"
-        ));
-        let mut settings = self.cal.calibration.clone();
-        settings.frozen_springs.push(spring);
-        let data = [calibrate::data_of(self.rec, self.declared.ndof(), self.sensors, 0)?];
-        let held = calibrate::calibrate(self.declared, &data, &settings)?;
-        if !matches!(
-            held.status,
-            calibrate::CalibrationStatus::Converged | calibrate::CalibrationStatus::EvaluationLimit
-        ) {
-            let note = format!(
-                "{}; spring {label} suspected of absorbing an effect, the calibration with it held did not give a start ({:?})",
-                best.note, held.status
-            );
-            return Ok((RefinedPath { note, ..best }, calibration));
-        }
-        let held = absorbed::with_held(held, &calibration, spring);
-        (self.progress)(&format!("diagnose with spring {label} held"));
-        let d = super::diagnose(
-            &held.model,
-            self.rec,
-            self.validation,
-            self.sensors,
-            self.settings,
-            self.progress,
-        )?;
-        let first = self.refined(d, &held.model)?;
-        let mut other = self.more_rounds(first)?;
-        let (e_best, e_other) = (best.d.after.relative_error, other.d.after.relative_error);
-        let compared = format!(
-            "spring {label} suspected of absorbing an effect: multiple-shooting error on the record from the calibration with it free {}, held {}",
-            pct(e_best),
-            pct(e_other)
-        );
-        Ok(if lower(e_other, e_best) {
-            other.note = format!("{}; {compared}: held kept", other.note);
-            (other, held)
-        } else {
-            let note = format!("{}; {compared}: free kept", best.note);
-            (RefinedPath { note, ..best }, calibration)
-        })
-    }
-
     /// Whether `d` explains the record up to the noise: its
     /// multiple-shooting error at most [`AT_NOISE`] times the noise level it
     /// ran at ([`Diagnosis::noise_level`]).
@@ -618,7 +551,9 @@ impl Context<'_> {
             std = est.unwrap_or(std);
         }
         if !self.at_noise(&d) {
-            if let Some((n, est)) = refit_without(&mut d, self.cal, self.settings, &bases, self.progress)? {
+            if let Some((n, est)) =
+                refit_without(&mut d, self.cal, self.settings, &bases, self.progress)?
+            {
                 note = format!("{note}; {n}");
                 std = est;
             }

@@ -51,7 +51,6 @@
 
 pub use crate::identify::{lifted, locate};
 
-mod absorbed;
 mod alternative;
 pub mod calibrated;
 pub mod comparison;
