@@ -1238,3 +1238,72 @@ pub(super) fn lower(a: Option<f64>, b: Option<f64>) -> bool {
         _ => false,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Contact;
+    use crate::simulate::{simulate_record, RecordSpec};
+    use crate::trace::{Candidate, RankedEffect};
+
+    /// A contact 3→2 on lanl8dof diagnosed, a quadratic 2–3 named beside
+    /// it (as on a linear part the calibration biased): refined again
+    /// without it, the record is explained as well, so it is dropped and
+    /// the contact kept.
+    #[test]
+    fn a_companion_the_rest_explains_without_is_dropped() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let declared = Model::from_file(std::path::Path::new(p)).unwrap();
+        let mut truth = declared.clone();
+        truth.contacts.push(Contact {
+            dofs: vec![3, 2],
+            gap: 3e-4,
+            stiffness: 2e6,
+        });
+        let spec = RecordSpec {
+            samples: 2048,
+            sensors: (1..=8).collect(),
+            noise: 0.01,
+            seed: 16,
+            settings: SimSettings {
+                substeps: 40,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let rec = simulate_record(&truth, &spec).unwrap().0;
+        let settings = DiagnoseSettings::default();
+        let mut d =
+            super::super::diagnose(&declared, &rec, None, None, &settings, &|_| {}).unwrap();
+        assert_eq!(d.effects.len(), 1, "{}", d.verdict);
+        assert_eq!(d.added[0].label, "contact 3→2");
+        // the quadratic 2–3 of seed 77909's record without a linear record
+        let q = Candidate::new(EffectKind::Quadratic, vec![1, 2]);
+        let added = effects::add(&mut d.model, &RankedEffect::for_test(q, &[("k2", -6.4e5)]));
+        let mut report = d.effects[0].clone();
+        (report.kind, report.dofs, report.label) =
+            (EffectKind::Quadratic, vec![2, 3], added.label.clone());
+        d.added.push(added);
+        d.effects.push(report);
+        let with = d.prepared.comparison.errors(&d.model, sim_of(&d)).0;
+        d.after = with.clone();
+        let bases = Bases {
+            record: d.prepared.clone(),
+            validation: None,
+        };
+        let cal = CalibratedSettings::default();
+        let dropped = refit_without(&mut d, &cal, &settings, &bases, &|_| {}).unwrap();
+        let (note, est) = dropped.expect("the quadratic dropped");
+        assert!(note.starts_with("quadratic 2–3 dropped"), "{note}");
+        assert!(!est.is_empty());
+        let labels: Vec<&str> = d.added.iter().map(|e| e.label.as_str()).collect();
+        assert_eq!(labels, ["contact 3→2"]);
+        let after = d.after.relative_error.unwrap();
+        assert!(
+            after < with.relative_error.unwrap(),
+            "{after} {:?}",
+            with.relative_error
+        );
+        assert!(after < 0.015, "{after}");
+    }
+}
