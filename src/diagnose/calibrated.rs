@@ -36,7 +36,11 @@
 //!    scored, on the record and the validation record, from the linear
 //!    part's reconstruction corrected for the rigid-body wander fitted with
 //!    its laws ([`super::ground::corrected`]), as the diagnosis scores it;
-//!    each refined model from its own.
+//!    each refined model from its own. A refined model above the noise
+//!    with two nonlinear effects or more is refined again without each
+//!    in turn, and one explaining the record as well without it is
+//!    dropped (`refit_without`: a companion named beside an effect on a
+//!    linear part the calibration biased).
 //!
 //! Stages that cannot usefully win are not run: once a diagnosis explains
 //! the record up to the noise (multiple-shooting error at most 1.5 × its
@@ -545,6 +549,14 @@ impl Context<'_> {
             let (n, est) = self.open_loop(&mut d, vprep.as_ref().map(|p| &p.comparison))?;
             note = format!("{note}; {n}");
             std = est.unwrap_or(std);
+        }
+        if !self.at_noise(&d) {
+            if let Some((n, est)) =
+                refit_without(&mut d, self.cal, self.settings, &bases, self.progress)?
+            {
+                note = format!("{note}; {n}");
+                std = est;
+            }
         }
         update_effects(&mut d, &std, &self.cal.calibration);
         if let Some(n) = drop_negligible(&mut d, &bases, self.progress) {
@@ -1157,6 +1169,66 @@ fn needed(
     e_off > e_with * (1.0 + SCREEN_RISE)
 }
 
+/// Drop a spurious companion: with two nonlinear effects or more and the
+/// record's error above the noise, each is switched off in turn
+/// ([`effects::without`]) and the rest refined again without it
+/// ([`refine_once`]: the linear part, the other effects and the start
+/// states, from where the refinement with it ended); the lowest error so
+/// reached replaces `d` when it is at most 1 + [`NEGLIGIBLE`] times the
+/// error with the effect (fewer effects explaining the record as well). A
+/// quadratic spring named before a contact on the same pair, on a linear
+/// part the calibration biased, holds the refinement in a minimum the
+/// contact alone leaves. The note and the refined parameters with their
+/// standard errors; None when nothing was dropped.
+fn refit_without(
+    d: &mut Diagnosis,
+    cal: &CalibratedSettings,
+    settings: &DiagnoseSettings,
+    bases: &Bases,
+    progress: &dyn Fn(&str),
+) -> Result<Option<(String, Vec<Estimated>)>> {
+    let nonlinear: Vec<usize> = (0..d.added.len())
+        .filter(|&i| {
+            !matches!(
+                d.added[i].candidate.kind,
+                EffectKind::Stiffness | EffectKind::Damping
+            )
+        })
+        .collect();
+    let Some(with) = d.after.relative_error.filter(|_| nonlinear.len() >= 2) else {
+        return Ok(None);
+    };
+    let mut best: Option<(Diagnosis, String, Vec<Estimated>)> = None;
+    for &i in &nonlinear {
+        let label = d.added[i].label.clone();
+        progress(&format!("refine again without {label}"));
+        let mut t = d.clone();
+        t.model = effects::without(&d.model, &d.added[i]);
+        t.prepared = owned(&t.model, &bases.record).unwrap_or_else(|| bases.record.clone());
+        let (after, pred) = t.prepared.comparison.errors(&t.model, sim_of(&t));
+        (t.after, t.predictions.1) = (after, pred);
+        t.added.remove(i);
+        t.effects.remove(i);
+        let (n, est) = refine_once(&mut t, cal, settings, bases, progress)?;
+        let e = t.after.relative_error;
+        let better = best
+            .as_ref()
+            .is_none_or(|(b, _, _)| lower(e, b.after.relative_error));
+        if !est.is_empty() && better && e.is_some_and(|e| e <= with * (1.0 + NEGLIGIBLE)) {
+            let note = format!(
+                "{label} dropped (the rest refined again without it: {} against {} with it; {n})",
+                pct(e),
+                pct(Some(with))
+            );
+            best = Some((t, note, est));
+        }
+    }
+    Ok(best.map(|(t, note, est)| {
+        *d = t;
+        (note, est)
+    }))
+}
+
 /// The linear corrections of the final model against the declared one
 /// (named as the calibration named them).
 fn corrections(
@@ -1222,5 +1294,74 @@ pub(super) fn lower(a: Option<f64>, b: Option<f64>) -> bool {
         (Some(a), Some(b)) => a < b,
         (Some(_), None) => true,
         _ => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Contact;
+    use crate::simulate::{simulate_record, RecordSpec};
+    use crate::trace::{Candidate, RankedEffect};
+
+    /// A contact 3→2 on lanl8dof diagnosed, a quadratic 2–3 named beside
+    /// it (as on a linear part the calibration biased): refined again
+    /// without it, the record is explained as well, so it is dropped and
+    /// the contact kept.
+    #[test]
+    fn a_companion_the_rest_explains_without_is_dropped() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let declared = Model::from_file(std::path::Path::new(p)).unwrap();
+        let mut truth = declared.clone();
+        truth.contacts.push(Contact {
+            dofs: vec![3, 2],
+            gap: 3e-4,
+            stiffness: 2e6,
+        });
+        let spec = RecordSpec {
+            samples: 2048,
+            sensors: (1..=8).collect(),
+            noise: 0.01,
+            seed: 16,
+            settings: SimSettings {
+                substeps: 40,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let rec = simulate_record(&truth, &spec).unwrap().0;
+        let settings = DiagnoseSettings::default();
+        let mut d =
+            super::super::diagnose(&declared, &rec, None, None, &settings, &|_| {}).unwrap();
+        assert_eq!(d.effects.len(), 1, "{}", d.verdict);
+        assert_eq!(d.added[0].label, "contact 3→2");
+        // the quadratic 2–3 of seed 77909's record without a linear record
+        let q = Candidate::new(EffectKind::Quadratic, vec![1, 2]);
+        let added = effects::add(&mut d.model, &RankedEffect::for_test(q, &[("k2", -6.4e5)]));
+        let mut report = d.effects[0].clone();
+        (report.kind, report.dofs, report.label) =
+            (EffectKind::Quadratic, vec![2, 3], added.label.clone());
+        d.added.push(added);
+        d.effects.push(report);
+        let with = d.prepared.comparison.errors(&d.model, sim_of(&d)).0;
+        d.after = with.clone();
+        let bases = Bases {
+            record: d.prepared.clone(),
+            validation: None,
+        };
+        let cal = CalibratedSettings::default();
+        let dropped = refit_without(&mut d, &cal, &settings, &bases, &|_| {}).unwrap();
+        let (note, est) = dropped.expect("the quadratic dropped");
+        assert!(note.starts_with("quadratic 2–3 dropped"), "{note}");
+        assert!(!est.is_empty());
+        let labels: Vec<&str> = d.added.iter().map(|e| e.label.as_str()).collect();
+        assert_eq!(labels, ["contact 3→2"]);
+        let after = d.after.relative_error.unwrap();
+        assert!(
+            after < with.relative_error.unwrap(),
+            "{after} {:?}",
+            with.relative_error
+        );
+        assert!(after < 0.015, "{after}");
     }
 }
