@@ -45,6 +45,7 @@
 
 mod arrival;
 mod rescue;
+mod sweep;
 
 use super::comparison::{segment_residual, Comparison};
 use crate::integrate::{Integrator, Seeds, SimSettings, Tape};
@@ -351,6 +352,15 @@ fn refine_with(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
+    if with_rescue {
+        let (changed, yt, n) = sweep::sweep(cmp, model, sim, &mut segs, &res, iterations);
+        fit.simulations += n;
+        fit.rescued += changed.len();
+        for &i in &changed {
+            copy_segment(&mut y, &yt, &segs[i]);
+            res[i] = residual(cmp, &segs[i], &y);
+        }
+    }
     // segments still far above the others: a long run-in from earlier
     // segments or the arrival at the next one's start ([`rescue`]), then a
     // growing horizon
@@ -375,6 +385,15 @@ fn refine_with(
         let (changed, yt, n) = grow(cmp, model, sim, segments, &mut segs, &picks, iterations);
         fit.simulations += n;
         fit.grown += changed.len();
+        for &i in &changed {
+            copy_segment(&mut y, &yt, &segs[i]);
+            res[i] = residual(cmp, &segs[i], &y);
+        }
+    }
+    if with_rescue {
+        let (changed, yt, n) = sweep::sweep(cmp, model, sim, &mut segs, &res, iterations);
+        fit.simulations += n;
+        fit.rescued += changed.len();
         for &i in &changed {
             copy_segment(&mut y, &yt, &segs[i]);
             res[i] = residual(cmp, &segs[i], &y);

@@ -1,0 +1,105 @@
+//! Carried starts after the refinement: a forward sweep of the model's
+//! own simulation from the segments that fit to the noise into the
+//! segments after them that do not.
+//!
+//! An exact model's segments all cost about the same (the noise over a
+//! segment's samples, the channels weighted alike), so the lowest costs
+//! give the floor the others should reach. A segment from a few
+//! accelerometers may fit its outputs while its start is wrong in
+//! directions they hardly see (the states of the unmeasured masses); with
+//! a stiff element that grazes its threshold the cost from there is rough
+//! and the refinement stalls at many times the floor, well below the
+//! [`super::super::settings::StartSettings::outlier`] × the median that
+//! the rescues act on when most segments are in that state. The
+//! continuity starts inside the refinement are tried once, after its
+//! first iteration, when the segment before has not reached its own
+//! start yet. Here, once every segment is refined, each segment above
+//! [`ABOVE`] × the floor ([`FLOOR`], a low quantile of the costs) is
+//! started where the model arrives from the refined start of the segment
+//! before, refined ([`super::refine_local`]) and kept when it predicts the
+//! segment better; the sweep goes on in waves, each over the segments
+//! whose predecessor has just changed, so a run of segments takes the
+//! model's simulation from the last one that fits.
+
+use super::{carried, refine_local, residual, segment_costs, Comparison};
+use crate::integrate::{Integrator, SimSettings};
+use crate::model::Model;
+use crate::update::shooting::Segment;
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+
+/// The quantile of the segment costs taken as the floor.
+const FLOOR: f64 = 0.125;
+
+/// A segment above this multiple of the floor is swept.
+const ABOVE: f64 = 2.0;
+
+/// The floor of `costs` ([`FLOOR`]; infinite for none).
+fn floor(costs: &[f64]) -> f64 {
+    let mut sorted = costs.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let k = (FLOOR * sorted.len() as f64) as usize;
+    sorted.get(k).copied().unwrap_or(f64::INFINITY)
+}
+
+/// The forward sweep (module docs) over `segs` with evaluations `res`:
+/// returns the indices changed, their predictions (p × N) and the
+/// simulations run.
+pub(super) fn sweep(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    segs: &mut [Segment],
+    res: &[Option<(DVector<f64>, f64)>],
+    iterations: usize,
+) -> (Vec<usize>, DMatrix<f64>, usize) {
+    let mut y = DMatrix::zeros(cmp.observations.len(), cmp.force.ncols());
+    let Ok(integ) = Integrator::new(model, cmp.fs, sim) else {
+        return (vec![], y, 0);
+    };
+    let (n, mut sims) = (model.ndof(), 0);
+    let mut costs = segment_costs(res);
+    let above = ABOVE * floor(&costs);
+    let follows = |segs: &[Segment], i: usize| segs[i - 1].start + segs[i - 1].len == segs[i].start;
+    let mut changed: Vec<usize> = vec![];
+    let mut wave: Vec<usize> = (1..segs.len())
+        .filter(|&i| costs[i] > above && follows(segs, i))
+        .collect();
+    while !wave.is_empty() {
+        let this = &*segs;
+        let trials: Vec<(usize, Option<(Segment, DMatrix<f64>, f64)>, usize)> = wave
+            .par_iter()
+            .map(|&i| {
+                let Some(t) = carried(&integ, cmp, &this[i - 1], &this[i], n) else {
+                    return (i, None, 1);
+                };
+                let (t, yt, f) = refine_local(cmp, model, sim, &[t], iterations, false);
+                let t = t.into_iter().next().expect("one segment");
+                let found = residual(cmp, &t, &yt).map(|(_, c)| {
+                    let yi = yt.columns(t.start, t.len).into_owned();
+                    (t, yi, c)
+                });
+                (i, found, 1 + f.simulations)
+            })
+            .collect();
+        let mut moved = vec![];
+        for (i, found, k) in trials {
+            sims += k;
+            if let Some((t, yi, c)) = found.filter(|f| f.2 < costs[i]) {
+                y.columns_mut(t.start, t.len).copy_from(&yi);
+                segs[i] = t;
+                costs[i] = c;
+                moved.push(i);
+            }
+        }
+        changed.extend(&moved);
+        wave = moved
+            .iter()
+            .map(|&i| i + 1)
+            .filter(|&j| j < segs.len() && costs[j] > above && follows(segs, j))
+            .collect();
+    }
+    changed.sort_unstable();
+    changed.dedup();
+    (changed, y, sims)
+}
