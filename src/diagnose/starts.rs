@@ -352,7 +352,7 @@ fn refine_with(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
-    if with_rescue {
+    {
         let (changed, yt, n) = sweep::sweep(cmp, model, sim, &mut segs, &res, iterations);
         fit.simulations += n;
         fit.rescued += changed.len();
@@ -390,7 +390,7 @@ fn refine_with(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
-    if with_rescue {
+    {
         let (changed, yt, n) = sweep::sweep(cmp, model, sim, &mut segs, &res, iterations);
         fit.simulations += n;
         fit.rescued += changed.len();

@@ -65,21 +65,37 @@ pub(super) fn sweep(
     let mut wave: Vec<usize> = (1..segs.len())
         .filter(|&i| costs[i] > above && follows(segs, i))
         .collect();
+    // segment `s` started where the model arrives from `p`, refined
+    let from = |p: &Segment, s: &Segment, sims: &mut usize| {
+        *sims += 1;
+        let t = carried(&integ, cmp, p, s, n)?;
+        let (t, yt, f) = refine_local(cmp, model, sim, &[t], iterations, false);
+        *sims += f.simulations;
+        let t = t.into_iter().next().expect("one segment");
+        residual(cmp, &t, &yt).map(|(_, c)| {
+            let yi = yt.columns(t.start, t.len).into_owned();
+            (t, yi, c)
+        })
+    };
     while !wave.is_empty() {
         let this = &*segs;
         let trials: Vec<(usize, Option<(Segment, DMatrix<f64>, f64)>, usize)> = wave
             .par_iter()
             .map(|&i| {
-                let Some(t) = carried(&integ, cmp, &this[i - 1], &this[i], n) else {
-                    return (i, None, 1);
-                };
-                let (t, yt, f) = refine_local(cmp, model, sim, &[t], iterations, false);
-                let t = t.into_iter().next().expect("one segment");
-                let found = residual(cmp, &t, &yt).map(|(_, c)| {
-                    let yi = yt.columns(t.start, t.len).into_owned();
-                    (t, yi, c)
-                });
-                (i, found, 1 + f.simulations)
+                let mut sims = 0;
+                let mut found = from(&this[i - 1], &this[i], &mut sims);
+                if found.as_ref().is_none_or(|f| f.2 > above) {
+                    // the segment before refined over both segments
+                    let p = &this[i - 1];
+                    let both = Segment { len: p.len + this[i].len, ..p.clone() };
+                    let (w, _, f) = refine_local(cmp, model, sim, &[both], iterations, false);
+                    sims += f.simulations;
+                    let w = Segment { len: p.len, ..w.into_iter().next().expect("one segment") };
+                    if let Some(g) = from(&w, &this[i], &mut sims).filter(|g| found.as_ref().is_none_or(|f| g.2 < f.2)) {
+                        found = Some(g);
+                    }
+                }
+                (i, found, sims)
             })
             .collect();
         let mut moved = vec![];
