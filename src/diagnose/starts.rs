@@ -34,7 +34,10 @@
 //! segment before ends (continuity), the segments taken in order so that a
 //! run of them in a wrong basin takes the model's simulation from the last
 //! good one; a segment left above 8× the median cost is run in from the
-//! refined segment before; one still there is given a long run-in from 2,
+//! refined segment before; every segment above twice the lowest costs'
+//! level is then started from where the refined segment before ends, the
+//! segments in waves ([`sweep`], again after the rescues); one still far
+//! above is given a long run-in from 2,
 //! 4, 8 or 16 segments back, or the state from which the model arrives at
 //! the next segment's refined start ([`rescue`]); and one still there is
 //! refined over a growing horizon (the first quarter of the segment, then
@@ -352,15 +355,8 @@ fn refine_with(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
-    {
-        let (changed, yt, n) = sweep::sweep(cmp, model, sim, &mut segs, &res, iterations);
-        fit.simulations += n;
-        fit.rescued += changed.len();
-        for &i in &changed {
-            copy_segment(&mut y, &yt, &segs[i]);
-            res[i] = residual(cmp, &segs[i], &y);
-        }
-    }
+    let (changed, n) = sweep::sweep(cmp, model, sim, (&mut segs, &mut y, &mut res), iterations);
+    (fit.continued, fit.simulations) = (fit.continued + changed, fit.simulations + n);
     // segments still far above the others: a long run-in from earlier
     // segments or the arrival at the next one's start ([`rescue`]), then a
     // growing horizon
@@ -390,15 +386,8 @@ fn refine_with(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
-    {
-        let (changed, yt, n) = sweep::sweep(cmp, model, sim, &mut segs, &res, iterations);
-        fit.simulations += n;
-        fit.rescued += changed.len();
-        for &i in &changed {
-            copy_segment(&mut y, &yt, &segs[i]);
-            res[i] = residual(cmp, &segs[i], &y);
-        }
-    }
+    let (changed, n) = sweep::sweep(cmp, model, sim, (&mut segs, &mut y, &mut res), iterations);
+    (fit.continued, fit.simulations) = (fit.continued + changed, fit.simulations + n);
     fit.stuck = stuck(&segs, &segment_costs(&res), cmp.starts.outlier);
     fit.cost.1 = res.iter().flatten().map(|r| r.1).sum();
     (segs, y, fit)

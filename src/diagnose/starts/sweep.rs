@@ -4,24 +4,29 @@
 //!
 //! An exact model's segments all cost about the same (the noise over a
 //! segment's samples, the channels weighted alike), so the lowest costs
-//! give the floor the others should reach. A segment from a few
-//! accelerometers may fit its outputs while its start is wrong in
-//! directions they hardly see (the states of the unmeasured masses); with
-//! a stiff element that grazes its threshold the cost from there is rough
-//! and the refinement stalls at many times the floor, well below the
-//! [`super::super::settings::StartSettings::outlier`] × the median that
-//! the rescues act on when most segments are in that state. The
-//! continuity starts inside the refinement are tried once, after its
-//! first iteration, when the segment before has not reached its own
-//! start yet. Here, once every segment is refined, each segment above
-//! [`ABOVE`] × the floor ([`FLOOR`], a low quantile of the costs) is
-//! started where the model arrives from the refined start of the segment
-//! before, refined ([`super::refine_local`]) and kept when it predicts the
-//! segment better; the sweep goes on in waves, each over the segments
-//! whose predecessor has just changed, so a run of segments takes the
-//! model's simulation from the last one that fits.
+//! give the floor the others should reach. From a few accelerometers a
+//! segment may fit its outputs while its start is wrong in directions
+//! they hardly see (the states of the unmeasured masses); with a stiff
+//! element that grazes its threshold the cost from there is rough and the
+//! refinement stalls at tens to hundreds of times the floor. When most
+//! segments are in that state the median is too, and the rescues, which
+//! act on segments above [`crate::diagnose::settings::StartSettings::outlier`]
+//! × the median, see none of them. The continuity starts inside the
+//! refinement are tried once, after its first iteration, before the
+//! segment before has reached its own start. Here, once every segment is
+//! refined, each segment above [`ABOVE`] × the floor (the [`FLOOR`]
+//! quantile of the costs) that directly follows another is started where
+//! the model arrives from the refined start of the segment before, and
+//! refined ([`super::refine_local`]); when that start stays above the
+//! floor's bound, the segment before is also refined over both segments
+//! (a window that sees the directions the later segment needs) and the
+//! segment started where the model arrives from there. The best start is
+//! kept when it predicts the segment better than its start now. The sweep
+//! goes on in waves, each over the segments whose predecessor has just
+//! changed, so a run of segments takes the model's simulation from the
+//! last one that fits.
 
-use super::{carried, refine_local, residual, segment_costs, Comparison};
+use super::{carried, copy_segment, refine_local, residual, segment_costs, Comparison};
 use crate::integrate::{Integrator, SimSettings};
 use crate::model::Model;
 use crate::update::shooting::Segment;
@@ -42,15 +47,37 @@ fn floor(costs: &[f64]) -> f64 {
     sorted.get(k).copied().unwrap_or(f64::INFINITY)
 }
 
-/// The forward sweep (module docs) over `segs` with evaluations `res`:
-/// returns the indices changed, their predictions (p × N) and the
-/// simulations run.
+/// The forward sweep (module docs) over `segs`, with their predictions
+/// `y` (p × N) and evaluations `res`, all updated where a segment takes a
+/// new start: returns the number of segments changed and the simulations
+/// run.
 pub(super) fn sweep(
     cmp: &Comparison,
     model: &Model,
     sim: SimSettings,
+    (segs, y, res): (&mut [Segment], &mut DMatrix<f64>, &mut [Evaluation]),
+    iterations: usize,
+) -> (usize, usize) {
+    let (changed, yt, n) = waves(cmp, model, sim, segs, res, iterations);
+    for &i in &changed {
+        copy_segment(y, &yt, &segs[i]);
+        res[i] = residual(cmp, &segs[i], y);
+    }
+    (changed.len(), n)
+}
+
+/// A segment's weighted residual and cost (None where its prediction
+/// failed).
+type Evaluation = Option<(DVector<f64>, f64)>;
+
+/// The waves of the sweep: the indices changed, their predictions (p × N)
+/// and the simulations run.
+fn waves(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
     segs: &mut [Segment],
-    res: &[Option<(DVector<f64>, f64)>],
+    res: &[Evaluation],
     iterations: usize,
 ) -> (Vec<usize>, DMatrix<f64>, usize) {
     let mut y = DMatrix::zeros(cmp.observations.len(), cmp.force.ncols());
@@ -87,11 +114,19 @@ pub(super) fn sweep(
                 if found.as_ref().is_none_or(|f| f.2 > above) {
                     // the segment before refined over both segments
                     let p = &this[i - 1];
-                    let both = Segment { len: p.len + this[i].len, ..p.clone() };
+                    let both = Segment {
+                        len: p.len + this[i].len,
+                        ..p.clone()
+                    };
                     let (w, _, f) = refine_local(cmp, model, sim, &[both], iterations, false);
                     sims += f.simulations;
-                    let w = Segment { len: p.len, ..w.into_iter().next().expect("one segment") };
-                    if let Some(g) = from(&w, &this[i], &mut sims).filter(|g| found.as_ref().is_none_or(|f| g.2 < f.2)) {
+                    let w = Segment {
+                        len: p.len,
+                        ..w.into_iter().next().expect("one segment")
+                    };
+                    if let Some(g) = from(&w, &this[i], &mut sims)
+                        .filter(|g| found.as_ref().is_none_or(|f| g.2 < f.2))
+                    {
                         found = Some(g);
                     }
                 }
