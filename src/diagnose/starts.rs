@@ -301,7 +301,8 @@ pub fn refine(
     refine_with(cmp, model, sim, segments, (iterations, true))
 }
 
-/// [`refine`] without the long run-ins and arrivals ([`rescue`]): the
+/// [`refine`] without the sweep ([`sweep`]), the long run-ins and the
+/// arrivals ([`rescue`]): the
 /// starts of the segments a joint fit steps (a trial model's segment far
 /// above the others is left to the fit, which moves the model).
 pub fn refine_for_fit(
@@ -355,8 +356,10 @@ fn refine_with(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
-    let (changed, n) = sweep::sweep(cmp, model, sim, (&mut segs, &mut y, &mut res), iterations);
-    (fit.continued, fit.simulations) = (fit.continued + changed, fit.simulations + n);
+    if with_rescue {
+        let (changed, n) = sweep::sweep(cmp, model, sim, (&mut segs, &mut y, &mut res), iterations);
+        (fit.continued, fit.simulations) = (fit.continued + changed, fit.simulations + n);
+    }
     // segments still far above the others: a long run-in from earlier
     // segments or the arrival at the next one's start ([`rescue`]), then a
     // growing horizon
@@ -386,8 +389,10 @@ fn refine_with(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
-    let (changed, n) = sweep::sweep(cmp, model, sim, (&mut segs, &mut y, &mut res), iterations);
-    (fit.continued, fit.simulations) = (fit.continued + changed, fit.simulations + n);
+    if with_rescue {
+        let (changed, n) = sweep::sweep(cmp, model, sim, (&mut segs, &mut y, &mut res), iterations);
+        (fit.continued, fit.simulations) = (fit.continued + changed, fit.simulations + n);
+    }
     fit.stuck = stuck(&segs, &segment_costs(&res), cmp.starts.outlier);
     fit.cost.1 = res.iter().flatten().map(|r| r.1).sum();
     (segs, y, fit)
