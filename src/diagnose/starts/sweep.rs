@@ -70,6 +70,67 @@ pub(super) fn sweep(
 /// failed).
 type Evaluation = Option<(DVector<f64>, f64)>;
 
+/// A segment's new start, its prediction (p × len) and cost.
+type Found = Option<(Segment, DMatrix<f64>, f64)>;
+
+/// The model and its integrator, shared by the trials of a sweep.
+struct Sweep<'a> {
+    cmp: &'a Comparison,
+    model: &'a Model,
+    sim: SimSettings,
+    iterations: usize,
+    integ: Integrator,
+    /// Cost above which a segment is swept.
+    above: f64,
+}
+
+impl Sweep<'_> {
+    /// Segment `s` started where the model arrives from `p`, refined.
+    fn from(&self, p: &Segment, s: &Segment, sims: &mut usize) -> Found {
+        *sims += 1;
+        let t = carried(&self.integ, self.cmp, p, s, self.model.ndof())?;
+        let (t, yt, f) = self.refine(t);
+        *sims += f;
+        residual(self.cmp, &t, &yt).map(|(_, c)| {
+            let yi = yt.columns(t.start, t.len).into_owned();
+            (t, yi, c)
+        })
+    }
+
+    /// One segment refined alone: the segment, the prediction (p × N)
+    /// and the simulations run.
+    fn refine(&self, s: Segment) -> (Segment, DMatrix<f64>, usize) {
+        let (t, yt, f) = refine_local(self.cmp, self.model, self.sim, &[s], self.iterations, false);
+        let t = t.into_iter().next().expect("one segment");
+        (t, yt, f.simulations)
+    }
+
+    /// The best start of segment `i` from the segment before (module
+    /// docs), and the simulations run.
+    fn trial(&self, segs: &[Segment], i: usize) -> (Found, usize) {
+        let mut sims = 0;
+        let (p, s) = (&segs[i - 1], &segs[i]);
+        let mut found = self.from(p, s, &mut sims);
+        if found.as_ref().is_none_or(|f| f.2 > self.above) {
+            // the segment before refined over both segments
+            let both = Segment {
+                len: p.len + s.len,
+                ..p.clone()
+            };
+            let (w, _, f) = self.refine(both);
+            sims += f;
+            let w = Segment { len: p.len, ..w };
+            if let Some(g) = self
+                .from(&w, s, &mut sims)
+                .filter(|g| found.as_ref().is_none_or(|f| g.2 < f.2))
+            {
+                found = Some(g);
+            }
+        }
+        (found, sims)
+    }
+}
+
 /// The waves of the sweep: the indices changed, their predictions (p × N)
 /// and the simulations run.
 fn waves(
@@ -84,57 +145,28 @@ fn waves(
     let Ok(integ) = Integrator::new(model, cmp.fs, sim) else {
         return (vec![], y, 0);
     };
-    let (n, mut sims) = (model.ndof(), 0);
     let mut costs = segment_costs(res);
-    let above = ABOVE * floor(&costs);
-    let follows = |segs: &[Segment], i: usize| segs[i - 1].start + segs[i - 1].len == segs[i].start;
-    let mut changed: Vec<usize> = vec![];
-    let mut wave: Vec<usize> = (1..segs.len())
-        .filter(|&i| costs[i] > above && follows(segs, i))
-        .collect();
-    // segment `s` started where the model arrives from `p`, refined
-    let from = |p: &Segment, s: &Segment, sims: &mut usize| {
-        *sims += 1;
-        let t = carried(&integ, cmp, p, s, n)?;
-        let (t, yt, f) = refine_local(cmp, model, sim, &[t], iterations, false);
-        *sims += f.simulations;
-        let t = t.into_iter().next().expect("one segment");
-        residual(cmp, &t, &yt).map(|(_, c)| {
-            let yi = yt.columns(t.start, t.len).into_owned();
-            (t, yi, c)
-        })
+    let sweep = Sweep {
+        cmp,
+        model,
+        sim,
+        iterations,
+        integ,
+        above: ABOVE * floor(&costs),
     };
+    let follows = |segs: &[Segment], i: usize| segs[i - 1].start + segs[i - 1].len == segs[i].start;
+    let (mut changed, mut sims) = (vec![], 0);
+    let mut wave: Vec<usize> = (1..segs.len())
+        .filter(|&i| costs[i] > sweep.above && follows(segs, i))
+        .collect();
     while !wave.is_empty() {
         let this = &*segs;
-        let trials: Vec<(usize, Option<(Segment, DMatrix<f64>, f64)>, usize)> = wave
+        let trials: Vec<(usize, (Found, usize))> = wave
             .par_iter()
-            .map(|&i| {
-                let mut sims = 0;
-                let mut found = from(&this[i - 1], &this[i], &mut sims);
-                if found.as_ref().is_none_or(|f| f.2 > above) {
-                    // the segment before refined over both segments
-                    let p = &this[i - 1];
-                    let both = Segment {
-                        len: p.len + this[i].len,
-                        ..p.clone()
-                    };
-                    let (w, _, f) = refine_local(cmp, model, sim, &[both], iterations, false);
-                    sims += f.simulations;
-                    let w = Segment {
-                        len: p.len,
-                        ..w.into_iter().next().expect("one segment")
-                    };
-                    if let Some(g) = from(&w, &this[i], &mut sims)
-                        .filter(|g| found.as_ref().is_none_or(|f| g.2 < f.2))
-                    {
-                        found = Some(g);
-                    }
-                }
-                (i, found, sims)
-            })
+            .map(|&i| (i, sweep.trial(this, i)))
             .collect();
         let mut moved = vec![];
-        for (i, found, k) in trials {
+        for (i, (found, k)) in trials {
             sims += k;
             if let Some((t, yi, c)) = found.filter(|f| f.2 < costs[i]) {
                 y.columns_mut(t.start, t.len).copy_from(&yi);
@@ -147,7 +179,7 @@ fn waves(
         wave = moved
             .iter()
             .map(|&i| i + 1)
-            .filter(|&j| j < segs.len() && costs[j] > above && follows(segs, j))
+            .filter(|&j| j < segs.len() && costs[j] > sweep.above && follows(segs, j))
             .collect();
     }
     changed.sort_unstable();
