@@ -9,6 +9,10 @@ use tacit::integrate::SimSettings;
 use tacit::model::{Clearance, Damping, Model};
 use tacit::simulate::{simulate_record, RecordSpec};
 
+/// The record: its noise seed and length.
+const SEED: u64 = 779091;
+const SAMPLES: usize = 2048;
+
 fn lanl() -> Model {
     let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
     Model::from_file(std::path::Path::new(p)).unwrap()
@@ -65,6 +69,3 @@ fn truth_scores_near_the_noise_under_three_sensors() {
         100.0 * noise
     );
 }
-
-const SEED: u64 = 779091;
-const SAMPLES: usize = 2048;
