@@ -1080,7 +1080,7 @@ fn drop_negligible(d: &mut Diagnosis, bases: &Bases, progress: &dyn Fn(&str)) ->
         let cmp = prepared
             .as_ref()
             .map_or(&d.prepared.comparison, |p| &p.comparison);
-        if needed(cmp, &off, sim, d.predictions.1.as_ref()) {
+        if needed(cmp, &off, &d.model, sim) {
             continue;
         }
         let (after, pred) = cmp.errors(&off, sim);
@@ -1125,21 +1125,13 @@ const SCREEN_STRIDE: usize = 4;
 const SCREEN_RISE: f64 = 0.25;
 
 /// Whether the model `off` (an effect switched off) is clearly worse than
-/// the model whose segment predictions on the record are `with` (p × N):
-/// scored the same way ([`super::Comparison::shoot`]) on every
-/// [`SCREEN_STRIDE`]-th segment only, its multiple-shooting error there
-/// exceeds the one of `with` on the same samples by more than
-/// [`SCREEN_RISE`]. False (score every segment) when it does not, or when a
-/// prediction failed.
-fn needed(
-    cmp: &super::Comparison,
-    off: &Model,
-    sim: SimSettings,
-    with: Option<&nalgebra::DMatrix<f64>>,
-) -> bool {
-    let Some(with) = with else {
-        return false;
-    };
+/// the model `with` it: both scored the same way on every
+/// [`SCREEN_STRIDE`]-th segment only (the same start-state refinement,
+/// [`super::starts::refine`], on the same segments, so that neither has
+/// the continuity of its neighbours the other lacks), the error of `off`
+/// there exceeds the one of `with` by more than [`SCREEN_RISE`]. False
+/// (score every segment) when it does not, or when a prediction failed.
+fn needed(cmp: &super::Comparison, off: &Model, with: &Model, sim: SimSettings) -> bool {
     let subset: Vec<_> = cmp
         .segments
         .iter()
@@ -1150,23 +1142,23 @@ fn needed(
     if subset.len() < 2 || cmp.starts.iterations == 0 {
         return false;
     }
-    let (segs, y, _) = super::starts::refine(cmp, off, sim, &subset, cmp.starts.iterations);
-    if y.shape() != with.shape() {
-        return false;
-    }
-    // both predictions on the screen's samples only (NaN elsewhere)
-    let blank = || nalgebra::DMatrix::from_element(with.nrows(), with.ncols(), f64::NAN);
-    let (mut a, mut b) = (blank(), blank());
-    for s in &segs {
-        let (ya, yb) = (y.columns(s.start, s.len), with.columns(s.start, s.len));
-        if ya.iter().chain(yb.iter()).any(|v| !v.is_finite()) {
-            return false;
+    let score = |m: &Model| {
+        let (segs, y, _) = super::starts::refine(cmp, m, sim, &subset, cmp.starts.iterations);
+        // the prediction on the screen's samples only (NaN elsewhere)
+        let mut a = nalgebra::DMatrix::from_element(y.nrows(), y.ncols(), f64::NAN);
+        for s in &segs {
+            let ys = y.columns(s.start, s.len);
+            if ys.iter().any(|v| !v.is_finite()) {
+                return None;
+            }
+            a.columns_mut(s.start, s.len).copy_from(&ys);
         }
-        a.columns_mut(s.start, s.len).copy_from(&ya);
-        b.columns_mut(s.start, s.len).copy_from(&yb);
+        Some(cmp.total_error(&a))
+    };
+    match (score(off), score(with)) {
+        (Some(e_off), Some(e_with)) => e_off > e_with * (1.0 + SCREEN_RISE),
+        _ => false,
     }
-    let (e_off, e_with) = (cmp.total_error(&a), cmp.total_error(&b));
-    e_off > e_with * (1.0 + SCREEN_RISE)
 }
 
 /// Drop a spurious companion: with two nonlinear effects or more and the

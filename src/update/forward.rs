@@ -92,19 +92,24 @@ pub fn simulate(
                 }
             };
             if !sim.completed() {
-                return Err(Failure {
-                    segment: Some(i),
-                    reason: format!(
-                        "simulation stopped: {}",
-                        crate::simulate::describe_status(&sim.status)
-                    ),
-                });
+                return Err(stopped(i, &sim));
             }
             Ok(extract(problem, &sim, &compiled.pos))
         })
         .collect();
     let count = runs.len();
     (runs.into_iter().collect(), count)
+}
+
+/// The failure of segment `i`, whose simulation `sim` stopped early.
+fn stopped(i: usize, sim: &crate::integrate::Simulation) -> Failure {
+    Failure {
+        segment: Some(i),
+        reason: format!(
+            "simulation stopped: {}",
+            crate::simulate::describe_status(&sim.status)
+        ),
+    }
 }
 
 /// [`simulate`], each segment's run taped ([`Integrator::run_taped`], with
@@ -137,13 +142,7 @@ pub(super) fn simulate_taped(
             let force = problem.force.columns(seg.start, seg.len);
             let (sim, tape) = compiled.integ.run_taped(force, &seg.u0, &seg.v0, true);
             if !sim.completed() {
-                return Err(Failure {
-                    segment: Some(i),
-                    reason: format!(
-                        "simulation stopped: {}",
-                        crate::simulate::describe_status(&sim.status)
-                    ),
-                });
+                return Err(stopped(i, &sim));
             }
             Ok((extract(problem, &sim, &compiled.pos), tape))
         })
