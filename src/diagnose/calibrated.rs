@@ -61,7 +61,6 @@ use crate::error::Result;
 use crate::integrate::SimSettings;
 use crate::model::Model;
 use crate::record::Record;
-use crate::trace::EffectKind;
 use crate::update::{Parameter, Target};
 use serde::Serialize;
 use std::borrow::Cow;
@@ -233,12 +232,10 @@ pub fn diagnose_calibrated(
             .is_some_and(|e| e <= t.noise_floor(settings));
         // a stiffness or damping change among its effects says the
         // declared linear part is wrong: calibrated all the same
-        let linear_named = t.added.iter().any(|e| {
-            matches!(
-                e.candidate.kind,
-                EffectKind::Stiffness | EffectKind::Damping
-            )
-        });
+        let linear_named = t
+            .added
+            .iter()
+            .any(|e| e.candidate.kind.changes_linear_part());
         if linear_records.is_empty() && explained && !linear_named {
             return Ok(trusted.expect("checked above"));
         }
@@ -1013,10 +1010,8 @@ fn update_effects(d: &mut Diagnosis, std: &[Estimated], s: &CalibrationSettings)
         .added
         .iter()
         .map(|e| {
-            !(matches!(
-                e.candidate.kind,
-                EffectKind::Stiffness | EffectKind::Damping
-            ) && e.targets.iter().all(|t| is_linear(&d.model, *t)))
+            !(e.candidate.kind.changes_linear_part()
+                && e.targets.iter().all(|t| is_linear(&d.model, *t)))
         })
         .collect();
     for (rep, e) in d.effects.iter_mut().zip(&d.added) {
@@ -1030,10 +1025,7 @@ fn update_effects(d: &mut Diagnosis, std: &[Estimated], s: &CalibrationSettings)
     // a local stiffness or damping change the refinement took back to
     // nothing (within the calibration's significance rule) is not an effect
     for ((k, rep), e) in keep.iter_mut().zip(&d.effects).zip(&d.added) {
-        if matches!(
-            e.candidate.kind,
-            EffectKind::Stiffness | EffectKind::Damping
-        ) {
+        if e.candidate.kind.changes_linear_part() {
             *k &= rep.parameters.iter().any(|(name, v)| {
                 let se = rep.std_errors.get(name).copied().flatten();
                 v.abs() > s.min_change && se.is_none_or(|e| v.abs() > s.significance * e)
@@ -1065,12 +1057,12 @@ const NEGLIGIBLE: f64 = 0.01;
 fn drop_negligible(d: &mut Diagnosis, bases: &Bases, progress: &dyn Fn(&str)) -> Option<String> {
     let sim = sim_of(d);
     let mut dropped = vec![];
+    // the model's own screen error on its reconstruction, while it is
+    // unchanged
+    let mut with_screen: Option<Option<f64>> = None;
     for i in (0..d.added.len()).rev() {
         let e = &d.added[i];
-        if matches!(
-            e.candidate.kind,
-            EffectKind::Stiffness | EffectKind::Damping
-        ) {
+        if e.candidate.kind.changes_linear_part() {
             continue;
         }
         let with = d.after.relative_error?;
@@ -1080,7 +1072,11 @@ fn drop_negligible(d: &mut Diagnosis, bases: &Bases, progress: &dyn Fn(&str)) ->
         let cmp = prepared
             .as_ref()
             .map_or(&d.prepared.comparison, |p| &p.comparison);
-        if needed(cmp, &off, &d.model, sim) {
+        let with_error = match &prepared {
+            Some(_) => screen_error(cmp, &d.model, sim),
+            None => *with_screen.get_or_insert_with(|| screen_error(cmp, &d.model, sim)),
+        };
+        if needed(screen_error(cmp, &off, sim), with_error) {
             continue;
         }
         let (after, pred) = cmp.errors(&off, sim);
@@ -1097,6 +1093,7 @@ fn drop_negligible(d: &mut Diagnosis, bases: &Bases, progress: &dyn Fn(&str)) ->
             pct(Some(with))
         ));
         d.model = off;
+        with_screen = None;
         if let Some(p) = prepared {
             d.prepared = p;
         }
@@ -1124,14 +1121,13 @@ const SCREEN_STRIDE: usize = 4;
 /// 25 × [`NEGLIGIBLE`].
 const SCREEN_RISE: f64 = 0.25;
 
-/// Whether the model `off` (an effect switched off) is clearly worse than
-/// the model `with` it: both scored the same way on every
-/// [`SCREEN_STRIDE`]-th segment only (the same start-state refinement,
-/// [`super::starts::refine`], on the same segments, so that neither has
-/// the continuity of its neighbours the other lacks), the error of `off`
-/// there exceeds the one of `with` by more than [`SCREEN_RISE`]. False
-/// (score every segment) when it does not, or when a prediction failed.
-fn needed(cmp: &super::Comparison, off: &Model, with: &Model, sim: SimSettings) -> bool {
+/// The multiple-shooting error of `model` on every [`SCREEN_STRIDE`]-th
+/// segment of `cmp` only, those segments' starts refined alone
+/// ([`super::starts::refine`]): models screened this way are compared on
+/// the same footing, neither with the continuity of neighbours the other
+/// lacks. None with fewer than two such segments, without start-state
+/// refinement, or when a prediction failed.
+fn screen_error(cmp: &super::Comparison, model: &Model, sim: SimSettings) -> Option<f64> {
     let subset: Vec<_> = cmp
         .segments
         .iter()
@@ -1140,25 +1136,27 @@ fn needed(cmp: &super::Comparison, off: &Model, with: &Model, sim: SimSettings) 
         .cloned()
         .collect();
     if subset.len() < 2 || cmp.starts.iterations == 0 {
-        return false;
+        return None;
     }
-    let score = |m: &Model| {
-        let (segs, y, _) = super::starts::refine(cmp, m, sim, &subset, cmp.starts.iterations);
-        // the prediction on the screen's samples only (NaN elsewhere)
-        let mut a = nalgebra::DMatrix::from_element(y.nrows(), y.ncols(), f64::NAN);
-        for s in &segs {
-            let ys = y.columns(s.start, s.len);
-            if ys.iter().any(|v| !v.is_finite()) {
-                return None;
-            }
-            a.columns_mut(s.start, s.len).copy_from(&ys);
+    let (segs, y, _) = super::starts::refine(cmp, model, sim, &subset, cmp.starts.iterations);
+    // the prediction on the screen's samples only (NaN elsewhere)
+    let mut a = nalgebra::DMatrix::from_element(y.nrows(), y.ncols(), f64::NAN);
+    for s in &segs {
+        let ys = y.columns(s.start, s.len);
+        if ys.iter().any(|v| !v.is_finite()) {
+            return None;
         }
-        Some(cmp.total_error(&a))
-    };
-    match (score(off), score(with)) {
-        (Some(e_off), Some(e_with)) => e_off > e_with * (1.0 + SCREEN_RISE),
-        _ => false,
+        a.columns_mut(s.start, s.len).copy_from(&ys);
     }
+    Some(cmp.total_error(&a))
+}
+
+/// Whether a model with an effect switched off, whose screen error
+/// ([`screen_error`]) is `off`, is clearly worse than the model with it
+/// (`with`): by more than [`SCREEN_RISE`]. False (score every segment)
+/// when it is not, or when either error is missing.
+fn needed(off: Option<f64>, with: Option<f64>) -> bool {
+    matches!((off, with), (Some(o), Some(w)) if o > w * (1.0 + SCREEN_RISE))
 }
 
 /// Drop a spurious companion: with two nonlinear effects or more and the
@@ -1180,12 +1178,7 @@ fn refit_without(
     progress: &dyn Fn(&str),
 ) -> Result<Option<(String, Vec<Estimated>)>> {
     let nonlinear: Vec<usize> = (0..d.added.len())
-        .filter(|&i| {
-            !matches!(
-                d.added[i].candidate.kind,
-                EffectKind::Stiffness | EffectKind::Damping
-            )
-        })
+        .filter(|&i| !d.added[i].candidate.kind.changes_linear_part())
         .collect();
     let Some(with) = d.after.relative_error.filter(|_| nonlinear.len() >= 2) else {
         return Ok(None);
@@ -1294,7 +1287,7 @@ mod tests {
     use super::*;
     use crate::model::Contact;
     use crate::simulate::{simulate_record, RecordSpec};
-    use crate::trace::{Candidate, RankedEffect};
+    use crate::trace::{Candidate, EffectKind, RankedEffect};
 
     /// A contact 3→2 on lanl8dof diagnosed, a quadratic 2–3 named beside
     /// it (as on a linear part the calibration biased): refined again

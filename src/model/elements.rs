@@ -163,6 +163,18 @@ pub struct Saturating {
     pub force: f64,
 }
 
+/// The force and slope of a saturating spring of stiffness `k` and bound
+/// `fmax` at the relative displacement `delta`: `(k δ, k)` while
+/// `|k δ| ≤ fmax`, `(±fmax, 0)` beyond.
+pub fn saturation(k: f64, fmax: f64, delta: f64) -> (f64, f64) {
+    let trial = k * delta;
+    if trial.abs() <= fmax {
+        (trial, k)
+    } else {
+        (fmax.copysign(trial), 0.0)
+    }
+}
+
 /// One nonlinear element in compiled, 0-based form for the integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Element {
@@ -508,14 +520,9 @@ impl Element {
                 slope
             }
             Element::Saturating { i, j, k, fmax } => {
-                let trial = k * rel(u, i, j);
-                if trial.abs() <= fmax {
-                    scatter(f, i, j, trial);
-                    k
-                } else {
-                    scatter(f, i, j, fmax.copysign(trial));
-                    0.0
-                }
+                let (force, slope) = saturation(k, fmax, rel(u, i, j));
+                scatter(f, i, j, force);
+                slope
             }
         }
     }

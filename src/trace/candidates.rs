@@ -44,6 +44,12 @@ impl EffectKind {
         )
     }
 
+    /// A change of a parameter the declared linear part already has (a
+    /// stiffness or damping change), not an element of its own.
+    pub fn changes_linear_part(self) -> bool {
+        matches!(self, EffectKind::Stiffness | EffectKind::Damping)
+    }
+
     /// The effect dissipates energy along a law other than the viscous
     /// damping's (friction to ground or between DOFs, a nonlinear damper):
     /// it is fitted with the model's damping free beside it

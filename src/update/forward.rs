@@ -65,51 +65,8 @@ pub fn simulate(
     problem: &Problem,
     x: &[f64],
 ) -> (std::result::Result<Vec<SegmentResponse>, Failure>, usize) {
-    let model = problem.model_at(x);
-    let compiled = match compile(problem, &model) {
-        Ok(c) => c,
-        Err(f) => return (Err(f), 0),
-    };
-    // segments are independent: simulated in parallel and collected in
-    // order, so the result (and the first failure reported) does not depend
-    // on the thread count; every segment is simulated and counted
-    let runs: Vec<std::result::Result<SegmentResponse, Failure>> = problem
-        .segments
-        .par_iter()
-        .enumerate()
-        .map(|(i, seg)| {
-            let force = problem.force.columns(seg.start, seg.len);
-            let sim = match &compiled.tt {
-                None => compiled.integ.run(force, &seg.u0, &seg.v0),
-                Some(tt) => {
-                    let fa = tt * force;
-                    let proj = compiled.proj.as_ref().unwrap_or(tt);
-                    let ua = proj * DVector::from_column_slice(&seg.u0);
-                    let va = proj * DVector::from_column_slice(&seg.v0);
-                    compiled
-                        .integ
-                        .run(fa.as_view(), ua.as_slice(), va.as_slice())
-                }
-            };
-            if !sim.completed() {
-                return Err(stopped(i, &sim));
-            }
-            Ok(extract(problem, &sim, &compiled.pos))
-        })
-        .collect();
-    let count = runs.len();
-    (runs.into_iter().collect(), count)
-}
-
-/// The failure of segment `i`, whose simulation `sim` stopped early.
-fn stopped(i: usize, sim: &crate::integrate::Simulation) -> Failure {
-    Failure {
-        segment: Some(i),
-        reason: format!(
-            "simulation stopped: {}",
-            crate::simulate::describe_status(&sim.status)
-        ),
-    }
+    let (res, n) = simulate_with(problem, x, false);
+    (res.map(|(y, _)| y), n)
 }
 
 /// [`simulate`], each segment's run taped ([`Integrator::run_taped`], with
@@ -124,23 +81,52 @@ pub(super) fn simulate_taped(
     std::result::Result<(Vec<SegmentResponse>, Option<Vec<Tape>>), Failure>,
     usize,
 ) {
+    simulate_with(problem, x, true)
+}
+
+/// [`simulate`] with each run's tape when `taped` (and the problem is not
+/// reduced).
+#[allow(clippy::type_complexity)]
+fn simulate_with(
+    problem: &Problem,
+    x: &[f64],
+    taped: bool,
+) -> (
+    std::result::Result<(Vec<SegmentResponse>, Option<Vec<Tape>>), Failure>,
+    usize,
+) {
     let model = problem.model_at(x);
     let compiled = match compile(problem, &model) {
         Ok(c) => c,
         Err(f) => return (Err(f), 0),
     };
-    if compiled.tt.is_some() {
-        let (r, n) = simulate(problem, x);
-        return (r.map(|r| (r, None)), n);
-    }
-    // in parallel, collected in order (as [`simulate`])
-    let runs: Vec<std::result::Result<(SegmentResponse, Tape), Failure>> = problem
+    let taped = taped && compiled.tt.is_none();
+    // segments are independent: simulated in parallel and collected in
+    // order, so the result (and the first failure reported) does not depend
+    // on the thread count; every segment is simulated and counted
+    let runs: Vec<std::result::Result<(SegmentResponse, Option<Tape>), Failure>> = problem
         .segments
         .par_iter()
         .enumerate()
         .map(|(i, seg)| {
             let force = problem.force.columns(seg.start, seg.len);
-            let (sim, tape) = compiled.integ.run_taped(force, &seg.u0, &seg.v0, true);
+            let (sim, tape) = match &compiled.tt {
+                None if taped => {
+                    let (sim, tape) = compiled.integ.run_taped(force, &seg.u0, &seg.v0, true);
+                    (sim, Some(tape))
+                }
+                None => (compiled.integ.run(force, &seg.u0, &seg.v0), None),
+                Some(tt) => {
+                    let fa = tt * force;
+                    let proj = compiled.proj.as_ref().unwrap_or(tt);
+                    let ua = proj * DVector::from_column_slice(&seg.u0);
+                    let va = proj * DVector::from_column_slice(&seg.v0);
+                    let sim = compiled
+                        .integ
+                        .run(fa.as_view(), ua.as_slice(), va.as_slice());
+                    (sim, None)
+                }
+            };
             if !sim.completed() {
                 return Err(stopped(i, &sim));
             }
@@ -149,13 +135,25 @@ pub(super) fn simulate_taped(
         .collect();
     let count = runs.len();
     let runs: std::result::Result<Vec<_>, Failure> = runs.into_iter().collect();
-    (
-        runs.map(|r| {
-            let (y, t): (Vec<_>, Vec<_>) = r.into_iter().unzip();
-            (y, Some(t))
-        }),
-        count,
-    )
+    let split = |r: Vec<(SegmentResponse, Option<Tape>)>| {
+        let (y, t): (Vec<_>, Vec<_>) = r.into_iter().unzip();
+        (
+            y,
+            t.into_iter().collect::<Option<Vec<_>>>().filter(|_| taped),
+        )
+    };
+    (runs.map(split), count)
+}
+
+/// The failure of segment `i`, whose simulation `sim` stopped early.
+pub(super) fn stopped(i: usize, sim: &Simulation) -> Failure {
+    Failure {
+        segment: Some(i),
+        reason: format!(
+            "simulation stopped: {}",
+            crate::simulate::describe_status(&sim.status)
+        ),
+    }
 }
 
 /// The first segment whose simulation at `x` diverges (its energy above

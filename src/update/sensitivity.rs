@@ -27,7 +27,7 @@
 use super::forward::{self, Failure, SegmentResponse};
 use super::param::{Parameter, Target};
 use super::problem::Problem;
-use crate::integrate::{ElementSeed, ParamSeed, Seeds, Tape};
+use crate::integrate::{ElementSeed, ParamSeed, Seeds, Sensitivities, Tape};
 use crate::model::elements::{self, ElementList, ElementParam};
 use crate::model::{Damping, Model};
 use nalgebra::DMatrix;
@@ -103,24 +103,11 @@ pub fn simulate_seeded(
                 .run_sensitivities(force, &seg.u0, &seg.v0, &seeds)
                 .map_err(|e| fail(Some(i), e.to_string()))?;
             if !sim.completed() {
-                let reason = format!(
-                    "simulation stopped: {}",
-                    crate::simulate::describe_status(&sim.status)
-                );
-                return Err(fail(Some(i), reason));
-            }
-            if let Some(t) = sens.singular_tangent {
-                let reason = format!("the converged tangent is singular at t = {t} s");
-                return Err(fail(Some(i), reason));
+                return Err(forward::stopped(i, &sim));
             }
             let pos = &compiled.pos;
             let y = forward::extract_channels(problem, (&sim.u, &sim.v, &sim.a), pos);
-            let dy = (0..seeds.len())
-                .map(|j| {
-                    forward::extract_channels(problem, (&sens.du[j], &sens.dv[j], &sens.da[j]), pos)
-                })
-                .collect();
-            Ok(SegmentDerivatives { y, dy })
+            segment_derivatives(problem, pos, i, y, &sens)
         })
         .collect();
     let count = runs.len();
@@ -157,25 +144,40 @@ pub fn from_tapes(
                 .integ
                 .sensitivities_from_tape(force, &seg.u0, &seg.v0, tape, &seeds)
                 .ok()?;
-            if let Some(t) = sens.singular_tangent {
-                let reason = format!("the converged tangent is singular at t = {t} s");
-                return Some(Err(Failure {
-                    segment: Some(i),
-                    reason,
-                }));
-            }
-            let pos = &compiled.pos;
-            let dy = (0..seeds.len())
-                .map(|j| {
-                    forward::extract_channels(problem, (&sens.du[j], &sens.dv[j], &sens.da[j]), pos)
-                })
-                .collect();
-            Some(Ok(SegmentDerivatives { y: y.clone(), dy }))
+            Some(segment_derivatives(
+                problem,
+                &compiled.pos,
+                i,
+                y.clone(),
+                &sens,
+            ))
         })
         .collect();
     runs.into_iter()
         .collect::<Option<Vec<_>>>()
         .map(|r| r.into_iter().collect())
+}
+
+/// Segment `i`'s channels `y` with their derivatives along every seed of
+/// `sens` (`pos`: each DOF's simulated coordinate); a failure when the
+/// converged tangent was singular (the derivatives NaN from there on).
+fn segment_derivatives(
+    problem: &Problem,
+    pos: &[Option<usize>],
+    i: usize,
+    y: SegmentResponse,
+    sens: &Sensitivities,
+) -> std::result::Result<SegmentDerivatives, Failure> {
+    if let Some(t) = sens.singular_tangent {
+        return Err(Failure {
+            segment: Some(i),
+            reason: format!("the converged tangent is singular at t = {t} s"),
+        });
+    }
+    let dy = (0..sens.du.len())
+        .map(|j| forward::extract_channels(problem, (&sens.du[j], &sens.dv[j], &sens.da[j]), pos))
+        .collect();
+    Ok(SegmentDerivatives { y, dy })
 }
 
 /// The seeds `∂(M, C, K, elements)/∂x_j` of the parameters at `model`

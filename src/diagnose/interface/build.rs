@@ -196,9 +196,16 @@ fn push_jenkins(m: &mut Model, spec: &FitSpec, dofs: Vec<usize>, k_j: f64, slip_
         m.jenkins.push(Jenkins {
             dofs: dofs.clone(),
             stiffness: k_j / n as f64,
-            slip_force: slip_force * (i as f64 / n as f64).powf(spec.spread),
+            slip_force: element_slip_force(i, n, spec.spread, slip_force),
         });
     }
+}
+
+/// The slip force of element `i` (from 1) of `n` whose largest is
+/// `slip_force`: `F_s (i / n)^p` (`p` the density's exponent,
+/// [`FitSpec::spread`]).
+pub(super) fn element_slip_force(i: usize, n: usize, spread: f64, slip_force: f64) -> f64 {
+    slip_force * (i as f64 / n as f64).powf(spread)
 }
 
 /// `base` with the residual mode above the band and the factors of
@@ -452,8 +459,9 @@ shape = [0.1, -0.4, 0.4]
         assert!(j.stiffness > 0.0);
     }
 
-    #[test]
-    fn interface_coordinate_softens_only_the_modes_it_strains() {
+    /// [`section`] with a residual mode at 30 Hz, and the settings of an
+    /// interface coordinate on a pair the linear model couples by a spring.
+    fn coordinate_case() -> (modal::ModalSection, FitSpec) {
         let mut s = section();
         s.modes.push(modal::ModalMode {
             frequency_hz: 30.0,
@@ -461,7 +469,6 @@ shape = [0.1, -0.4, 0.4]
             shape: vec![0.2, 0.1, -0.3],
             residual: true,
         });
-        // a pair the linear model couples by a spring
         let d = &held_model(&s).unwrap().springs[0].dofs;
         let spec = FitSpec {
             direction: Direction::Coordinate,
@@ -469,6 +476,12 @@ shape = [0.1, -0.4, 0.4]
             upper_residual_damping: None,
             ..Default::default()
         };
+        (s, spec)
+    }
+
+    #[test]
+    fn interface_coordinate_softens_only_the_modes_it_strains() {
+        let (s, spec) = coordinate_case();
         // the 7-Hz mode alone: fully slipped it keeps 1 − δ² of its ω²
         let m = coordinate_model(&s, &spec, &[], &[0.0, 0.0, 0.6], 1.0).unwrap();
         assert_eq!(m.points, ["exc", "wing", "payload", INTERFACE]);
@@ -506,25 +519,15 @@ shape = [0.1, -0.4, 0.4]
 
     #[test]
     fn elastic_softening_keeps_the_linear_model_below_its_bound_and_adds_its_share_saturated() {
-        let mut s = section();
-        s.modes.push(modal::ModalMode {
-            frequency_hz: 30.0,
-            damping: 0.05,
-            shape: vec![0.2, 0.1, -0.3],
-            residual: true,
-        });
-        let d = &held_model(&s).unwrap().springs[0].dofs;
+        let (s, coordinate) = coordinate_case();
         let spec = FitSpec {
-            direction: Direction::Coordinate,
-            pair: [d[0], d[1]],
-            upper_residual_damping: None,
             participations: Some(vec![0.0, 0.0, 0.6]),
             hold_participations: true,
             softening: Some(Softening {
                 share: 0.5,
                 force: 3.0,
             }),
-            ..Default::default()
+            ..coordinate
         };
         spec.validate().unwrap();
         let m = coordinate_model(&s, &spec, &[], &[0.0, 0.0, 0.6], 1.0).unwrap();

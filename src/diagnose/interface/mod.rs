@@ -217,15 +217,11 @@ impl Offer {
 
     /// The best interface model on the coordinate (its fit).
     pub fn best_interface(&self) -> &Fitted {
-        let mut best = (self.rank_of(JENKINS), &self.jenkins);
-        for (name, f) in [(IWAN, &self.iwan), (SOFTENED, &self.softened)] {
-            if let Some(f) = f {
-                if self.rank_of(name) < best.0 {
-                    best = (self.rank_of(name), f);
-                }
-            }
-        }
-        best.1
+        [JENKINS, IWAN, SOFTENED]
+            .into_iter()
+            .filter_map(|name| Some((self.rank_of(name), self.fitted(name)?)))
+            .min_by_key(|(rank, _)| *rank)
+            .map_or(&self.jenkins, |(_, f)| f)
     }
 
     /// The fit of the interface model named `name` in [`Offer::ranking`]
@@ -385,7 +381,7 @@ fn softening_spec(spec: &FitSpec, from: &Fitted, share: f64) -> FitSpec {
         hold_participations: true,
         softening: Some(Softening {
             share,
-            force: from.slip_force * (1.0 / n as f64).powf(from.spread),
+            force: build::element_slip_force(1, n, from.spread, from.slip_force),
         }),
         ..spec.clone()
     }

@@ -81,7 +81,7 @@ pub fn restoring(
             f += fe;
         }
         for e in &soft {
-            f += (e.stiffness * d).clamp(-e.force, e.force);
+            f += crate::model::elements::saturation(e.stiffness, e.force, d).0;
         }
         if k >= k0 {
             displacement.push(d);
