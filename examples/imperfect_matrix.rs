@@ -348,7 +348,12 @@ fn verdict(c: &Case, d: &tacit::diagnose::Diagnosis, noise: f64) -> String {
             let x = e.parameters.get(*n).copied().unwrap_or(f64::NAN);
             let dev = x / v - 1.0;
             if dev.is_nan() || dev.abs() > 0.1 {
-                fails.push(format!("{} {n} {:+.1} %", t.kind, 100.0 * dev));
+                let said = if e.undetermined.iter().any(|u| u == n) {
+                    " (reported as not determined)"
+                } else {
+                    ""
+                };
+                fails.push(format!("{} {n} {:+.1} %{said}", t.kind, 100.0 * dev));
             }
         }
     }

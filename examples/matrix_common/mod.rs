@@ -18,7 +18,10 @@ pub fn effects_cell(effects: &[EffectReport]) -> String {
             let p: Vec<String> = e
                 .parameters
                 .iter()
-                .map(|(k, v)| format!("{k} {v:.4e}"))
+                .map(|(k, v)| match e.std_errors.get(k).copied().flatten() {
+                    Some(se) => format!("{k} {v:.4e} ± {se:.1e}"),
+                    None => format!("{k} {v:.4e}"),
+                })
                 .collect();
             format!("{} {:?}: {}", e.kind.name(), e.dofs, p.join(", "))
         })

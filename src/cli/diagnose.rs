@@ -233,6 +233,13 @@ fn print_summary(d: &diagnose::Diagnosis, output: &std::path::Path) -> anyhow::R
             pct(v.after.relative_error)
         );
     }
+    for e in d.effects.iter().filter(|e| !e.undetermined.is_empty()) {
+        outln!(
+            "warning: {}: {} not determined by these records (standard error above the value; report.md, Effects found)",
+            e.label,
+            e.undetermined.join(", ")
+        );
+    }
     outln!("report: {}", output.join("report.md").display());
     Ok(())
 }

@@ -31,6 +31,9 @@ pub struct EffectReport {
     pub group_estimates: BTreeMap<String, Vec<f64>>,
     /// Parameters from the trace regression (the fit's start).
     pub traced: BTreeMap<String, f64>,
+    /// Parameters the records do not determine: their noise-only standard
+    /// error exceeds their value ([`undetermined`]).
+    pub undetermined: Vec<String>,
     /// Scores.
     pub score: Score,
 }
@@ -60,6 +63,28 @@ impl EffectReport {
         let v = *self.parameters.get(name)?;
         Some(se.hypot(mean - v))
     }
+}
+
+/// The parameters of `values` whose standard error (`std_errors`)
+/// exceeds their magnitude: noise alone could move them by more than
+/// their whole value, so the records do not tell what they are (a stop's
+/// gap against ground on a structure free to move as a rigid body, which
+/// each segment's free start position absorbs, is the known case).
+pub fn undetermined(
+    values: &BTreeMap<String, f64>,
+    std_errors: &BTreeMap<String, Option<f64>>,
+) -> Vec<String> {
+    values
+        .iter()
+        .filter(|(k, v)| {
+            std_errors
+                .get(*k)
+                .copied()
+                .flatten()
+                .is_some_and(|se| se > v.abs())
+        })
+        .map(|(k, _)| k.clone())
+        .collect()
 }
 
 /// How much an effect pays.

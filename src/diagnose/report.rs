@@ -265,6 +265,7 @@ fn effects_section(s: &mut String, d: &Diagnosis) {
     );
     for e in &d.effects {
         offset_note(s, e);
+        undetermined_note(s, e);
     }
     if let Some((name, label, ratio)) = worst_ratio(&d.effects) {
         let _ = writeln!(
@@ -302,6 +303,40 @@ fn offset_note(s: &mut String, e: &EffectReport) {
             far.join("; ")
         );
     }
+}
+
+/// A sentence for the parameters the records do not determine
+/// ([`EffectReport::undetermined`]), with the known cause for a law
+/// against ground.
+fn undetermined_note(s: &mut String, e: &EffectReport) {
+    if e.undetermined.is_empty() {
+        return;
+    }
+    let each: Vec<String> = e
+        .undetermined
+        .iter()
+        .filter_map(|k| {
+            let (v, se) = (
+                *e.parameters.get(k)?,
+                e.std_errors.get(k).copied().flatten()?,
+            );
+            let sh = shown(k);
+            let (dv, dse) = (sh.decimals(v, &[]), sh.decimals(se, &[]));
+            Some(format!("{k} {} ± {}", sh.value(v, dv), sh.value(se, dse)))
+        })
+        .collect();
+    let ground = e.dofs.len() == 1 && e.undetermined.iter().any(|k| k == "gap");
+    let cause = if ground {
+        " A threshold against ground is measured from the structure's absolute position, which accelerations do not give: where the structure can move as a rigid body, each segment's free start position takes up any gap, and only a displacement sensor or a record that starts at rest at the position the gap is counted from ties it."
+    } else {
+        ""
+    };
+    let _ = writeln!(
+        s,
+        "\n**{}: not determined by these records** ({}): the noise alone could move the value by more than its size; the effect's other parameters and the errors stand, this value is not a measurement.{cause}",
+        e.label,
+        each.join("; ")
+    );
 }
 
 /// The parameter whose quarters' standard error
@@ -892,6 +927,7 @@ mod tests {
             .map(|(k, v)| (k.to_string(), v.clone()))
             .collect(),
             traced: BTreeMap::new(),
+            undetermined: vec![],
             score: super::super::outcome::Score {
                 residual_explained: 0.428,
                 bic_change: -1.0,
@@ -935,6 +971,32 @@ mod tests {
         near.parameters.insert("stiffness".into(), 2.02e6);
         let mut s = String::new();
         offset_note(&mut s, &near);
+        assert!(s.is_empty(), "{s}");
+    }
+
+    /// A stop against ground whose gap's standard error (1.6 m) dwarfs
+    /// the gap (0.012 mm) is said not to be determined, with the rigid-body
+    /// cause; a determined gap (the bumper's) gets no sentence.
+    #[test]
+    fn a_gap_the_noise_could_move_by_more_than_itself_is_not_determined() {
+        let mut stop = contact();
+        stop.dofs = vec![8];
+        stop.label = "contact @8".into();
+        stop.parameters.insert("gap".into(), 1.2045e-5);
+        stop.std_errors.insert("gap".into(), Some(1.6));
+        stop.undetermined = super::super::outcome::undetermined(&stop.parameters, &stop.std_errors);
+        assert_eq!(stop.undetermined, vec!["gap".to_string()]);
+        let mut s = String::new();
+        undetermined_note(&mut s, &stop);
+        assert!(s.contains("contact @8: not determined"), "{s}");
+        assert!(s.contains("(gap 0.012045 mm ± 1600"), "{s}");
+        assert!(s.contains("rigid body"), "{s}");
+        let bumper = contact();
+        assert!(
+            super::super::outcome::undetermined(&bumper.parameters, &bumper.std_errors).is_empty()
+        );
+        let mut s = String::new();
+        undetermined_note(&mut s, &bumper);
         assert!(s.is_empty(), "{s}");
     }
 

@@ -5,7 +5,7 @@
 use super::effects;
 use super::errors::Comparison;
 use super::fit::spread;
-use super::outcome::EffectReport;
+use super::outcome::{undetermined, EffectReport};
 use super::state::{Context, KeptEffect, State};
 use super::{joint, DiagnoseSettings};
 use crate::integrate::SimSettings;
@@ -63,11 +63,13 @@ pub(super) fn report_effects(
                     group_estimates.insert(name.clone(), groups.into_iter().map(change).collect());
                 }
             }
+            let parameters = vals.into_iter().collect();
             EffectReport {
                 kind: e.candidate.kind,
                 dofs: e.candidate.dofs.iter().map(|d| d + 1).collect(),
                 label: e.label.clone(),
-                parameters: vals.into_iter().collect(),
+                undetermined: undetermined(&parameters, &std_errors),
+                parameters,
                 std_errors,
                 group_estimates,
                 traced: r.parameters.iter().cloned().collect(),
