@@ -34,9 +34,10 @@
 //! segment before ends (continuity), the segments taken in order so that a
 //! run of them in a wrong basin takes the model's simulation from the last
 //! good one; a segment left above 8× the median cost is run in from the
-//! refined segment before; every segment above twice the lowest costs'
-//! level is then started from where the refined segment before ends, the
-//! segments in waves ([`sweep`], again after the rescues); one still far
+//! refined segment before; where the record measures fewer DOFs than the
+//! model has, every segment above twice the lowest costs' level is then
+//! started from where the refined segment before ends, the segments in
+//! waves ([`sweep`], again after the rescues); one still far
 //! above is given a long run-in from 2,
 //! 4, 8 or 16 segments back, or the state from which the model arrives at
 //! the next segment's refined start ([`rescue`]); and one still there is
@@ -327,6 +328,7 @@ fn refine_with(
     if !model.is_nonlinear() || iterations == 0 {
         return (segs, y, fit);
     }
+    let sweeps = with_rescue && sweep::weakly_observed(cmp, model);
     // segments left far above the others: run in again from where the
     // (now refined) segment before ends, then refine those alone
     let mut res: Vec<Option<(DVector<f64>, f64)>> =
@@ -356,7 +358,7 @@ fn refine_with(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
-    if with_rescue {
+    if sweeps {
         let (changed, n) = sweep::sweep(cmp, model, sim, (&mut segs, &mut y, &mut res), iterations);
         (fit.continued, fit.simulations) = (fit.continued + changed, fit.simulations + n);
     }
@@ -389,7 +391,7 @@ fn refine_with(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
-    if with_rescue {
+    if sweeps {
         let (changed, n) = sweep::sweep(cmp, model, sim, (&mut segs, &mut y, &mut res), iterations);
         (fit.continued, fit.simulations) = (fit.continued + changed, fit.simulations + n);
     }
