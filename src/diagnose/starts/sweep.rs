@@ -207,3 +207,55 @@ fn waves(
     changed.dedup();
     (changed, y, sims)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::settings::StartSettings;
+    use crate::record::Quantity;
+    use crate::update::problem::Observation;
+
+    fn comparison(dofs: &[usize]) -> Comparison {
+        let seg = Segment {
+            start: 0,
+            len: 2,
+            u0: vec![0.0; 8],
+            v0: vec![0.0; 8],
+        };
+        Comparison {
+            fs: 512.0,
+            force: DMatrix::zeros(8, 2),
+            observations: dofs
+                .iter()
+                .map(|&dof| Observation {
+                    quantity: Quantity::Accel,
+                    dof,
+                    weight: 1.0,
+                    data: vec![0.0; 2],
+                    point: None,
+                })
+                .collect(),
+            segments: vec![seg.clone()],
+            whole: seg,
+            unscored: 0,
+            starts: StartSettings::default(),
+        }
+    }
+
+    #[test]
+    fn the_sweep_runs_only_with_unmeasured_dofs() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let m = Model::from_file(std::path::Path::new(p)).unwrap();
+        assert!(weakly_observed(&comparison(&[2, 3, 7]), &m));
+        // a DOF measured twice counts once
+        assert!(weakly_observed(&comparison(&[1, 1, 2, 3, 4, 5, 6, 7]), &m));
+        assert!(!weakly_observed(&comparison(&[1, 2, 3, 4, 5, 6, 7, 8]), &m));
+    }
+
+    #[test]
+    fn the_floor_is_the_lowest_eighth() {
+        let costs: Vec<f64> = (1..=16).map(f64::from).collect();
+        assert_eq!(floor(&costs), 3.0);
+        assert_eq!(floor(&[]), f64::INFINITY);
+    }
+}
