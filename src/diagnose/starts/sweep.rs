@@ -31,11 +31,11 @@
 //! With every DOF measured a segment's outputs fix its start (the
 //! refinement converges from the reconstruction), so a segment above the
 //! floor is one the model does not predict, and a start carried from the
-//! segment before only lowers a wrong model's error towards the right
-//! one's: measured on `tests/diagnose_effects.rs`'s bumper with spring 5
-//! −14 % (8 sensors), the sweep there took the refinement to a spring
-//! delta of −12.6 % (docs/calibration.md, "A grazing contact under three
-//! sensors").
+//! segment before only lowers wrong models' errors: on
+//! `tests/diagnose_effects.rs`'s bumper with spring 5 −14 % (8 sensors)
+//! the sweep moved the fit's local minimum from a spring delta of
+//! −12.66 % to −12.58 %, outside the test's tolerance (docs/calibration.md,
+//! "A grazing contact under three sensors").
 
 use super::{carried, copy_segment, refine_local, residual, segment_costs, Comparison};
 use crate::integrate::{Integrator, SimSettings};
