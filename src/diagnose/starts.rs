@@ -34,7 +34,11 @@
 //! segment before ends (continuity), the segments taken in order so that a
 //! run of them in a wrong basin takes the model's simulation from the last
 //! good one; a segment left above 8× the median cost is run in from the
-//! refined segment before; one still there is given a long run-in from 2,
+//! refined segment before; where the record measures fewer DOFs than the
+//! model has, every segment above twice the lowest costs' level is then
+//! started from where the refined segment before ends, the segments in
+//! waves ([`sweep`], again after the rescues); one still far
+//! above is given a long run-in from 2,
 //! 4, 8 or 16 segments back, or the state from which the model arrives at
 //! the next segment's refined start ([`rescue`]); and one still there is
 //! refined over a growing horizon (the first quarter of the segment, then
@@ -45,6 +49,7 @@
 
 mod arrival;
 mod rescue;
+mod sweep;
 
 use super::comparison::{segment_residual, Comparison};
 use crate::integrate::{Integrator, Seeds, SimSettings, Tape};
@@ -297,7 +302,8 @@ pub fn refine(
     refine_with(cmp, model, sim, segments, (iterations, true))
 }
 
-/// [`refine`] without the long run-ins and arrivals ([`rescue`]): the
+/// [`refine`] without the sweep ([`sweep`]), the long run-ins and the
+/// arrivals ([`rescue`]): the
 /// starts of the segments a joint fit steps (a trial model's segment far
 /// above the others is left to the fit, which moves the model).
 pub fn refine_for_fit(
@@ -322,6 +328,7 @@ fn refine_with(
     if !model.is_nonlinear() || iterations == 0 {
         return (segs, y, fit);
     }
+    let sweeps = with_rescue && sweep::weakly_observed(cmp, model);
     // segments left far above the others: run in again from where the
     // (now refined) segment before ends, then refine those alone
     let mut res: Vec<Option<(DVector<f64>, f64)>> =
@@ -351,6 +358,10 @@ fn refine_with(
             res[i] = residual(cmp, &segs[i], &y);
         }
     }
+    if sweeps {
+        let (changed, n) = sweep::sweep(cmp, model, sim, (&mut segs, &mut y, &mut res), iterations);
+        (fit.continued, fit.simulations) = (fit.continued + changed, fit.simulations + n);
+    }
     // segments still far above the others: a long run-in from earlier
     // segments or the arrival at the next one's start ([`rescue`]), then a
     // growing horizon
@@ -379,6 +390,10 @@ fn refine_with(
             copy_segment(&mut y, &yt, &segs[i]);
             res[i] = residual(cmp, &segs[i], &y);
         }
+    }
+    if sweeps {
+        let (changed, n) = sweep::sweep(cmp, model, sim, (&mut segs, &mut y, &mut res), iterations);
+        (fit.continued, fit.simulations) = (fit.continued + changed, fit.simulations + n);
     }
     fit.stuck = stuck(&segs, &segment_costs(&res), cmp.starts.outlier);
     fit.cost.1 = res.iter().flatten().map(|r| r.1).sum();
