@@ -500,6 +500,32 @@ impl Integrator {
         ws: &mut Work,
         sub: usize,
     ) -> std::result::Result<usize, (usize, f64)> {
+        #[cfg(target_arch = "x86_64")]
+        if dense::wide() {
+            // SAFETY: the CPU has AVX2 (checked at run time)
+            return unsafe { self.advance_avx2::<N>(ws, sub) };
+        }
+        self.advance_body::<N>(ws, sub)
+    }
+
+    /// [`Integrator::advance`] compiled for AVX2 (the same operations in
+    /// the same order, so the same bits; see [`dense::wide`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn advance_avx2<const N: usize>(
+        &self,
+        ws: &mut Work,
+        sub: usize,
+    ) -> std::result::Result<usize, (usize, f64)> {
+        self.advance_body::<N>(ws, sub)
+    }
+
+    #[inline(always)]
+    fn advance_body<const N: usize>(
+        &self,
+        ws: &mut Work,
+        sub: usize,
+    ) -> std::result::Result<usize, (usize, f64)> {
         let a1 = self.gamma / (self.beta * self.h);
         self.step_setup::<N>(ws, sub);
         let it = self.newton::<N>(ws, a1)?;
@@ -781,6 +807,7 @@ impl Integrator {
     /// across the switch makes it jump where a perturbation moves the
     /// penetration out of the tolerance band; differences of the cost then
     /// disagree with the derivatives by percents).
+    #[inline(always)]
     fn newton<const N: usize>(
         &self,
         ws: &mut Work,
@@ -847,6 +874,7 @@ impl Integrator {
     /// residual evaluation; false when J is singular. J's factor is kept
     /// in ws.jac and reused while the slopes are unchanged (a closed
     /// contact without friction), so equal matrices give equal factors.
+    #[inline(always)]
     fn newton_direction<const N: usize>(&self, ws: &mut Work, a1: f64) -> bool {
         let n = dim::<N>(self.n);
         ws.du.copy_from_slice(&ws.r);
@@ -869,6 +897,7 @@ impl Integrator {
     }
 
     /// ws.jac = J0 + (1+α)(∂f/∂u + a1 ∂f/∂v) from the slopes in ws.slopes.
+    #[inline(always)]
     fn newton_matrix(&self, ws: &mut Work, a1: f64) {
         let c1 = 1.0 + self.alpha;
         ws.jac.copy_from_slice(self.j0.as_slice());
@@ -879,6 +908,7 @@ impl Integrator {
 
     /// Backtracking line search on ‖r‖∞ along −ws.du from ws.un; leaves the
     /// accepted point in ws.un and returns its (‖r‖∞, scale).
+    #[inline(always)]
     fn line_search<const N: usize>(&self, ws: &mut Work, a1: f64, rn: f64) -> (f64, f64) {
         let n = dim::<N>(self.n);
         let tol = self.settings.newton_tol;

@@ -20,6 +20,17 @@ pub(super) fn dim<const N: usize>(n: usize) -> usize {
     }
 }
 
+/// True when the CPU runs AVX2 (x86-64, detected once and cached): the
+/// Newton iterations and the derivative steps then run a copy compiled
+/// for it, with four lanes where the baseline has two. Rust never fuses
+/// a product and a sum on its own and keeps the order of every sum, so
+/// the copy performs the same operations as the baseline: the same bits.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(super) fn wide() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
+}
+
 /// y += s A x (A column-major n×n).
 #[inline(always)]
 pub(super) fn mat_vec_axpy<const N: usize>(a: &[f64], n: usize, x: &[f64], s: f64, y: &mut [f64]) {

@@ -457,6 +457,7 @@ impl Integrator {
     /// `q = δC v + δK u + ∂f_int/∂p` of every parameter seed at the state
     /// in `ws` (u, v), into `q` (seed-major); `closed`: each contact's
     /// side of the switch (`None`: from its penetration).
+    #[inline(always)]
     fn parameter_q<const N: usize>(
         &self,
         ws: &Work,
@@ -483,6 +484,7 @@ impl Integrator {
     }
 
     /// `p = δM a + (1+α) q` of every parameter seed (from `sw.q`).
+    #[inline(always)]
     fn parameter_p<const N: usize>(&self, ws: &Work, sw: &mut SensWork, prep: &[Prepared]) {
         let n = dim::<N>(self.n);
         let c1 = 1.0 + self.alpha;
@@ -503,6 +505,7 @@ impl Integrator {
     /// linear law, even when it lies within the Newton tolerance across the
     /// switch), the other elements at the accepted point. True when some
     /// contact's side differs from its actual state at the accepted point.
+    #[inline(always)]
     fn newton_side(&self, ws: &Work, sw: &mut SensWork) -> bool {
         let mut differs = false;
         for (e, el) in self.elements.iter().enumerate() {
@@ -595,6 +598,37 @@ impl Integrator {
     /// the converged point). False when the converged tangent is singular
     /// (the derivatives become NaN).
     fn sensitivity_step<const N: usize>(
+        &self,
+        ws: &Work,
+        sw: &mut SensWork,
+        prep: &[Prepared],
+        powers: Option<&[f64]>,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if super::dense::wide() {
+            // SAFETY: the CPU has AVX2 (checked at run time)
+            return unsafe { self.sensitivity_step_avx2::<N>(ws, sw, prep, powers) };
+        }
+        self.sensitivity_step_body::<N>(ws, sw, prep, powers)
+    }
+
+    /// [`Integrator::sensitivity_step`] compiled for AVX2 (the same
+    /// operations in the same order, so the same bits; see
+    /// [`super::dense::wide`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn sensitivity_step_avx2<const N: usize>(
+        &self,
+        ws: &Work,
+        sw: &mut SensWork,
+        prep: &[Prepared],
+        powers: Option<&[f64]>,
+    ) -> bool {
+        self.sensitivity_step_body::<N>(ws, sw, prep, powers)
+    }
+
+    #[inline(always)]
+    fn sensitivity_step_body<const N: usize>(
         &self,
         ws: &Work,
         sw: &mut SensWork,
@@ -735,6 +769,7 @@ impl Integrator {
     /// is a triangular solve of all of them when the tangent has a Cholesky
     /// factor, else one seed at a time; a seed whose solve fails becomes
     /// NaN.
+    #[inline(always)]
     fn seeds_step<const N: usize>(&self, sw: &mut SensWork, cols: Range<usize>, ns0: usize) {
         let n = dim::<N>(self.n);
         let s = sw.s;
@@ -872,6 +907,7 @@ impl Integrator {
 
     /// Factor `J_T = J_0 + (1+α)(F_u + a_1 F_v)` for `slopes`, unless the
     /// factor in `t` was built from the same slopes; false when singular.
+    #[inline(always)]
     fn factor_tangent<const N: usize>(
         &self,
         slopes: &[f64],
@@ -913,6 +949,7 @@ impl Integrator {
 
     /// Solve `J_T x = b` in place with the current factor; false when
     /// singular.
+    #[inline(always)]
     fn solve_tangent<const N: usize>(&self, t: &TangentFactor, b: &mut [f64]) -> bool {
         let n = dim::<N>(self.n);
         let lu_solve = |lu: &LU<f64, Dyn, Dyn>, b: &mut [f64]| {
@@ -943,6 +980,24 @@ impl Integrator {
 /// Advance seed `j` over its pending sub-steps (`powers` from
 /// [`Integrator::linear_powers`]).
 fn flush_seed(powers: &[f64], n: usize, j: usize, sw: &mut SensWork) {
+    #[cfg(target_arch = "x86_64")]
+    if super::dense::wide() {
+        // SAFETY: the CPU has AVX2 (checked at run time)
+        return unsafe { flush_seed_avx2(powers, n, j, sw) };
+    }
+    flush_seed_body(powers, n, j, sw)
+}
+
+/// [`flush_seed`] compiled for AVX2 (the same bits; see
+/// [`super::dense::wide`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn flush_seed_avx2(powers: &[f64], n: usize, j: usize, sw: &mut SensWork) {
+    flush_seed_body(powers, n, j, sw)
+}
+
+#[inline(always)]
+fn flush_seed_body(powers: &[f64], n: usize, j: usize, sw: &mut SensWork) {
     let c = sw.pending[j];
     if c == 0 {
         return;
@@ -1084,6 +1139,7 @@ impl Rows {
 }
 
 /// Every seed advanced over its pending sub-steps.
+#[inline(always)]
 fn flush_all(powers: Option<&[f64]>, n: usize, sw: &mut SensWork) {
     if let Some(pw) = powers {
         for j in 0..sw.s {
