@@ -4,7 +4,8 @@
 //! An effect is kept when, fitted, it removes at least
 //! [`ScreenSettings::min_improvement`] of the squared multiple-shooting
 //! error (a candidate the screen did not propose:
-//! [`ScreenSettings::companion_improvement`]). A candidate below the
+//! [`ScreenSettings::companion_improvement`] of the squared error above
+//! the noise measured on the record, [`super::noise`]). A candidate below the
 //! screen may only have let the effects found be refitted, so it is also
 //! switched off in the fitted model (the others as fitted) and must itself
 //! remove the same share; when it does not, the effects found as refitted
@@ -47,13 +48,20 @@ pub(super) fn judge(
         off = Some((m, scored));
     }
     let (before, after) = (st.error, trial.scored.error);
+    // below the screen, the share is of the error above the noise
+    // measured on the record: near the noise half of the whole error
+    // cannot be removed by any effect
+    let noise = below
+        .as_ref()
+        .and(ctx.measured_noise)
+        .map_or(0.0, |n| n * n);
     let negligible = match (without, after) {
-        (Some(w), Some(b)) => b * b >= w * w * (1.0 - need),
+        (Some(w), Some(b)) => w * w - b * b <= need * (w * w - noise),
         _ => false,
     };
     let pays = !negligible
         && match (before, after) {
-            (Some(a), Some(b)) => b * b < a * a * (1.0 - need),
+            (Some(a), Some(b)) => a * a - b * b > need * (a * a - noise),
             (None, Some(_)) => true,
             _ => false,
         };
