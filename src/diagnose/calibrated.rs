@@ -374,7 +374,7 @@ impl Context<'_> {
                 (Some(e), Some(p)) => e <= 0.5 * p,
                 _ => false,
             };
-            if round >= self.cal.rounds && !halved {
+            if round >= self.cal.rounds && (!halved || self.at_noise(&best.d)) {
                 break;
             }
             // on a linear part calibrated on low-level records, another
