@@ -56,12 +56,12 @@ pub(super) fn judge(
         .and(ctx.measured_noise)
         .map_or(0.0, |n| n * n);
     let negligible = match (without, after) {
-        (Some(w), Some(b)) => w * w - b * b <= need * (w * w - noise),
+        (Some(w), Some(b)) => !removes(w, b, need, noise),
         _ => false,
     };
     let pays = !negligible
         && match (before, after) {
-            (Some(a), Some(b)) => a * a - b * b > need * (a * a - noise),
+            (Some(a), Some(b)) => removes(a, b, need, noise),
             (None, Some(_)) => true,
             _ => false,
         };
@@ -100,4 +100,29 @@ pub(super) fn judge(
         refit_kept: refit.as_ref().map(|_| (before, without)),
     };
     Judged { decision, refit }
+}
+
+/// Whether going from error `a` to error `b` removes more than `need` of
+/// the squared error above the squared noise level `noise2` (0: of the
+/// whole squared error).
+fn removes(a: f64, b: f64, need: f64, noise2: f64) -> bool {
+    a * a - b * b > need * (a * a - noise2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::removes;
+
+    /// The friction beside the cubic 1–2 of the imperfect matrix (seed
+    /// 60413, linear record): 2.41 % → 1.88 % against 1.23 % measured
+    /// noise removes 38.9 % of the squared error, 52.7 % of it above the
+    /// noise; half is needed.
+    #[test]
+    fn the_share_above_the_noise_is_judged() {
+        let (a, b, n) = (0.024099, 0.018839, 0.012333);
+        assert!(!removes(a, b, 0.5, 0.0));
+        assert!(removes(a, b, 0.5, n * n));
+        // a change within the noise is not kept whatever the level
+        assert!(!removes(a, 0.0238, 0.5, n * n));
+    }
 }
