@@ -97,6 +97,12 @@ pub struct CalibratedSettings {
     /// kept when it lowers the record's error; with low-level records, not
     /// after a round at the noise (1.5 × its noise level).
     pub rounds: usize,
+    /// Most rounds in all (default 4): a round after the `rounds`th is
+    /// run while the round before at least halved the record's error and
+    /// left it above the noise (a refinement started far from the record
+    /// ends in a linear part still far from it, from which the next
+    /// round's diagnosis fits the effects better).
+    pub max_rounds: usize,
 }
 
 impl Default for CalibratedSettings {
@@ -110,6 +116,7 @@ impl Default for CalibratedSettings {
             open_loop: false,
             open_loop_iterations: 40,
             rounds: 2,
+            max_rounds: 4,
         }
     }
 }
@@ -359,7 +366,17 @@ impl Context<'_> {
     /// while the refinement before was kept, diagnoses with the linear part
     /// it gave and refines; kept when it lowers the record's error.
     fn more_rounds(&self, mut best: RefinedPath) -> Result<RefinedPath> {
-        for round in 1..self.cal.rounds {
+        // the error before the last round kept (None: the first)
+        let mut previous: Option<f64> = None;
+        for round in 1..self.cal.rounds.max(self.cal.max_rounds) {
+            // beyond `rounds`, only while the round before halved the error
+            let halved = match (best.d.after.relative_error, previous) {
+                (Some(e), Some(p)) => e <= 0.5 * p,
+                _ => false,
+            };
+            if round >= self.cal.rounds && (!halved || self.at_noise(&best.d)) {
+                break;
+            }
             // on a linear part calibrated on low-level records, another
             // diagnosis cannot usefully beat one at the noise (calibrated on
             // the record itself, the first round's noise and error still
@@ -386,6 +403,7 @@ impl Context<'_> {
             if !lower(next.d.after.relative_error, best.d.after.relative_error) {
                 break;
             }
+            previous = best.d.after.relative_error;
             best = next;
         }
         Ok(best)

@@ -4,7 +4,8 @@
 //! An effect is kept when, fitted, it removes at least
 //! [`ScreenSettings::min_improvement`] of the squared multiple-shooting
 //! error (a candidate the screen did not propose:
-//! [`ScreenSettings::companion_improvement`]). A candidate below the
+//! [`ScreenSettings::companion_improvement`] of the squared error above
+//! the noise measured on the record, [`super::noise`]). A candidate below the
 //! screen may only have let the effects found be refitted, so it is also
 //! switched off in the fitted model (the others as fitted) and must itself
 //! remove the same share; when it does not, the effects found as refitted
@@ -47,13 +48,20 @@ pub(super) fn judge(
         off = Some((m, scored));
     }
     let (before, after) = (st.error, trial.scored.error);
+    // below the screen, the share is of the error above the noise
+    // measured on the record: near the noise half of the whole error
+    // cannot be removed by any effect
+    let noise = below
+        .as_ref()
+        .and(ctx.measured_noise)
+        .map_or(0.0, |n| n * n);
     let negligible = match (without, after) {
-        (Some(w), Some(b)) => b * b >= w * w * (1.0 - need),
+        (Some(w), Some(b)) => !removes(w, b, need, noise),
         _ => false,
     };
     let pays = !negligible
         && match (before, after) {
-            (Some(a), Some(b)) => b * b < a * a * (1.0 - need),
+            (Some(a), Some(b)) => removes(a, b, need, noise),
             (None, Some(_)) => true,
             _ => false,
         };
@@ -92,4 +100,29 @@ pub(super) fn judge(
         refit_kept: refit.as_ref().map(|_| (before, without)),
     };
     Judged { decision, refit }
+}
+
+/// Whether going from error `a` to error `b` removes more than `need` of
+/// the squared error above the squared noise level `noise2` (0: of the
+/// whole squared error).
+fn removes(a: f64, b: f64, need: f64, noise2: f64) -> bool {
+    a * a - b * b > need * (a * a - noise2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::removes;
+
+    /// The friction beside the cubic 1–2 of the imperfect matrix (seed
+    /// 60413, linear record): 2.41 % → 1.88 % against 1.23 % measured
+    /// noise removes 38.9 % of the squared error, 52.7 % of it above the
+    /// noise; half is needed.
+    #[test]
+    fn the_share_above_the_noise_is_judged() {
+        let (a, b, n) = (0.024099, 0.018839, 0.012333);
+        assert!(!removes(a, b, 0.5, 0.0));
+        assert!(removes(a, b, 0.5, n * n));
+        // a change within the noise is not kept whatever the level
+        assert!(!removes(a, 0.0238, 0.5, n * n));
+    }
 }

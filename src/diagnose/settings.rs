@@ -287,8 +287,9 @@ pub struct ScreenSettings {
     /// remove, or it is withdrawn (default 0.05; [0, 1)). Reason: the
     /// trace's threshold.
     pub min_improvement: f64,
-    /// The same for a candidate below the trace's screen (default 0.5;
-    /// [0, 1)). Reason: it must explain half of what remains.
+    /// The same for a candidate below the trace's screen, as a share of
+    /// the squared error above the noise measured on the record (default
+    /// 0.5; [0, 1)). Reason: it must explain half of what remains.
     pub companion_improvement: f64,
     /// A candidate below the screen predicted to remove less than this
     /// share of the fit cost is not fitted (default 0.2; [0, 1]). Reason:
