@@ -114,7 +114,10 @@ pub(super) fn run(
         }
     }
     let screened = !tr.selected.is_empty();
-    let pool = screen::pool(&tr, &st.added, ctx.located.as_ref());
+    let far = st
+        .error
+        .is_some_and(|e| e > ctx.settings.screen.far_from_noise * floor);
+    let pool = screen::pool(&tr, &st.added, ctx.located.as_ref(), far);
     if pool.is_empty() {
         let reason = tr.stop_reason.clone();
         st.rounds
