@@ -41,9 +41,16 @@ pub(super) struct Chosen {
 
 /// The candidates of a round, in the order they are tried: the one the
 /// trace's screen selected, else the companion and the best remaining one
-/// that lowers the BIC (module docs); in the first round, with the model
-/// `far` from the noise, the best nonlinear candidate that lowers the BIC
-/// ([`first_below`]).
+/// that lowers the BIC (module docs). In the first round that one is
+/// tried only with the model `far` from the noise, and only when
+/// nonlinear: a declared linear part that is off (damping twice the
+/// declared, springs a few per cent away) spreads residual over every
+/// candidate, and a localized effect's share can fall under the screen's
+/// 5 % while the model is far from the record (a bumper seen from three
+/// sensors: 4.4 % of the residual at 70 % error). It is fitted and judged
+/// as any candidate below the screen ([`super::decide`]: half of the
+/// squared error above the noise); a change linear in the state is left
+/// to the calibration there.
 pub(super) fn pool(
     tr: &TraceResult,
     added: &[KeptEffect],
@@ -54,31 +61,16 @@ pub(super) fn pool(
         return vec![s.clone()];
     }
     let mut pool: Vec<RankedEffect> = companion(tr, added, located).into_iter().collect();
-    if !added.is_empty() {
-        let next = tr
-            .ranking
-            .iter()
-            .find(|e| e.bic_change < 0.0 && !pool.iter().any(|p| p.candidate == e.candidate));
+    let first = added.is_empty();
+    if !first || far {
+        let next = tr.ranking.iter().find(|e| {
+            e.bic_change < 0.0
+                && !(first && e.candidate.kind.linear_in_state())
+                && !pool.iter().any(|p| p.candidate == e.candidate)
+        });
         pool.extend(next.cloned());
-    } else if far {
-        pool.extend(first_below(tr).cloned());
     }
     pool
-}
-
-/// The first round's candidate below the screen: the best-ranked
-/// nonlinear one that lowers the BIC. A declared linear part that is off
-/// (damping twice the declared, springs a few per cent away) spreads
-/// residual over every candidate, and a localized effect's share can fall
-/// under the screen's 5 % while the model is far from the record (a
-/// bumper seen from three sensors: 4.4 % of the residual at 70 % error).
-/// It is fitted and judged as any candidate below the screen
-/// ([`super::decide`]: half of the squared error above the noise); a
-/// change linear in the state is left to the calibration.
-fn first_below(tr: &TraceResult) -> Option<&RankedEffect> {
-    tr.ranking
-        .iter()
-        .find(|e| e.bic_change < 0.0 && !e.candidate.kind.linear_in_state())
 }
 
 /// A change linear in the state along the located directions, once a
