@@ -233,12 +233,26 @@ fn print_summary(d: &diagnose::Diagnosis, output: &std::path::Path) -> anyhow::R
             pct(v.after.relative_error)
         );
     }
-    for e in d.effects.iter().filter(|e| !e.undetermined.is_empty()) {
-        outln!(
-            "warning: {}: {} not determined by these records (standard error above the value; report.md, Effects found)",
-            e.label,
-            e.undetermined.join(", ")
-        );
+    for e in d.effects.iter() {
+        let (structural, noisy): (Vec<&String>, Vec<&String>) = e
+            .undetermined
+            .iter()
+            .partition(|k| e.unobservable.contains(k));
+        let names = |v: &[&String]| v.iter().map(|k| k.as_str()).collect::<Vec<_>>().join(", ");
+        if !structural.is_empty() {
+            outln!(
+                "warning: {}: {} not observable with these sensors (it trades with the absolute position, which accelerations do not give; report.md, Effects found)",
+                e.label,
+                names(&structural)
+            );
+        }
+        if !noisy.is_empty() {
+            outln!(
+                "warning: {}: {} not determined by these records (standard error above the value; report.md, Effects found)",
+                e.label,
+                names(&noisy)
+            );
+        }
     }
     outln!("report: {}", output.join("report.md").display());
     Ok(())

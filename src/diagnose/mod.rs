@@ -291,7 +291,16 @@ fn validate(
     let t = Instant::now();
     let own = ctx.own_prep(&st.current, rec);
     let (fitted, count) = (&st.current, &mut st.simulations);
-    let val = validation::score(ctx.declared, fitted, v, own.as_ref(), ctx.prep, sims, count)?;
+    let q = &ctx.settings.fit.gap_quantiles;
+    let val = validation::score(
+        ctx.declared,
+        fitted,
+        v,
+        own.as_ref(),
+        ctx.prep,
+        (sims, q),
+        count,
+    )?;
     st.timings
         .insert("validation".into(), t.elapsed().as_secs_f64());
     Ok(val)

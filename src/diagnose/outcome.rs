@@ -32,8 +32,15 @@ pub struct EffectReport {
     /// Parameters from the trace regression (the fit's start).
     pub traced: BTreeMap<String, f64>,
     /// Parameters the records do not determine: their noise-only standard
-    /// error exceeds their value ([`undetermined`]).
+    /// error exceeds their value ([`undetermined`]), or no record from
+    /// these sensors could determine them (`unobservable`).
     pub undetermined: Vec<String>,
+    /// Parameters that trade exactly with something the sensors do not
+    /// see, whatever the noise: the gap of a contact against ground on a
+    /// structure free to translate, measured by accelerations only (the
+    /// absolute position; [`super::uncertainty::gap_unobservable`]). Also
+    /// in `undetermined`.
+    pub unobservable: Vec<String>,
     /// Scores.
     pub score: Score,
 }
@@ -147,6 +154,23 @@ pub struct Validation {
     /// Linear model driven by the force identified on the first record
     /// (non-parametric prediction), multiple-shooting error.
     pub nonparametric_relative_error: Option<f64>,
+    /// Gaps of contacts against ground that the sensors do not observe,
+    /// taken again from this record's own datum (the fitted model is
+    /// scored with them; empty when none moved).
+    pub datum: Vec<DatumShift>,
+}
+
+/// A contact's gap against ground measured from another record's datum:
+/// the structure's absolute position is not observed, so each record
+/// places the gap relative to its own reconstructed positions.
+#[derive(Debug, Clone, Serialize)]
+pub struct DatumShift {
+    /// The contact.
+    pub label: String,
+    /// Gap fitted on the record diagnosed, m.
+    pub fitted: f64,
+    /// Gap on this record's datum, m.
+    pub here: f64,
 }
 
 /// A failure the diagnosis went on past (it used a fallback), reported so

@@ -306,34 +306,42 @@ fn offset_note(s: &mut String, e: &EffectReport) {
 }
 
 /// A sentence for the parameters the records do not determine
-/// ([`EffectReport::undetermined`]), with the known cause for a law
-/// against ground.
+/// ([`EffectReport::undetermined`]): those no record from these sensors
+/// could determine first, with their cause, then those the noise could
+/// move by more than their size.
 fn undetermined_note(s: &mut String, e: &EffectReport) {
-    if e.undetermined.is_empty() {
-        return;
-    }
-    let each: Vec<String> = e
+    let with_se = |k: &String| {
+        let (v, se) = (
+            *e.parameters.get(k)?,
+            e.std_errors.get(k).copied().flatten(),
+        );
+        let sh = shown(k);
+        let value = sh.value(v, sh.decimals(v, &[]));
+        Some(match se {
+            Some(se) => format!("{k} {value} ± {}", sh.value(se, sh.decimals(se, &[]))),
+            None => format!("{k} {value}"),
+        })
+    };
+    let (structural, noisy): (Vec<&String>, Vec<&String>) = e
         .undetermined
         .iter()
-        .filter_map(|k| {
-            let (v, se) = (
-                *e.parameters.get(k)?,
-                e.std_errors.get(k).copied().flatten()?,
-            );
-            let sh = shown(k);
-            let (dv, dse) = (sh.decimals(v, &[]), sh.decimals(se, &[]));
-            Some(format!("{k} {} ± {}", sh.value(v, dv), sh.value(se, dse)))
-        })
-        .collect();
-    let ground = e.dofs.len() == 1 && e.undetermined.iter().any(|k| k == "gap");
-    let cause = if ground {
-        " A threshold against ground is measured from the structure's absolute position, which accelerations do not give: where the structure can move as a rigid body, each segment's free start position takes up any gap, and only a displacement sensor or a record that starts at rest at the position the gap is counted from ties it."
-    } else {
-        ""
-    };
+        .partition(|k| e.unobservable.contains(k));
+    if !structural.is_empty() {
+        let each: Vec<String> = structural.into_iter().filter_map(with_se).collect();
+        let _ = writeln!(
+            s,
+            "\n**{}: not observable with these sensors** ({}): a threshold against ground is measured from the structure's absolute position, which accelerations do not give; the structure can move as a rigid body, so each segment's free start position takes up any gap and the predictions do not change with it. The value is where the fit stopped, not a measurement, whatever its ±; the effect's other parameters and the errors stand. A displacement sensor on the structure would determine it.",
+            e.label,
+            each.join("; ")
+        );
+    }
+    if noisy.is_empty() {
+        return;
+    }
+    let each: Vec<String> = noisy.into_iter().filter_map(with_se).collect();
     let _ = writeln!(
         s,
-        "\n**{}: not determined by these records** ({}): the noise alone could move the value by more than its size; the effect's other parameters and the errors stand, this value is not a measurement.{cause}",
+        "\n**{}: not determined by these records** ({}): the noise alone could move the value by more than its size; the effect's other parameters and the errors stand, this value is not a measurement.",
         e.label,
         each.join("; ")
     );
@@ -391,6 +399,15 @@ fn errors_section(s: &mut String, d: &Diagnosis) {
             "\nFor comparison, the declared linear model driven by the internal force identified on the first record (a force history, no fitted law) predicts the validation record with a segment error of {}.",
             pct(v.nonparametric_relative_error)
         );
+        for m in &v.datum {
+            let _ = writeln!(
+                s,
+                "\nThe gap of {} against ground is not observable (it is counted from the structure's absolute position, which each record reconstructs with its own offset): on the validation record it was taken again from that record's positions, {:.4} mm against {:.4} mm fitted, everything else held.",
+                m.label,
+                1e3 * m.here,
+                1e3 * m.fitted
+            );
+        }
     }
     for (name, e) in [("before", &d.before), ("after", &d.after)] {
         if !e.status.is_ok() {
@@ -928,6 +945,7 @@ mod tests {
             .collect(),
             traced: BTreeMap::new(),
             undetermined: vec![],
+            unobservable: vec![],
             score: super::super::outcome::Score {
                 residual_explained: 0.428,
                 bic_change: -1.0,
@@ -975,8 +993,9 @@ mod tests {
     }
 
     /// A stop against ground whose gap's standard error (1.6 m) dwarfs
-    /// the gap (0.012 mm) is said not to be determined, with the rigid-body
-    /// cause; a determined gap (the bumper's) gets no sentence.
+    /// the gap (0.012 mm) is said not to be determined; known to trade
+    /// with the rigid-body position it is said not to be observable, with
+    /// that cause; a determined gap (the bumper's) gets no sentence.
     #[test]
     fn a_gap_the_noise_could_move_by_more_than_itself_is_not_determined() {
         let mut stop = contact();
@@ -990,7 +1009,19 @@ mod tests {
         undetermined_note(&mut s, &stop);
         assert!(s.contains("contact @8: not determined"), "{s}");
         assert!(s.contains("(gap 0.012045 mm ± 1600"), "{s}");
-        assert!(s.contains("rigid body"), "{s}");
+        assert!(!s.contains("rigid body"), "{s}");
+        // the same gap known to trade with the rigid-body position
+        stop.unobservable = vec!["gap".into()];
+        let mut s = String::new();
+        undetermined_note(&mut s, &stop);
+        assert!(
+            s.contains("contact @8: not observable with these sensors"),
+            "{s}"
+        );
+        assert!(
+            s.contains("rigid body") && !s.contains("not determined"),
+            "{s}"
+        );
         let bumper = contact();
         assert!(
             super::super::outcome::undetermined(&bumper.parameters, &bumper.std_errors).is_empty()
