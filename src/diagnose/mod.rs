@@ -156,6 +156,28 @@ pub(crate) fn finite_result(
     Ok(())
 }
 
+/// The validation record prepared by [`diagnose`] on the linear part of
+/// `model` at `settings` (the settings it ran at), located along the
+/// record's force directions (its [`Prepared::located`]): what
+/// [`prepare_located`] gives for the same inputs, so a refinement of the
+/// same linear part ([`calibrated`]) takes it instead of preparing it again.
+#[derive(Debug, Clone)]
+pub struct ValidationPrepared {
+    /// The model diagnosed.
+    pub model: Model,
+    /// The settings the diagnosis ran at.
+    pub settings: DiagnoseSettings,
+    /// The prepared record.
+    pub prepared: Prepared,
+}
+
+impl ValidationPrepared {
+    /// The prepared record when it was prepared on `model` at `settings`.
+    pub fn take_for(self, model: &Model, settings: &DiagnoseSettings) -> Option<Prepared> {
+        (self.model == *model && self.settings == *settings).then_some(self.prepared)
+    }
+}
+
 /// Run the diagnosis of `rec` with the `declared` model (module docs),
 /// validated on `validation` when given; `progress` hears each stage.
 pub fn diagnose(
@@ -177,6 +199,16 @@ pub fn diagnose(
         settings,
     } = prepare::both(declared, rec, validation, sensors, settings, &mut timings)?;
     let settings = &settings;
+    // (the record's located directions are its `located` with the
+    // lifted states alone)
+    let validation_prepared = vprep
+        .as_ref()
+        .filter(|_| settings.states == StatesSource::Lifted)
+        .map(|v| ValidationPrepared {
+            model: declared.clone(),
+            settings: settings.clone(),
+            prepared: v.clone(),
+        });
     let (cy, dy) = prep.sampled.outputs(&prep.channels)?;
     let ctx = Context {
         declared,
@@ -252,6 +284,7 @@ pub fn diagnose(
         added: st.added.iter().map(|a| a.effect.clone()).collect(),
         prepared: prep,
         predictions: (pred_before, pred_after),
+        validation_prepared,
     })
 }
 
