@@ -251,11 +251,46 @@ pub fn diagnose(
         substeps: st.substeps,
         ..Default::default()
     };
-    let (after, pred_after, effects) = score_after(&ctx, &mut st, (&before, &pred_before), sim1);
-    add_time(&mut st.timings, "errors_after", t);
-    let validation = match (vprep.as_ref(), validation) {
-        (Some(v), Some(r)) => Some(validate(&ctx, &mut st, v, r, (sim0, sim1), progress)?),
+    // the validation record's scores do not depend on the record's: on
+    // the pool beside them
+    let val_in = match (vprep.as_ref(), validation) {
+        (Some(v), Some(r)) => Some((v, ctx.own_prep(&st.current, r))),
         _ => None,
+    };
+    if val_in.is_some() {
+        progress("validation");
+    }
+    let current = st.current.clone();
+    let mut val_out = None;
+    let (after, pred_after, effects) = rayon::in_place_scope(|s| {
+        if let Some((v, own)) = val_in.as_ref() {
+            let (declared, prep, out) = (ctx.declared, ctx.prep, &mut val_out);
+            s.spawn(move |_| {
+                let t = Instant::now();
+                let mut count = 0;
+                let r = validation::score(
+                    declared,
+                    &current,
+                    v,
+                    own.as_ref(),
+                    prep,
+                    (sim0, sim1),
+                    &mut count,
+                );
+                *out = Some((r, count, t.elapsed().as_secs_f64()));
+            });
+        }
+        let r = score_after(&ctx, &mut st, (&before, &pred_before), sim1);
+        add_time(&mut st.timings, "errors_after", t);
+        r
+    });
+    let validation = match val_out {
+        Some((r, count, secs)) => {
+            st.simulations += count;
+            st.timings.insert("validation".into(), secs);
+            Some(r?)
+        }
+        None => None,
     };
     finite_result(&st.current, &after, validation.as_ref())?;
     st.timings
@@ -309,25 +344,6 @@ fn score_after(
     };
     let effects = uncertainty::report_effects(ctx, st, sim1);
     (after, pred_after, effects)
-}
-
-/// Both models scored on the validation record `rec` (prepared: `v`).
-fn validate(
-    ctx: &Context<'_>,
-    st: &mut State,
-    v: &Prepared,
-    rec: &Record,
-    sims: (SimSettings, SimSettings),
-    progress: &dyn Fn(&str),
-) -> Result<Validation> {
-    progress("validation");
-    let t = Instant::now();
-    let own = ctx.own_prep(&st.current, rec);
-    let (fitted, count) = (&st.current, &mut st.simulations);
-    let val = validation::score(ctx.declared, fitted, v, own.as_ref(), ctx.prep, sims, count)?;
-    st.timings
-        .insert("validation".into(), t.elapsed().as_secs_f64());
-    Ok(val)
 }
 
 /// "no missing effect found", or the effects found.
