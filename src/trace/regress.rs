@@ -370,7 +370,7 @@ fn gemv_rows<const B: usize>(y: &mut [f64], m: &[f64], x: &[f64], add: bool, i0:
     }
     for (c, &xj) in cols {
         for (a, &v) in acc.iter_mut().zip(&c[i0..i0 + B]) {
-            *a = v * xj + *a;
+            *a += v * xj;
         }
     }
     y[i0..i0 + B].copy_from_slice(&acc);
