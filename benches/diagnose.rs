@@ -219,10 +219,23 @@ fn print_result(d: &Diagnosis) {
     );
 }
 
-/// The calibrated diagnosis's choice and refinement, in words.
+/// The calibrated diagnosis's choice and refinement, in words, and the
+/// start-state refinement of the errors after.
 fn print_calibration(d: &Diagnosis) {
     if let Some(c) = &d.calibration {
         eprintln!("choice: {}\nrefinement: {}", c.choice, c.refinement);
+    }
+    if let Some(f) = &d.after.starts {
+        eprintln!(
+            "starts after: {} iterations, {} simulations, {} continued, {} grown, {} rescued, {} stuck, {} stalled",
+            f.iterations,
+            f.simulations,
+            f.continued,
+            f.grown,
+            f.rescued,
+            f.stuck.len(),
+            f.stalled
+        );
     }
     for e in &d.effects {
         eprintln!("effect {}: {:?}", e.label, e.parameters);

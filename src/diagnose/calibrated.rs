@@ -514,18 +514,23 @@ impl Context<'_> {
     /// model's errors.
     fn refined(&self, mut d: Diagnosis, linear: &Model) -> Result<RefinedPath> {
         (self.progress)("identify the validation record on the linear part");
-        let vprep = self
-            .validation
-            .map(|v| {
-                prepare_located(
-                    linear,
-                    v,
-                    self.sensors,
-                    self.settings,
-                    d.prepared.located.as_ref(),
-                )
-            })
-            .transpose()?;
+        // the diagnosis's own when it ran on `linear` at these settings
+        let done = d.validation_prepared.take();
+        let vprep = match done.and_then(|v| v.take_for(linear, self.settings)) {
+            Some(p) => Some(p),
+            None => self
+                .validation
+                .map(|v| {
+                    prepare_located(
+                        linear,
+                        v,
+                        self.sensors,
+                        self.settings,
+                        d.prepared.located.as_ref(),
+                    )
+                })
+                .transpose()?,
+        };
         let sim0 = SimSettings {
             substeps: d.substeps.0,
             ..Default::default()

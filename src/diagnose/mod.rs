@@ -156,6 +156,28 @@ pub(crate) fn finite_result(
     Ok(())
 }
 
+/// The validation record prepared by [`diagnose`] on the linear part of
+/// `model` at `settings` (the settings it ran at), located along the
+/// record's force directions (its [`Prepared::located`]): what
+/// [`prepare_located`] gives for the same inputs, so a refinement of the
+/// same linear part ([`calibrated`]) takes it instead of preparing it again.
+#[derive(Debug, Clone)]
+pub struct ValidationPrepared {
+    /// The model diagnosed.
+    pub model: Model,
+    /// The settings the diagnosis ran at.
+    pub settings: DiagnoseSettings,
+    /// The prepared record.
+    pub prepared: Prepared,
+}
+
+impl ValidationPrepared {
+    /// The prepared record when it was prepared on `model` at `settings`.
+    pub fn take_for(self, model: &Model, settings: &DiagnoseSettings) -> Option<Prepared> {
+        (self.model == *model && self.settings == *settings).then_some(self.prepared)
+    }
+}
+
 /// Run the diagnosis of `rec` with the `declared` model (module docs),
 /// validated on `validation` when given; `progress` hears each stage.
 pub fn diagnose(
@@ -177,6 +199,16 @@ pub fn diagnose(
         settings,
     } = prepare::both(declared, rec, validation, sensors, settings, &mut timings)?;
     let settings = &settings;
+    // (the record's located directions are its `located` with the
+    // lifted states alone)
+    let validation_prepared = vprep
+        .as_ref()
+        .filter(|_| settings.states == StatesSource::Lifted)
+        .map(|v| ValidationPrepared {
+            model: declared.clone(),
+            settings: settings.clone(),
+            prepared: v.clone(),
+        });
     let (cy, dy) = prep.sampled.outputs(&prep.channels)?;
     let ctx = Context {
         declared,
@@ -219,11 +251,47 @@ pub fn diagnose(
         substeps: st.substeps,
         ..Default::default()
     };
-    let (after, pred_after, effects) = score_after(&ctx, &mut st, (&before, &pred_before), sim1);
-    add_time(&mut st.timings, "errors_after", t);
-    let validation = match (vprep.as_ref(), validation) {
-        (Some(v), Some(r)) => Some(validate(&ctx, &mut st, v, r, (sim0, sim1), progress)?),
+    // the validation record's scores do not depend on the record's: on
+    // the pool beside them
+    let val_in = match (vprep.as_ref(), validation) {
+        (Some(v), Some(r)) => Some((v, ctx.own_prep(&st.current, r))),
         _ => None,
+    };
+    if val_in.is_some() {
+        progress("validation");
+    }
+    let current = st.current.clone();
+    let mut val_out = None;
+    let (after, pred_after, effects) = rayon::in_place_scope(|s| {
+        if let Some((v, own)) = val_in.as_ref() {
+            let (declared, prep, out) = (ctx.declared, ctx.prep, &mut val_out);
+            let q = &ctx.settings.fit.gap_quantiles;
+            s.spawn(move |_| {
+                let t = Instant::now();
+                let mut count = 0;
+                let r = validation::score(
+                    declared,
+                    &current,
+                    v,
+                    own.as_ref(),
+                    prep,
+                    ((sim0, sim1), q),
+                    &mut count,
+                );
+                *out = Some((r, count, t.elapsed().as_secs_f64()));
+            });
+        }
+        let r = score_after(&ctx, &mut st, (&before, &pred_before), sim1);
+        add_time(&mut st.timings, "errors_after", t);
+        r
+    });
+    let validation = match val_out {
+        Some((r, count, secs)) => {
+            st.simulations += count;
+            st.timings.insert("validation".into(), secs);
+            Some(r?)
+        }
+        None => None,
     };
     finite_result(&st.current, &after, validation.as_ref())?;
     st.timings
@@ -252,6 +320,7 @@ pub fn diagnose(
         added: st.added.iter().map(|a| a.effect.clone()).collect(),
         prepared: prep,
         predictions: (pred_before, pred_after),
+        validation_prepared,
     })
 }
 
@@ -276,34 +345,6 @@ fn score_after(
     };
     let effects = uncertainty::report_effects(ctx, st, sim1);
     (after, pred_after, effects)
-}
-
-/// Both models scored on the validation record `rec` (prepared: `v`).
-fn validate(
-    ctx: &Context<'_>,
-    st: &mut State,
-    v: &Prepared,
-    rec: &Record,
-    sims: (SimSettings, SimSettings),
-    progress: &dyn Fn(&str),
-) -> Result<Validation> {
-    progress("validation");
-    let t = Instant::now();
-    let own = ctx.own_prep(&st.current, rec);
-    let (fitted, count) = (&st.current, &mut st.simulations);
-    let q = &ctx.settings.fit.gap_quantiles;
-    let val = validation::score(
-        ctx.declared,
-        fitted,
-        v,
-        own.as_ref(),
-        ctx.prep,
-        (sims, q),
-        count,
-    )?;
-    st.timings
-        .insert("validation".into(), t.elapsed().as_secs_f64());
-    Ok(val)
 }
 
 /// "no missing effect found", or the effects found.

@@ -233,6 +233,9 @@ pub struct Diagnosis {
     /// Segment predictions before and after (p × N).
     #[serde(skip)]
     pub predictions: (Option<DMatrix<f64>>, Option<DMatrix<f64>>),
+    /// The validation record as the diagnosis prepared it, when given.
+    #[serde(skip)]
+    pub validation_prepared: Option<super::ValidationPrepared>,
 }
 
 impl Diagnosis {

@@ -209,10 +209,7 @@ fn node_response(
     let sm = ctx.input.sampled;
     let (cy, dy) = (ctx.input.cy, ctx.input.dy);
     let s = ctx.nodes.len() - 1;
-    let ns = k1;
     let nx = 2 * sm.n;
-    let mut x = DVector::zeros(nx);
-    let mut xn = DVector::zeros(nx);
     // the node inputs side by side, [N_0 … N_S] (projected on the
     // direction: [N_0 d … N_S d]), so that one product per sample takes
     // the S + 1 node values, contiguous in the history
@@ -240,41 +237,143 @@ fn node_response(
         }
         NodeForce::Full(_) => dy.clone(),
     };
-    let at = |k: usize, len: usize| {
-        let k = k - k0;
-        nalgebra::DVectorView::from_slice(&data[k * s * width..(k * s + len) * width], len * width)
+    let kernel = NodeKernel {
+        a: sm.a.as_slice(),
+        cy: cy.as_slice(),
+        feed: feed.as_slice(),
+        dd: dd.as_slice(),
+        data,
+        width,
+        s,
+        seg: ctx.seg,
+        nx,
     };
-    // a contact's force is zero while it is open: products with a zero
-    // state or a zero input are skipped (y stays zero there)
-    let mut rest = true;
-    for k in k0..ns {
-        if k % ctx.seg == 0 {
-            x.fill(0.0);
-            rest = true;
-        }
-        let here = at(k, 1);
-        let mut yk = y.column_mut(k);
-        if !rest {
-            yk.gemv(1.0, cy, &x, 0.0);
-        }
-        if here.iter().any(|&v| v != 0.0) {
-            yk.gemv(1.0, &dd, &here, 1.0);
-        }
-        if k + 1 < ns && (k + 1) % ctx.seg != 0 {
-            let input = at(k, s + 1);
-            let driven = input.iter().any(|&v| v != 0.0);
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked at run time)
+        unsafe { kernel.run_avx2(y, k0, k1) };
+        return;
+    }
+    kernel.run(y, k0, k1);
+}
+
+/// The recursion of [`node_response`] on column-major slices: the state
+/// `x` (2n), the output map `cy` (p × 2n), the node inputs `feed`
+/// (2n × width (S + 1)) and their feed-through `dd` (p × width), the node
+/// history `data` (width values per node, from node `k0 S`).
+struct NodeKernel<'a> {
+    a: &'a [f64],
+    cy: &'a [f64],
+    feed: &'a [f64],
+    dd: &'a [f64],
+    data: &'a [f64],
+    width: usize,
+    s: usize,
+    seg: usize,
+    nx: usize,
+}
+
+impl NodeKernel<'_> {
+    /// [`NodeKernel::run`] compiled for AVX2 (the same operations in the
+    /// same order: the same bits).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn run_avx2(&self, y: &mut DMatrix<f64>, k0: usize, k1: usize) {
+        self.run(y, k0, k1);
+    }
+
+    /// Fill the columns `k0..k1` of `y`.
+    #[inline(always)]
+    fn run(&self, y: &mut DMatrix<f64>, k0: usize, k1: usize) {
+        let (nx, p) = (self.nx, y.nrows());
+        let ys = y.as_mut_slice();
+        let (s, width) = (self.s, self.width);
+        let mut x = vec![0.0; nx];
+        let mut xn = vec![0.0; nx];
+        // a contact's force is zero while it is open: products with a
+        // zero state or a zero input are skipped (y stays zero there)
+        let mut rest = true;
+        for k in k0..k1 {
+            if k % self.seg == 0 {
+                x.fill(0.0);
+                rest = true;
+            }
+            let off = (k - k0) * s * width;
+            let here = &self.data[off..off + width];
+            let yk = &mut ys[k * p..(k + 1) * p];
             if !rest {
-                xn.gemv(1.0, &sm.a, &x, 0.0);
-                if driven {
-                    xn.gemv(1.0, &feed, &input, 1.0);
+                gemv(yk, self.cy, &x, false);
+            }
+            if here.iter().any(|&v| v != 0.0) {
+                gemv(yk, self.dd, here, true);
+            }
+            if k + 1 < k1 && (k + 1) % self.seg != 0 {
+                let input = &self.data[off..off + (s + 1) * width];
+                let driven = input.iter().any(|&v| v != 0.0);
+                if !rest {
+                    gemv(&mut xn, self.a, &x, false);
+                    if driven {
+                        gemv(&mut xn, self.feed, input, true);
+                    }
+                    std::mem::swap(&mut x, &mut xn);
+                } else if driven {
+                    gemv(&mut x, self.feed, input, false);
+                    rest = false;
                 }
-                std::mem::swap(&mut x, &mut xn);
-            } else if driven {
-                x.gemv(1.0, &feed, &input, 0.0);
-                rest = false;
             }
         }
     }
+}
+
+/// `y = M x` (`add`: `y += M x`), `M` column-major with `y.len()` rows, as
+/// nalgebra's `gemv` forms it — the columns accumulated in order, each
+/// `y_i ← M_ij x_j + y_i` — so the same bits; the rows in blocks held in
+/// registers across the columns.
+#[inline(always)]
+fn gemv(y: &mut [f64], m: &[f64], x: &[f64], add: bool) {
+    let r = y.len();
+    if r == 0 {
+        return;
+    }
+    debug_assert_eq!(m.len(), r * x.len());
+    let mut i0 = 0;
+    while r - i0 >= 16 {
+        gemv_rows::<16>(y, m, x, add, i0);
+        i0 += 16;
+    }
+    if r - i0 >= 8 {
+        gemv_rows::<8>(y, m, x, add, i0);
+        i0 += 8;
+    }
+    if r - i0 >= 4 {
+        gemv_rows::<4>(y, m, x, add, i0);
+        i0 += 4;
+    }
+    while i0 < r {
+        gemv_rows::<1>(y, m, x, add, i0);
+        i0 += 1;
+    }
+}
+
+/// Rows `i0..i0 + B` of [`gemv`].
+#[inline(always)]
+fn gemv_rows<const B: usize>(y: &mut [f64], m: &[f64], x: &[f64], add: bool, i0: usize) {
+    let r = y.len();
+    let mut acc = [0.0; B];
+    let mut cols = m.chunks_exact(r).zip(x);
+    if add {
+        acc.copy_from_slice(&y[i0..i0 + B]);
+    } else if let Some((c, &xj)) = cols.next() {
+        for (a, &v) in acc.iter_mut().zip(&c[i0..i0 + B]) {
+            *a = v * xj;
+        }
+    }
+    for (c, &xj) in cols {
+        for (a, &v) in acc.iter_mut().zip(&c[i0..i0 + B]) {
+            *a += v * xj;
+        }
+    }
+    y[i0..i0 + B].copy_from_slice(&acc);
 }
 
 /// A force history at the sub-step nodes.
@@ -287,8 +386,15 @@ enum NodeForce<'a> {
 
 /// Weighted, stacked vector of a p × N matrix.
 fn stack(m: &DMatrix<f64>, w: &[f64]) -> DVector<f64> {
-    let (p, ns) = m.shape();
-    DVector::from_fn(p * ns, |i, _| w[i % p] * m[(i % p, i / p)])
+    let p = m.nrows();
+    if p == 0 {
+        return DVector::zeros(0);
+    }
+    let cols = m.as_slice().chunks_exact(p);
+    DVector::from_iterator(
+        m.len(),
+        cols.flat_map(|c| c.iter().zip(w).map(|(&v, &wi)| wi * v)),
+    )
 }
 
 /// The current selection: the column blocks of the selected effects
