@@ -1,6 +1,6 @@
 //! The model found, scored on a validation record it was not fitted to.
 
-use super::errors::error_simulations;
+use super::errors::{error_simulations, ErrorSet};
 use super::outcome::{DatumShift, Validation};
 use super::prepare::Prepared;
 use super::uncertainty::gap_unobservable;
@@ -25,12 +25,8 @@ pub(super) fn score(
     let cmp = &prep.comparison;
     let (before, _) = cmp.errors(declared, sims.0);
     // the fitted model from its own reconstruction when it needs one
-    let after_prep = own.unwrap_or(prep);
-    let cmp_after = &after_prep.comparison;
-    let (datum, shots) = rezero(fitted, after_prep, quantiles, sims.1);
-    let fitted = datum.as_ref().map_or(fitted, |d| &d.model);
-    let (after, _) = cmp_after.errors(fitted, sims.1);
-    *count += error_simulations(&before, cmp) + error_simulations(&after, cmp_after) + shots;
+    let (after, datum, n) = after_errors(fitted, own.unwrap_or(prep), quantiles, sims.1);
+    *count += error_simulations(&before, cmp) + n;
     // the linear model driven by the first record's identified force
     let n = declared.ndof();
     let ns = cmp.force.ncols();
@@ -54,8 +50,26 @@ pub(super) fn score(
         before,
         after,
         nonparametric_relative_error: Some(cmp.total_error(&y)),
-        datum: datum.map(|d| d.shifts).unwrap_or_default(),
+        datum,
     })
+}
+
+/// The fitted model's errors on a validation record (`prep`: prepared
+/// with the model's own linear part when it needs one) with the gaps of
+/// its contacts against ground that the sensors do not observe taken from
+/// this record's datum ([`rezero`]); what moved, and the simulations run.
+pub(super) fn after_errors(
+    fitted: &Model,
+    prep: &Prepared,
+    quantiles: &[f64],
+    sim: SimSettings,
+) -> (ErrorSet, Vec<DatumShift>, usize) {
+    let cmp = &prep.comparison;
+    let (datum, shots) = rezero(fitted, prep, quantiles, sim);
+    let model = datum.as_ref().map_or(fitted, |d| &d.model);
+    let (after, _) = cmp.errors(model, sim);
+    let n = error_simulations(&after, cmp) + shots;
+    (after, datum.map(|d| d.shifts).unwrap_or_default(), n)
 }
 
 /// The fitted model with the gaps of its contacts against ground that the
