@@ -1,8 +1,9 @@
 //! Fit the added effects' parameters jointly by the multiple-shooting
 //! error: starts from the trace (floored away from zero), from the joint
 //! linearization's step, bracketing a cubic spring's `k3`, and from a scan
-//! of a contact's gap and stiffness (the cost is rough in the gap, see
-//! docs/theory.md); a short race of Levenberg–Marquardt from every start
+//! of a contact's or clearance's gap and stiffness (the cost is rough in
+//! the gap, see docs/theory.md; a clearance's scan is scored on start
+//! states refined for each scanned model); a short race of Levenberg–Marquardt from every start
 //! ([`crate::update::race`]); the best carried on with the
 //! segment start states ([`super::polish`]).
 
@@ -11,6 +12,7 @@ use super::errors::Comparison;
 use super::outcome::ToleratedFailure;
 use super::polish::{noise_cost, polish, Polished};
 use super::settings::ZeroStarts;
+use super::starts;
 use super::substeps::resolved;
 use super::DiagnoseSettings;
 use crate::error::Result;
@@ -50,6 +52,10 @@ struct Starts {
     simulations: usize,
     /// Seconds spent on scans.
     scan_secs: f64,
+    /// Segment start states refined for the best scanned model, which the
+    /// race runs on instead of the reconstructed ones (a clearance's scan,
+    /// [`scan_contact`]).
+    segments: Option<Vec<Segment>>,
 }
 
 /// Pick up to `k` segments spread evenly over `all`.
@@ -113,6 +119,7 @@ pub(super) fn fit_effects(
         stiffest: trial.clone(),
         simulations: 0,
         scan_secs: 0.0,
+        segments: None,
     };
     // the joint linearization's step at the current fit, when the effect
     // came in on its predicted gain ([`super::screen`])
@@ -133,12 +140,15 @@ pub(super) fn fit_effects(
             contact_starts(trial, last, &mut problem, &scan, &mut starts)
         }
         Some((last, EffectKind::Clearance)) => {
-            clearance_starts(trial, last, &problem, &scan, &mut starts)
+            clearance_starts(trial, last, &mut problem, &scan, &mut starts)
         }
         _ => {}
     }
     rescan_beside(trial, all, &problem, predicted, &scan, &mut starts);
     problem.sim = resolved(&starts.stiffest, fs, settings, states);
+    if let Some(segs) = starts.segments.take() {
+        problem.segments = segs;
+    }
     race_and_polish(trial, cmp, &problem, starts, settings)
 }
 
@@ -190,15 +200,23 @@ fn contact_starts(
     c.stiffness = c.stiffness.max(kc);
 }
 
-/// A clearance: starts from the same scan as a contact, on `|δ|`.
+/// A clearance: starts from a scan as a contact's, on `|δ|`, over its
+/// own gaps and stiffnesses ([`super::settings::FitGroup::clearance_gap_quantiles`]);
+/// the gap's upper bound raised to the largest reconstructed `|δ|`.
 fn clearance_starts(
     trial: &Model,
     last: &AddedEffect,
-    problem: &Problem,
+    problem: &mut Problem,
     scan: &Scan<'_>,
     starts: &mut Starts,
 ) {
+    let np = problem.parameters.len();
     let ci = trial.clearances.len() - 1;
+    let dmax = (0..scan.states.ncols())
+        .map(|k| last.candidate.delta(scan.states, k).abs())
+        .fold(0.0, f64::max);
+    let pg = &mut problem.parameters[np - 2];
+    pg.upper = pg.upper.max(scan.settings.fit.gap_upper * dmax);
     let kc = scanned_starts(trial, ci, last, problem, scan, starts);
     let c = &mut starts.stiffest.clearances[ci];
     c.stiffness = c.stiffness.max(kc);
@@ -217,9 +235,12 @@ fn scanned_starts(
 ) -> f64 {
     let np = problem.parameters.len();
     let t = Instant::now();
-    let (best, evals) = scan_contact(trial, ci, &last.candidate, scan);
-    starts.simulations += evals * scan.segments.len();
+    let (best, sims, refined) = scan_contact(trial, ci, &last.candidate, scan);
+    starts.simulations += sims;
     starts.scan_secs += t.elapsed().as_secs_f64();
+    if refined.is_some() {
+        starts.segments = refined;
+    }
     let (pg, pk) = (&problem.parameters[np - 2], &problem.parameters[np - 1]);
     let mut stiffest: f64 = 0.0;
     for (g, kc) in best {
@@ -278,8 +299,8 @@ fn rescan_beside(
         p.target.set(&mut at, v);
     }
     let t = Instant::now();
-    let (best, evals) = scan_contact(&at, ci, &c.candidate, scan);
-    starts.simulations += evals * scan.segments.len();
+    let (best, sims, _) = scan_contact(&at, ci, &c.candidate, scan);
+    starts.simulations += sims;
     starts.scan_secs += t.elapsed().as_secs_f64();
     for (g, kc) in best {
         let mut v = far.to_vec();
@@ -400,14 +421,16 @@ fn push_start(starts: &mut Vec<Vec<f64>>, params: &[Parameter], values: &[f64]) 
 /// multiple-shooting error with the nonlinear model (the cost is rough
 /// in the gap): gaps at upper quantiles of the reconstructed
 /// relative displacement, stiffnesses at multiples of the stiffest spring
-/// the pair touches. Returns the two best (gap, stiffness) pairs and the
-/// evaluations spent.
-fn scan_contact(
-    trial: &Model,
-    ci: usize,
-    cand: &Candidate,
-    scan: &Scan<'_>,
-) -> (Vec<(f64, f64)>, usize) {
+/// the pair touches. A clearance (engaged whenever `|δ|` passes its gap,
+/// so its force changes the states over much of the record) is scanned
+/// over its own gaps and stiffnesses, each scored on start states refined
+/// for that model ([`starts::refine_for_fit`]) when
+/// [`super::settings::FitGroup::clearance_refined_scan`]: on the states
+/// reconstructed with the linear model every (gap, stiffness), the true
+/// one included, leaves about the linear model's error. Returns the two
+/// best (gap, stiffness) pairs, the segment simulations spent and the
+/// refined start states of the best (None without the refinement).
+fn scan_contact(trial: &Model, ci: usize, cand: &Candidate, scan: &Scan<'_>) -> ScanResult {
     const KEEP: usize = 2;
     let Scan {
         cmp,
@@ -425,24 +448,41 @@ fn scan_contact(
     d.sort_by(f64::total_cmp);
     let q = |f: f64| d[((d.len() - 1) as f64 * f) as usize].max(0.0);
     let kspring = stiffest_spring(trial, &cand.dofs);
+    let f = &settings.fit;
+    let (multiples, quantiles) = if two_sided {
+        (&f.clearance_stiffnesses, &f.clearance_gap_quantiles)
+    } else {
+        (&f.contact_stiffnesses, &f.gap_quantiles)
+    };
+    let grid: Vec<(f64, f64)> = multiples
+        .iter()
+        .flat_map(|&m| quantiles.iter().map(move |&f| (q(f), m * kspring)))
+        .collect();
+    let refine = two_sided && f.clearance_refined_scan;
     let mut scored = vec![];
-    let mut evals = 0;
-    for &m in &settings.fit.contact_stiffnesses {
-        let kc = m * kspring;
-        for &f in &settings.fit.gap_quantiles {
-            let g = q(f);
-            let mut m = trial.clone();
-            if two_sided {
-                m.clearances[ci].gap = g;
-                m.clearances[ci].stiffness = kc;
-            } else {
-                m.contacts[ci].gap = g;
-                m.contacts[ci].stiffness = kc;
+    let mut sims = 0;
+    for &(g, kc) in &grid {
+        let mut m = trial.clone();
+        if two_sided {
+            m.clearances[ci].gap = g;
+            m.clearances[ci].stiffness = kc;
+        } else {
+            m.contacts[ci].gap = g;
+            m.contacts[ci].stiffness = kc;
+        }
+        let sim = resolved(&m, fs, settings, states);
+        if refine {
+            let (segs, y, sf) =
+                starts::refine_for_fit(cmp, &m, sim, segments, cmp.starts.iterations);
+            sims += sf.simulations;
+            let e = cmp.total_error(&y);
+            if e.is_finite() {
+                scored.push((e, g, kc, Some(segs)));
             }
-            let sim = resolved(&m, fs, settings, states);
-            evals += 1;
+        } else {
+            sims += segments.len();
             if let Ok(y) = cmp.predict(&m, segments, sim) {
-                scored.push((cmp.total_error(&y), g, kc));
+                scored.push((cmp.total_error(&y), g, kc, None));
             }
         }
     }
@@ -450,13 +490,19 @@ fn scan_contact(
     // distinct pairs only (upper quantiles of a sparse impact history can
     // coincide)
     let mut best: Vec<(f64, f64)> = vec![];
-    for (_, g, kc) in scored {
+    let mut refined = None;
+    for (_, g, kc, segs) in scored {
         if best.len() < KEEP && !best.contains(&(g, kc)) {
             best.push((g, kc));
+            refined = refined.or(segs);
         }
     }
-    (best, evals)
+    (best, sims, refined)
 }
+
+/// A scan's best (gap, stiffness) pairs, the segment simulations spent
+/// and the start states refined for the best, if refined.
+type ScanResult = (Vec<(f64, f64)>, usize, Option<Vec<Segment>>);
 
 /// A traced value of zero cannot be scaled relatively (a contact traced
 /// to switch on at zero gap, or with zero stiffness; a friction level or

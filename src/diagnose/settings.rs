@@ -380,6 +380,24 @@ pub struct FitGroup {
     /// reconstructed relative displacement (default 1.2; ≥ 1). Reason:
     /// beyond it the contact never closes.
     pub gap_upper: f64,
+    /// Clearance stiffnesses of the scan, as multiples of the stiffest
+    /// spring at the pair (default [3, 5.5, 10, 18, 30]; > 0). Reason: a
+    /// clearance's stiffness is of the order of the spring it works
+    /// beside, not a penalty one to two orders stiffer; the error's valley
+    /// in (gap, stiffness) is narrow, so the multiples are less than 2×
+    /// apart.
+    pub clearance_stiffnesses: Vec<f64>,
+    /// Quantiles of the reconstructed relative displacement's magnitude
+    /// tried as a clearance's gap (default [0.2, 0.35, 0.5, 0.6, 0.7,
+    /// 0.8, 0.9]; in [0, 1]). Reason: a clearance engages on either side
+    /// whenever `|δ|` passes the gap, so its gap may lie anywhere in the
+    /// motion, not only in its top fifth.
+    pub clearance_gap_quantiles: Vec<f64>,
+    /// Score each (gap, stiffness) of a clearance's scan on segment start
+    /// states refined for that model, and race the starts on those of the
+    /// best (default true). Reason: on the states reconstructed with the
+    /// linear model every clearance scored alike, the true one included.
+    pub clearance_refined_scan: bool,
     /// Where a parameter traced at zero (which cannot be scaled
     /// relatively) starts instead.
     pub zero_starts: ZeroStarts,
@@ -431,6 +449,9 @@ impl Default for FitGroup {
             contact_stiffnesses: vec![10.0, 40.0],
             gap_quantiles: vec![0.8, 0.88, 0.93, 0.96, 0.98, 0.99, 0.995],
             gap_upper: 1.2,
+            clearance_stiffnesses: vec![3.0, 5.5, 10.0, 18.0, 30.0],
+            clearance_gap_quantiles: vec![0.2, 0.35, 0.5, 0.6, 0.7, 0.8, 0.9],
+            clearance_refined_scan: true,
             zero_starts: ZeroStarts::default(),
         }
     }
@@ -859,12 +880,23 @@ impl DiagnoseSettings {
             &f.contact_stiffnesses,
             "must be > 0, at least one",
         )?;
-        let quantiles =
-            !f.gap_quantiles.is_empty() && f.gap_quantiles.iter().all(|q| (0.0..=1.0).contains(q));
         rule(
-            quantiles,
+            all_pos(&f.clearance_stiffnesses),
+            "fit.clearance_stiffnesses",
+            &f.clearance_stiffnesses,
+            "must be > 0, at least one",
+        )?;
+        let quantiles = |v: &[f64]| !v.is_empty() && v.iter().all(|q| (0.0..=1.0).contains(q));
+        rule(
+            quantiles(&f.gap_quantiles),
             "fit.gap_quantiles",
             &f.gap_quantiles,
+            "must be in [0, 1], at least one",
+        )?;
+        rule(
+            quantiles(&f.clearance_gap_quantiles),
+            "fit.clearance_gap_quantiles",
+            &f.clearance_gap_quantiles,
             "must be in [0, 1], at least one",
         )?;
         rule(
@@ -1011,6 +1043,12 @@ mod tests {
                 s.fit.contact_stiffnesses = vec![10.0, 0.0]
             }),
             ("fit.gap_quantiles", |s| s.fit.gap_quantiles = vec![1.2]),
+            ("fit.clearance_gap_quantiles", |s| {
+                s.fit.clearance_gap_quantiles = vec![]
+            }),
+            ("fit.clearance_stiffnesses", |s| {
+                s.fit.clearance_stiffnesses = vec![-1.0]
+            }),
             ("fit.gap_upper", |s| s.fit.gap_upper = 0.9),
             ("starts.alternation_gain", |s| {
                 s.starts.alternation_gain = 1.0
