@@ -79,6 +79,12 @@ pub struct CalibratedSettings {
     pub refine_segments: usize,
     /// Most accepted steps of the joint refinement (default 40).
     pub refine_iterations: usize,
+    /// Most passes of the joint refinement on the diagnosis's segments
+    /// (default 4; 1: one): each pass after the first starts from the
+    /// start states refined for the model the pass before reached, and
+    /// runs while the pass before lowered the record's multiple-shooting
+    /// error by more than the starts' `alternation_gain`.
+    pub refine_passes: usize,
     /// After the joint refinement on the diagnosis's segments, refine
     /// again on segments of this many consecutive ones over the whole
     /// record (default 5: 0.5 s; 0 or 1: off), where the damping of the
@@ -112,6 +118,7 @@ impl Default for CalibratedSettings {
             off: false,
             refine_segments: 40,
             refine_iterations: 40,
+            refine_passes: 4,
             long_segments: 5,
             open_loop: false,
             open_loop_iterations: 40,
@@ -821,6 +828,11 @@ fn refine(
         100.0 * weighted(cmp, &jf.segments, None, pred.as_ref())
     );
     let mut best = (problem, refined, jf.segments, after, pred, prepared);
+    progress("joint refinement again from the start states refined for the refined model");
+    let (refined_starts, n) = more_passes(d, base, &mut best, refined_starts, cs, settings)?;
+    if let Some(n) = n {
+        note = format!("{note}; {n}");
+    }
     progress("joint refinement on long segments");
     if let Some((long, n)) = long_stage(d, base, &best, refined_starts, cs, settings)? {
         note = format!("{note}; {n}");
@@ -865,6 +877,63 @@ type Stage = (
     Option<nalgebra::DMatrix<f64>>,
     Option<super::prepare::Prepared>,
 );
+
+/// The joint refinement run again from `at`'s model, on the segments of
+/// `starts` (the start states refined for it, [`super::starts`]), while a
+/// pass lowers the record's multiple-shooting error by more than
+/// [`super::settings::StartSettings::alternation_gain`] of itself, at most
+/// [`CalibratedSettings::refine_passes`] passes in all. A joint fit moves
+/// the start states only locally: started from states refined for the
+/// diagnosed model, a segment whose refined model crosses an impact the
+/// diagnosed one did not keeps its start in the wrong basin, and the fit
+/// stalls there while start states refined afresh for the model it
+/// reached explain those segments far better. `at` becomes the last pass
+/// that lowered the error; the start states refined for it and the note
+/// (None when no pass ran) are returned.
+fn more_passes(
+    d: &Diagnosis,
+    base: &super::prepare::Prepared,
+    at: &mut Stage,
+    mut starts: Vec<crate::update::Segment>,
+    cs: &CalibratedSettings,
+    settings: &DiagnoseSettings,
+) -> Result<(Vec<crate::update::Segment>, Option<String>)> {
+    let gain = settings.starts.alternation_gain;
+    let mut errors = vec![];
+    for _ in 1..cs.refine_passes {
+        let segments = spread(&starts, cs.refine_segments);
+        let Ok((problem, jf)) = joint_fit(d, &at.1, segments, cs, settings)? else {
+            break;
+        };
+        let refined = problem.model_at(&jf.x);
+        let prepared = owned(&refined, base);
+        let cmp = prepared
+            .as_ref()
+            .map_or(&d.prepared.comparison, |p| &p.comparison);
+        let (next_starts, after, pred) = scored(cmp, &refined, sim_of(d));
+        errors.push(pct(after.relative_error));
+        let before = at.3.relative_error;
+        if !lower(after.relative_error, before) {
+            break;
+        }
+        let gained = match (after.relative_error, before) {
+            (Some(a), Some(b)) => a < b * (1.0 - gain),
+            _ => true,
+        };
+        *at = (problem, refined, jf.segments, after, pred, prepared);
+        starts = next_starts;
+        if !gained {
+            break;
+        }
+    }
+    let note = (!errors.is_empty()).then(|| {
+        format!(
+            "again from the start states refined for the refined model: multiple-shooting error {} (each pass kept while it lowers it)",
+            errors.join(" → ")
+        )
+    });
+    Ok((starts, note))
+}
 
 /// The refinement continued from `at` on long segments
 /// ([`CalibratedSettings::long_segments`] consecutive segments of the
