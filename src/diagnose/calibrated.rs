@@ -41,6 +41,12 @@
 //!    in turn, and one explaining the record as well without it is
 //!    dropped (`refit_without`: a companion named beside an effect on a
 //!    linear part the calibration biased).
+//! 4. **Damping alone**: without a linear record, when neither the declared
+//!    nor the calibrated linear part names any effect and the record is
+//!    left above the noise, steps 2 and 3 are run again from the declared
+//!    springs with the damping alone calibrated on the record; the lower
+//!    multiple-shooting error is kept (a calibration that moves the
+//!    springs can take a dominant effect's linearization into them).
 //!
 //! Stages that cannot usefully win are not run: once a diagnosis explains
 //! the record up to the noise (multiple-shooting error at most 1.5 × its
