@@ -954,9 +954,7 @@ type Stage = (
 /// `starts` (the start states refined for it, [`super::starts`]), while a
 /// pass lowers the record's multiple-shooting error by more than
 /// [`super::settings::StartSettings::alternation_gain`] of itself, at most
-/// [`CalibratedSettings::refine_passes`] passes in all, and not once the
-/// error is at the noise ([`AT_NOISE`] × the diagnosis's noise level). A
-/// joint fit moves
+/// [`CalibratedSettings::refine_passes`] passes in all. A joint fit moves
 /// the start states only locally: started from states refined for the
 /// diagnosed model, a segment whose refined model crosses an impact the
 /// diagnosed one did not keeps its start in the wrong basin, and the fit
@@ -973,12 +971,8 @@ fn more_passes(
     settings: &DiagnoseSettings,
 ) -> Result<(Vec<crate::update::Segment>, Option<String>)> {
     let gain = settings.starts.alternation_gain;
-    let at_noise = AT_NOISE * d.noise_level(settings);
     let mut errors = vec![];
     for _ in 1..cs.refine_passes {
-        if at.3.relative_error.is_some_and(|e| e <= at_noise) {
-            break;
-        }
         let segments = spread(&starts, cs.refine_segments);
         let Ok((problem, jf)) = joint_fit(d, &at.1, segments, cs, settings)? else {
             break;
