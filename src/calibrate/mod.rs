@@ -715,6 +715,9 @@ fn prob_dof(p: &Problem<'_>) -> f64 {
 /// Standard errors of `q` from `σ² (JᵀJ)⁻¹` (pseudo-inverse: a direction
 /// the data do not fix gets an infinite error).
 fn std_errors(j: &DMatrix<f64>, r: &DVector<f64>, dof: f64) -> DVector<f64> {
+    if j.ncols() == 0 {
+        return DVector::zeros(0);
+    }
     let s2 = r.norm_squared() / dof;
     let svd = j.clone().svd(false, true);
     let vt = svd.v_t.expect("V requested");
@@ -965,5 +968,27 @@ beta = 2e-4
             "{k}"
         );
         assert_eq!(cal.status, CalibrationStatus::Converged);
+    }
+
+    /// Nothing free (every freedom off): the declared model comes back
+    /// with its output error, no correction and the status saying so
+    /// (the standard errors of no parameter are none, not a failed SVD).
+    #[test]
+    fn nothing_free_gives_the_declared_model_and_its_error() {
+        let data = record_of(&chain(6000.0), 100.0, 2000);
+        let s = CalibrationSettings {
+            substeps: 10,
+            freedom: Freedom {
+                springs: false,
+                damping: false,
+                masses: false,
+            },
+            ..Default::default()
+        };
+        let cal = calibrate(&chain(2000.0), &[data], &s).unwrap();
+        assert_eq!(cal.status, CalibrationStatus::NothingFree);
+        assert!(cal.corrections.is_empty(), "{:?}", cal.corrections);
+        assert!(cal.error_before > 0.01, "{}", cal.error_before);
+        assert_eq!(cal.error_before, cal.error_after);
     }
 }

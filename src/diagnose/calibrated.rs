@@ -41,6 +41,12 @@
 //!    in turn, and one explaining the record as well without it is
 //!    dropped (`refit_without`: a companion named beside an effect on a
 //!    linear part the calibration biased).
+//! 4. **Damping alone**: without a linear record, when neither the declared
+//!    nor the calibrated linear part names any effect and the record is
+//!    left above the noise, steps 2 and 3 are run again from the declared
+//!    springs with the damping alone calibrated on the record; the lower
+//!    multiple-shooting error is kept (a calibration that moves the
+//!    springs can take a dominant effect's linearization into them).
 //!
 //! Stages that cannot usefully win are not run: once a diagnosis explains
 //! the record up to the noise (multiple-shooting error at most 1.5 × its
@@ -79,6 +85,12 @@ pub struct CalibratedSettings {
     pub refine_segments: usize,
     /// Most accepted steps of the joint refinement (default 40).
     pub refine_iterations: usize,
+    /// Most passes of the joint refinement on the diagnosis's segments
+    /// (default 4; 1: one): each pass after the first starts from the
+    /// start states refined for the model the pass before reached, and
+    /// runs while the pass before lowered the record's multiple-shooting
+    /// error by more than the starts' `alternation_gain`.
+    pub refine_passes: usize,
     /// After the joint refinement on the diagnosis's segments, refine
     /// again on segments of this many consecutive ones over the whole
     /// record (default 5: 0.5 s; 0 or 1: off), where the damping of the
@@ -112,6 +124,7 @@ impl Default for CalibratedSettings {
             off: false,
             refine_segments: 40,
             refine_iterations: 40,
+            refine_passes: 4,
             long_segments: 5,
             open_loop: false,
             open_loop_iterations: 40,
@@ -282,6 +295,18 @@ pub fn diagnose_calibrated(
             from_calibrated = ctx.unheld_alternative(from_calibrated, unheld)?;
         }
     }
+    // nothing named anywhere, far from the noise: the springs the
+    // calibration moved may have absorbed the effect; the damping alone
+    // calibrated is the other start
+    let named = |d: &Diagnosis| !d.effects.is_empty();
+    if linear_records.is_empty()
+        && declared.free.is_none()
+        && !ctx.at_noise(&from_calibrated.d)
+        && !named(&from_calibrated.d)
+        && !trusted.as_ref().is_some_and(named)
+    {
+        from_calibrated = ctx.damping_alternative(from_calibrated)?;
+    }
     let Some(trusted) = trusted else {
         // linear values marked free, or the declared ones off on the
         // low-level records: the calibrated diagnosis is the only one
@@ -441,6 +466,60 @@ impl Context<'_> {
             RefinedPath {
                 note: format!("{}; {compared}: held kept", held.note),
                 ..held
+            }
+        })
+    }
+
+    /// The diagnosis from the declared springs with the damping alone
+    /// calibrated on the record, refined and in rounds, against `current`
+    /// (the calibrated path); the lower multiple-shooting error on the
+    /// record is kept. On a record an effect dominates, the calibration of
+    /// every spring and the damping takes the effect's linearization into
+    /// the springs beside it (the bumper 5→6 seen from sensors 1, 5, 6
+    /// with twice the declared damping: k5 +41 %) and the diagnosis on it,
+    /// like the one on the declared damping, names nothing; with the springs
+    /// held the damping's correction unmasks the effect for the trace.
+    fn damping_alternative(&self, current: RefinedPath) -> Result<RefinedPath> {
+        (self.progress)("calibrate the damping alone");
+        let cs = CalibrationSettings {
+            freedom: calibrate::Freedom {
+                springs: false,
+                damping: true,
+                masses: false,
+            },
+            ..self.cal.calibration.clone()
+        };
+        let data = calibrate::data_of(self.rec, self.declared.ndof(), self.sensors, 0)?;
+        let c = calibrate::calibrate(self.declared, &[data], &cs)?;
+        if !matches!(
+            c.status,
+            calibrate::CalibrationStatus::Converged | calibrate::CalibrationStatus::EvaluationLimit
+        ) {
+            return Ok(current);
+        }
+        let d = super::diagnose(
+            &c.model,
+            self.rec,
+            self.validation,
+            self.sensors,
+            self.settings,
+            self.progress,
+        )?;
+        let first = self.refined(d, &c.model)?;
+        let mut other = self.more_rounds(first)?;
+        let (e_all, e_damping) = (current.d.after.relative_error, other.d.after.relative_error);
+        let compared = format!(
+            "multiple-shooting error on the record from the calibration of springs and damping {}, of the damping alone {}",
+            pct(e_all),
+            pct(e_damping)
+        );
+        Ok(if lower(e_damping, e_all) {
+            other.note = format!("{}; {compared}: the damping alone kept", other.note);
+            other
+        } else {
+            RefinedPath {
+                note: format!("{}; {compared}: springs and damping kept", current.note),
+                ..current
             }
         })
     }
@@ -826,6 +905,11 @@ fn refine(
         100.0 * weighted(cmp, &jf.segments, None, pred.as_ref())
     );
     let mut best = (problem, refined, jf.segments, after, pred, prepared);
+    progress("joint refinement again from the start states refined for the refined model");
+    let (refined_starts, n) = more_passes(d, base, &mut best, refined_starts, cs, settings)?;
+    if let Some(n) = n {
+        note = format!("{note}; {n}");
+    }
     progress("joint refinement on long segments");
     if let Some((long, n)) = long_stage(d, base, &best, refined_starts, cs, settings)? {
         note = format!("{note}; {n}");
@@ -870,6 +954,63 @@ type Stage = (
     Option<nalgebra::DMatrix<f64>>,
     Option<super::prepare::Prepared>,
 );
+
+/// The joint refinement run again from `at`'s model, on the segments of
+/// `starts` (the start states refined for it, [`super::starts`]), while a
+/// pass lowers the record's multiple-shooting error by more than
+/// [`super::settings::StartSettings::alternation_gain`] of itself, at most
+/// [`CalibratedSettings::refine_passes`] passes in all. A joint fit moves
+/// the start states only locally: started from states refined for the
+/// diagnosed model, a segment whose refined model crosses an impact the
+/// diagnosed one did not keeps its start in the wrong basin, and the fit
+/// stalls there while start states refined afresh for the model it
+/// reached explain those segments far better. `at` becomes the last pass
+/// that lowered the error; the start states refined for it and the note
+/// (None when no pass ran) are returned.
+fn more_passes(
+    d: &Diagnosis,
+    base: &super::prepare::Prepared,
+    at: &mut Stage,
+    mut starts: Vec<crate::update::Segment>,
+    cs: &CalibratedSettings,
+    settings: &DiagnoseSettings,
+) -> Result<(Vec<crate::update::Segment>, Option<String>)> {
+    let gain = settings.starts.alternation_gain;
+    let mut errors = vec![];
+    for _ in 1..cs.refine_passes {
+        let segments = spread(&starts, cs.refine_segments);
+        let Ok((problem, jf)) = joint_fit(d, &at.1, segments, cs, settings)? else {
+            break;
+        };
+        let refined = problem.model_at(&jf.x);
+        let prepared = owned(&refined, base);
+        let cmp = prepared
+            .as_ref()
+            .map_or(&d.prepared.comparison, |p| &p.comparison);
+        let (next_starts, after, pred) = scored(cmp, &refined, sim_of(d));
+        errors.push(pct(after.relative_error));
+        let before = at.3.relative_error;
+        if !lower(after.relative_error, before) {
+            break;
+        }
+        let gained = match (after.relative_error, before) {
+            (Some(a), Some(b)) => a < b * (1.0 - gain),
+            _ => true,
+        };
+        *at = (problem, refined, jf.segments, after, pred, prepared);
+        starts = next_starts;
+        if !gained {
+            break;
+        }
+    }
+    let note = (!errors.is_empty()).then(|| {
+        format!(
+            "again from the start states refined for the refined model: multiple-shooting error {} (each pass kept while it lowers it)",
+            errors.join(" → ")
+        )
+    });
+    Ok((starts, note))
+}
 
 /// The refinement continued from `at` on long segments
 /// ([`CalibratedSettings::long_segments`] consecutive segments of the
