@@ -658,7 +658,7 @@ impl Context<'_> {
             }
         }
         update_effects(&mut d, &std, &self.cal.calibration);
-        if let Some(n) = drop_negligible(&mut d, &bases, self.progress) {
+        if let Some(n) = drop_negligible(&mut d, &bases, self.settings, self.progress) {
             note = format!("{note}; {n}");
         }
         let start_errors = std::mem::replace(&mut d.before, declared_errors);
@@ -763,9 +763,7 @@ fn refine_once(
             d.predictions.1 = pred;
             let sim = sim_of(d);
             progress("the refined model's errors on the validation record");
-            if let (Some(b), Some(v)) = (bases.validation.as_ref(), d.validation.as_mut()) {
-                v.after = own(&d.model, b).comparison.errors(&d.model, sim).0;
-            }
+            rescore_validation(d, bases, settings, sim);
             (note, params.into_iter().zip(std).collect())
         }
         Refined::NotKept(note) => (note, vec![]),
@@ -783,6 +781,24 @@ struct Bases {
 /// with laws against ground in the absolute displacement and no spring to
 /// ground, `base` corrected for the rigid-body wander fitted with its laws
 /// ([`super::ground::corrected`], as the diagnosis scores it); else `base`.
+/// The fitted model `d.model` scored again on the validation record, its
+/// unobservable gaps against ground re-zeroed there
+/// ([`super::validation::after_errors`]).
+fn rescore_validation(
+    d: &mut Diagnosis,
+    bases: &Bases,
+    settings: &DiagnoseSettings,
+    sim: SimSettings,
+) {
+    if let (Some(b), Some(v)) = (bases.validation.as_ref(), d.validation.as_mut()) {
+        let prep = own(&d.model, b);
+        let q = &settings.fit.gap_quantiles;
+        let (after, datum, _) = super::validation::after_errors(&d.model, &prep, q, sim);
+        v.after = after;
+        v.datum = datum;
+    }
+}
+
 fn own<'a>(model: &Model, base: &'a super::prepare::Prepared) -> Cow<'a, super::prepare::Prepared> {
     owned(model, base).map_or(Cow::Borrowed(base), Cow::Owned)
 }
@@ -1218,7 +1234,12 @@ const NEGLIGIBLE: f64 = 0.01;
 /// refinement can take an effect proposed beside the right one to nothing
 /// (a clearance of 71 N/m beside a cubic spring) without the stop rules
 /// seeing it. The note says what was dropped; None when nothing was.
-fn drop_negligible(d: &mut Diagnosis, bases: &Bases, progress: &dyn Fn(&str)) -> Option<String> {
+fn drop_negligible(
+    d: &mut Diagnosis,
+    bases: &Bases,
+    settings: &DiagnoseSettings,
+    progress: &dyn Fn(&str),
+) -> Option<String> {
     let sim = sim_of(d);
     let mut dropped = vec![];
     // the model's own screen error on its reconstruction, while it is
@@ -1269,9 +1290,7 @@ fn drop_negligible(d: &mut Diagnosis, bases: &Bases, progress: &dyn Fn(&str)) ->
     if dropped.is_empty() {
         return None;
     }
-    if let (Some(b), Some(v)) = (bases.validation.as_ref(), d.validation.as_mut()) {
-        v.after = own(&d.model, b).comparison.errors(&d.model, sim).0;
-    }
+    rescore_validation(d, bases, settings, sim);
     Some(dropped.join("; "))
 }
 
