@@ -1242,6 +1242,13 @@ fn drop_negligible(
 ) -> Option<String> {
     let sim = sim_of(d);
     let mut dropped = vec![];
+    // every effect's screens on the model as it is, in parallel (the
+    // screens are independent; one alone leaves a core idle in its
+    // few-segment steps); after a drop, one at a time
+    let mut ahead = d
+        .after
+        .relative_error
+        .and_then(|_| screens_ahead(d, bases, sim));
     // the model's own screen error on its reconstruction, while it is
     // unchanged
     let mut with_screen: Option<Option<f64>> = None;
@@ -1252,19 +1259,18 @@ fn drop_negligible(
         }
         let with = d.after.relative_error?;
         progress("score the model with an effect switched off");
-        let off = effects::without(&d.model, e);
-        let prepared = owned(&off, &bases.record);
-        let cmp = prepared
-            .as_ref()
-            .map_or(&d.prepared.comparison, |p| &p.comparison);
-        let with_error = match &prepared {
-            Some(_) => screen_error(cmp, &d.model, sim),
-            None => *with_screen.get_or_insert_with(|| screen_error(cmp, &d.model, sim)),
+        let s = match ahead.as_mut().and_then(|a| a[i].take()) {
+            Some(s) => s,
+            None => screened(d, e, bases, sim, &mut with_screen),
         };
-        if needed(screen_error(cmp, &off, sim), with_error) {
+        if needed(s.off_error, s.with_error) {
             continue;
         }
-        let (after, pred) = cmp.errors(&off, sim);
+        let cmp = s
+            .prepared
+            .as_ref()
+            .map_or(&d.prepared.comparison, |p| &p.comparison);
+        let (after, pred) = cmp.errors(&s.off, sim);
         if !after
             .relative_error
             .is_some_and(|x| x <= with * (1.0 + NEGLIGIBLE))
@@ -1277,9 +1283,11 @@ fn drop_negligible(
             pct(after.relative_error),
             pct(Some(with))
         ));
-        d.model = off;
+        d.model = s.off;
+        // the screens computed ahead were on the model before the drop
+        ahead = None;
         with_screen = None;
-        if let Some(p) = prepared {
+        if let Some(p) = s.prepared {
             d.prepared = p;
         }
         d.after = after;
@@ -1292,6 +1300,108 @@ fn drop_negligible(
     }
     rescore_validation(d, bases, settings, sim);
     Some(dropped.join("; "))
+}
+
+/// An effect switched off ([`effects::without`]) and the screens
+/// ([`screen_error`]) of the model without it and with it, on the
+/// reconstruction the model without it is scored from.
+struct Screened {
+    /// The model with the effect switched off.
+    off: Model,
+    /// Its own reconstruction when it differs from the diagnosis's
+    /// ([`owned`]).
+    prepared: Option<super::prepare::Prepared>,
+    /// The screen error of the model with the effect.
+    with_error: Option<f64>,
+    /// The screen error of the model without it.
+    off_error: Option<f64>,
+}
+
+/// [`Screened`] for the effect `e` of `d`, the two screens side by side;
+/// `with_screen` caches the screen of `d`'s model on `d`'s own
+/// reconstruction.
+fn screened(
+    d: &Diagnosis,
+    e: &super::effects::AddedEffect,
+    bases: &Bases,
+    sim: SimSettings,
+    with_screen: &mut Option<Option<f64>>,
+) -> Screened {
+    let off = effects::without(&d.model, e);
+    let prepared = owned(&off, &bases.record);
+    let cmp = prepared
+        .as_ref()
+        .map_or(&d.prepared.comparison, |p| &p.comparison);
+    let (with_error, off_error) = match (&prepared, *with_screen) {
+        (None, Some(w)) => (w, screen_error(cmp, &off, sim)),
+        _ => rayon::join(
+            || screen_error(cmp, &d.model, sim),
+            || screen_error(cmp, &off, sim),
+        ),
+    };
+    if prepared.is_none() {
+        *with_screen = Some(with_error);
+    }
+    Screened {
+        off,
+        prepared,
+        with_error,
+        off_error,
+    }
+}
+
+/// [`screened`] for every nonlinear effect of `d` (None for the others)
+/// at once, in parallel, the screen of `d`'s model on its own
+/// reconstruction computed once for those scored on it; None without a
+/// nonlinear effect.
+fn screens_ahead(d: &Diagnosis, bases: &Bases, sim: SimSettings) -> Option<Vec<Option<Screened>>> {
+    use rayon::prelude::*;
+    let offs: Vec<Option<(Model, Option<super::prepare::Prepared>)>> = d
+        .added
+        .par_iter()
+        .map(|e| {
+            (!e.candidate.kind.changes_linear_part()).then(|| {
+                let off = effects::without(&d.model, e);
+                let prepared = owned(&off, &bases.record);
+                (off, prepared)
+            })
+        })
+        .collect();
+    let listed: Vec<_> = offs.iter().flatten().collect();
+    if listed.is_empty() {
+        return None;
+    }
+    let on_base = listed.iter().any(|(_, p)| p.is_none());
+    let (base_with, each) = rayon::join(
+        || on_base.then(|| screen_error(&d.prepared.comparison, &d.model, sim)),
+        || {
+            offs.par_iter()
+                .map(|o| {
+                    o.as_ref().map(|(off, prepared)| {
+                        let cmp = prepared
+                            .as_ref()
+                            .map_or(&d.prepared.comparison, |p| &p.comparison);
+                        let with = prepared.as_ref().map(|_| screen_error(cmp, &d.model, sim));
+                        (screen_error(cmp, off, sim), with)
+                    })
+                })
+                .collect::<Vec<_>>()
+        },
+    );
+    Some(
+        offs.into_iter()
+            .zip(each)
+            .map(|(o, s)| {
+                let ((off, prepared), (off_error, with)) = (o?, s?);
+                Some(Screened {
+                    off,
+                    prepared,
+                    with_error: with.unwrap_or_else(|| base_with.flatten()),
+                    off_error,
+                })
+            })
+            .collect(),
+    )
 }
 
 /// Every this many segments of the record, one is scored in the screen

@@ -55,6 +55,9 @@ struct Context<'a> {
     costs: &'a [f64],
     /// Cost at or below which a segment is back among the others.
     good: f64,
+    /// Candidates of one search tried side by side: the threads the
+    /// searches of the picks leave idle, at least one.
+    side_by_side: usize,
 }
 
 /// New starts for the segments `picks` (indices into `segs`, whose costs
@@ -84,6 +87,7 @@ pub(super) fn rescue(
         segs,
         costs,
         good: cmp.starts.outlier * median(costs),
+        side_by_side: (rayon::current_num_threads() / picks.len().max(1)).max(1),
     };
     let found: Vec<Found> = picks.par_iter().map(|&i| ctx.search(i)).collect();
     let mut changed = vec![];
@@ -112,29 +116,50 @@ fn median(costs: &[f64]) -> f64 {
 impl Context<'_> {
     /// The candidates of segment `i` in turn — long run-ins from 2, 4, 8
     /// and 16 segments back, then the arrival at the next segment's
-    /// start — until one brings it back among the others.
+    /// start — until one brings it back among the others. With threads
+    /// idle (fewer picks than threads), the next few candidates are tried
+    /// side by side and taken in turn; the simulations counted are those
+    /// of the candidates taken, as when tried one at a time.
     fn search(&self, i: usize) -> Found {
         let mut best: Option<(Segment, DMatrix<f64>, f64)> = None;
         let mut sims = 0;
         let mut bound = self.costs[i];
-        let origins = BACK
+        let origins: Vec<Origin> = BACK
             .iter()
             .filter_map(|&b| i.checked_sub(b))
             .map(Origin::Before)
-            .chain(std::iter::once(Origin::After));
-        for origin in origins {
+            .chain(std::iter::once(Origin::After))
+            .collect();
+        for chunk in origins.chunks(self.side_by_side) {
+            let tried: Vec<Found> = match chunk {
+                [one] => vec![self.try_origin(i, *one)],
+                _ => chunk.par_iter().map(|&o| self.try_origin(i, o)).collect(),
+            };
+            for (c, n) in tried {
+                if bound <= self.good {
+                    break;
+                }
+                sims += n;
+                if let Some(c) = c.filter(|c| c.2 < bound) {
+                    bound = c.2;
+                    best = Some(c);
+                }
+            }
             if bound <= self.good {
                 break;
             }
-            let Some(start) = self.candidate(i, origin, &mut sims) else {
-                continue;
-            };
-            if let Some(c) = self.refined(start, &mut sims).filter(|c| c.2 < bound) {
-                bound = c.2;
-                best = Some(c);
-            }
         }
         (best, sims)
+    }
+
+    /// The start of segment `i` from `origin`, refined ([`Self::refined`]),
+    /// and the simulations run.
+    fn try_origin(&self, i: usize, origin: Origin) -> Found {
+        let mut sims = 0;
+        let c = self
+            .candidate(i, origin, &mut sims)
+            .and_then(|start| self.refined(start, &mut sims));
+        (c, sims)
     }
 
     /// The start of segment `i` from `origin`, before refinement; None

@@ -125,6 +125,10 @@ impl Integrator {
         states: bool,
     ) -> (crate::integrate::Simulation, Tape) {
         let mut tape = Tape::new(self, states);
+        // room for every sample sub-stepped: no growth while recording
+        let samples = force.ncols().saturating_sub(1);
+        tape.whole.reserve(samples);
+        tape.subs.reserve(tape.width() * samples * tape.substeps);
         let sim = self.run_sized(force, u0, v0, Some(&mut tape));
         (sim, tape)
     }
