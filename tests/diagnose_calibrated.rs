@@ -6,18 +6,13 @@
 //! 5→6, sensors 1, 5, 6, modal 2 %" of `examples/imperfect_matrix.rs`
 //! (seed 71129).
 
+mod diagnose_common;
+
+use diagnose_common::{lanl, record};
 use rand::Rng;
 use tacit::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
 use tacit::diagnose::DiagnoseSettings;
-use tacit::integrate::SimSettings;
 use tacit::model::{Contact, Damping, Model};
-use tacit::record::Record;
-use tacit::simulate::{simulate_record, RecordSpec};
-
-fn lanl() -> Model {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
-    Model::from_file(std::path::Path::new(p)).unwrap()
-}
 
 /// lanl8dof with springs within ±3 % (seeded) and 2 % modal damping.
 fn imperfect(seed: u64) -> Model {
@@ -31,22 +26,6 @@ fn imperfect(seed: u64) -> Model {
         ratios: vec![],
     };
     m
-}
-
-/// 4096 samples at `sensors`, 1 % noise, 40 sub-steps.
-fn record(truth: &Model, sensors: &[usize], seed: u64) -> Record {
-    let spec = RecordSpec {
-        samples: 4096,
-        sensors: sensors.to_vec(),
-        noise: 0.01,
-        seed,
-        settings: SimSettings {
-            substeps: 40,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    simulate_record(truth, &spec).unwrap().0
 }
 
 /// The declared damping is half the true one, so the diagnosis with the
@@ -69,8 +48,8 @@ fn the_bumper_seen_from_three_sensors_without_a_linear_record() {
     }];
     let sensors = [1, 5, 6];
     let (rec, val) = (
-        record(&truth, &sensors, 711291),
-        record(&truth, &sensors, 711292),
+        record(&truth, &sensors, 4096, 711291),
+        record(&truth, &sensors, 4096, 711292),
     );
     let settings = DiagnoseSettings::default();
     let d = diagnose_calibrated(

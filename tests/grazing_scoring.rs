@@ -4,19 +4,15 @@
 //! measured noise (docs/calibration.md, "A grazing contact under three
 //! sensors").
 
+mod diagnose_common;
+
+use diagnose_common::{lanl, record};
 use tacit::diagnose::{diagnose, DiagnoseSettings};
-use tacit::integrate::SimSettings;
 use tacit::model::{Clearance, Damping, Model};
-use tacit::simulate::{simulate_record, RecordSpec};
 
 /// The record: its noise seed and length.
 const SEED: u64 = 779091;
 const SAMPLES: usize = 2048;
-
-fn lanl() -> Model {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
-    Model::from_file(std::path::Path::new(p)).unwrap()
-}
 
 /// lanl8dof with 2.5 % modal damping and a clearance 2–3 of ±0.15 mm,
 /// 1e6 N/m: the relative motion of masses 2 and 3 grazes the gap.
@@ -34,25 +30,10 @@ fn truth() -> Model {
     m
 }
 
-fn record(m: &Model, seed: u64, samples: usize) -> tacit::record::Record {
-    let spec = RecordSpec {
-        samples,
-        sensors: vec![2, 3, 7],
-        noise: 0.01,
-        seed,
-        settings: SimSettings {
-            substeps: 40,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    simulate_record(m, &spec).unwrap().0
-}
-
 #[test]
 fn truth_scores_near_the_noise_under_three_sensors() {
     let m = truth();
-    let rec = record(&m, SEED, SAMPLES);
+    let rec = record(&m, &[2, 3, 7], SAMPLES, SEED);
     let d = diagnose(&m, &rec, None, None, &DiagnoseSettings::default(), &|_| {}).unwrap();
     let noise = d.noise.as_ref().unwrap().level;
     let e = d.before.relative_error.unwrap();

@@ -443,29 +443,51 @@ impl Context<'_> {
     /// path explains the record up to the noise.
     fn unheld_alternative(&self, held: RefinedPath, unheld: &Model) -> Result<RefinedPath> {
         (self.progress)("diagnose from the calibration without held parameters");
-        let d = super::diagnose(
+        self.better_of(
+            held,
             unheld,
+            [
+                "with parameters held",
+                "with none held",
+                "held kept",
+                "none held kept",
+            ],
+        )
+    }
+
+    /// The diagnosis from `start`, refined and in rounds, against
+    /// `current`: the lower multiple-shooting error on the record is kept,
+    /// the note gives both. `names`: how the note calls the calibration
+    /// `current` came from and `start`, then each of them kept.
+    fn better_of(
+        &self,
+        current: RefinedPath,
+        start: &Model,
+        [current_name, start_name, current_kept, start_kept]: [&str; 4],
+    ) -> Result<RefinedPath> {
+        let d = super::diagnose(
+            start,
             self.rec,
             self.validation,
             self.sensors,
             self.settings,
             self.progress,
         )?;
-        let first = self.refined(d, unheld)?;
+        let first = self.refined(d, start)?;
         let mut other = self.more_rounds(first)?;
-        let (e_held, e_other) = (held.d.after.relative_error, other.d.after.relative_error);
+        let (e_current, e_other) = (current.d.after.relative_error, other.d.after.relative_error);
         let compared = format!(
-            "multiple-shooting error on the record from the calibration with parameters held {}, with none held {}",
-            pct(e_held),
+            "multiple-shooting error on the record from the calibration {current_name} {}, {start_name} {}",
+            pct(e_current),
             pct(e_other)
         );
-        Ok(if lower(e_other, e_held) {
-            other.note = format!("{}; {compared}: none held kept", other.note);
+        Ok(if lower(e_other, e_current) {
+            other.note = format!("{}; {compared}: {start_kept}", other.note);
             other
         } else {
             RefinedPath {
-                note: format!("{}; {compared}: held kept", held.note),
-                ..held
+                note: format!("{}; {compared}: {current_kept}", current.note),
+                ..current
             }
         })
     }
@@ -497,31 +519,16 @@ impl Context<'_> {
         ) {
             return Ok(current);
         }
-        let d = super::diagnose(
+        self.better_of(
+            current,
             &c.model,
-            self.rec,
-            self.validation,
-            self.sensors,
-            self.settings,
-            self.progress,
-        )?;
-        let first = self.refined(d, &c.model)?;
-        let mut other = self.more_rounds(first)?;
-        let (e_all, e_damping) = (current.d.after.relative_error, other.d.after.relative_error);
-        let compared = format!(
-            "multiple-shooting error on the record from the calibration of springs and damping {}, of the damping alone {}",
-            pct(e_all),
-            pct(e_damping)
-        );
-        Ok(if lower(e_damping, e_all) {
-            other.note = format!("{}; {compared}: the damping alone kept", other.note);
-            other
-        } else {
-            RefinedPath {
-                note: format!("{}; {compared}: springs and damping kept", current.note),
-                ..current
-            }
-        })
+            [
+                "of springs and damping",
+                "of the damping alone",
+                "springs and damping kept",
+                "the damping alone kept",
+            ],
+        )
     }
 
     /// Whether `d` explains the record up to the noise: its

@@ -1,6 +1,6 @@
 //! The model found, scored on a validation record it was not fitted to.
 
-use super::errors::{error_simulations, ErrorSet};
+use super::errors::{error_simulations, ErrorSet, ShotResult};
 use super::outcome::{DatumShift, Validation};
 use super::prepare::Prepared;
 use super::uncertainty::gap_unobservable;
@@ -65,18 +65,26 @@ pub(super) fn after_errors(
     sim: SimSettings,
 ) -> (ErrorSet, Vec<DatumShift>, usize) {
     let cmp = &prep.comparison;
-    let (datum, shots) = rezero(fitted, prep, quantiles, sim);
-    let model = datum.as_ref().map_or(fitted, |d| &d.model);
-    let (after, _) = cmp.errors(model, sim);
-    let n = error_simulations(&after, cmp) + shots;
-    (after, datum.map(|d| d.shifts).unwrap_or_default(), n)
+    let Some(r) = rezero(fitted, prep, quantiles, sim) else {
+        let (after, _) = cmp.errors(fitted, sim);
+        let n = error_simulations(&after, cmp);
+        return (after, vec![], n);
+    };
+    // the multiple shooting of the model kept is the scan's own
+    let (after, _) = cmp.errors_of(&r.model, sim, r.shot);
+    let n = error_simulations(&after, cmp) + r.simulations - cmp.segments.len();
+    (after, r.shifts, n)
 }
 
 /// The fitted model with the gaps of its contacts against ground that the
-/// sensors do not observe re-zeroed on this record, and what moved.
+/// sensors do not observe re-zeroed on this record: what moved, the
+/// multiple shooting of the model kept, and the segment simulations of the
+/// scan.
 struct Rezeroed {
     model: Model,
     shifts: Vec<DatumShift>,
+    shot: ShotResult,
+    simulations: usize,
 }
 
 /// A contact against ground whose gap trades with the structure's
@@ -86,44 +94,45 @@ struct Rezeroed {
 /// gap is taken again, everything else held: the fitted gap and the
 /// reconstructed position of the contact's DOF at `quantiles` are scored
 /// by the multiple-shooting error and the lowest kept. `None` when no
-/// contact is concerned or the fitted gap scores best; with the segment
-/// simulations run.
+/// contact is concerned.
 fn rezero(
     fitted: &Model,
     prep: &Prepared,
     quantiles: &[f64],
     sim: SimSettings,
-) -> (Option<Rezeroed>, usize) {
+) -> Option<Rezeroed> {
     let cmp = &prep.comparison;
     let mut model = fitted.clone();
-    let (mut shifts, mut sims) = (vec![], 0);
+    let (mut shifts, mut sims, mut kept) = (vec![], 0, None);
     for ci in 0..fitted.contacts.len() {
         let c = &fitted.contacts[ci];
         let &[d] = c.dofs.as_slice() else { continue };
         if !gap_unobservable(fitted, &[d - 1], &cmp.observations) {
             continue;
         }
-        let row = prep.recon.states.row(d - 1);
         let mut tries = vec![c.gap];
         tries.extend(
-            quantiles
-                .iter()
-                .map(|&q| quantile(row.iter().copied(), q))
+            quantiles_of(prep.recon.states.row(d - 1).iter().copied(), quantiles)
+                .into_iter()
                 .filter(|g| *g > 0.0),
         );
-        let score = |m: &Model| cmp.shoot(m, sim).ok().map(|y| cmp.total_error(&y.0));
-        let mut best: Option<(f64, f64)> = None;
+        let mut best: Option<(f64, f64, ShotResult)> = None;
         for g in tries {
             model.contacts[ci].gap = g;
             sims += cmp.segments.len();
-            if let Some(e) = score(&model).filter(|e| e.is_finite()) {
-                if best.is_none_or(|b| e < b.1) {
-                    best = Some((g, e));
-                }
+            let shot = cmp.shoot(&model, sim);
+            let e = shot.as_ref().map_or(f64::NAN, |y| cmp.total_error(&y.0));
+            if e.is_finite() && best.as_ref().is_none_or(|b| e < b.1) {
+                best = Some((g, e, shot));
             }
         }
-        let gap = best.map_or(c.gap, |b| b.0);
+        let (gap, shot) = match best {
+            Some((g, _, shot)) => (g, Some(shot)),
+            None => (c.gap, None),
+        };
         model.contacts[ci].gap = gap;
+        // the scan of the last contact ran with the others at their gaps
+        kept = shot;
         if gap != c.gap {
             shifts.push(DatumShift {
                 label: format!("contact @{d}"),
@@ -132,17 +141,31 @@ fn rezero(
             });
         }
     }
-    let found = (!shifts.is_empty()).then_some(Rezeroed { model, shifts });
-    (found, sims)
+    let shot = match kept {
+        Some(shot) => shot,
+        None if sims == 0 => return None,
+        None => {
+            sims += cmp.segments.len();
+            cmp.shoot(&model, sim)
+        }
+    };
+    Some(Rezeroed {
+        model,
+        shifts,
+        shot,
+        simulations: sims,
+    })
 }
 
-/// The `q` quantile of `values` (nearest rank).
-fn quantile(values: impl Iterator<Item = f64>, q: f64) -> f64 {
+/// The `qs` quantiles of `values` (nearest rank; NaN when none is
+/// finite).
+fn quantiles_of(values: impl Iterator<Item = f64>, qs: &[f64]) -> Vec<f64> {
     let mut v: Vec<f64> = values.filter(|x| x.is_finite()).collect();
-    if v.is_empty() {
-        return f64::NAN;
-    }
     v.sort_by(f64::total_cmp);
-    let k = ((v.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
-    v[k]
+    qs.iter()
+        .map(|&q| match v.len() {
+            0 => f64::NAN,
+            n => v[((n - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize],
+        })
+        .collect()
 }

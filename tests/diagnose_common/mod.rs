@@ -2,7 +2,8 @@
 //! `diagnose_added_effects`): records simulated from lanl8dof with an
 //! effect the model file does not declare (2048 samples, 1 % noise, 40
 //! sub-steps), diagnosed with the declared linear model and validated on a
-//! second record.
+//! second record. Each test crate uses part of it.
+#![allow(dead_code)]
 
 use tacit::diagnose::{diagnose, DiagnoseSettings, Diagnosis};
 use tacit::integrate::SimSettings;
@@ -16,11 +17,11 @@ pub fn lanl() -> Model {
     Model::from_file(std::path::Path::new(p)).unwrap()
 }
 
-/// The record (seed `seed`) and the validation record (seed `seed + 1000`)
-/// of `truth` at `sensors`.
-pub fn records(truth: &Model, sensors: &[usize], seed: u64) -> (Record, Record) {
-    let spec = |seed| RecordSpec {
-        samples: 2048,
+/// A record of `truth` as these tests simulate it: `samples` samples,
+/// every output at `sensors`, 1 % noise (seed `seed`), 40 sub-steps.
+pub fn record(truth: &Model, sensors: &[usize], samples: usize, seed: u64) -> Record {
+    let spec = RecordSpec {
+        samples,
         sensors: sensors.to_vec(),
         noise: 0.01,
         seed,
@@ -30,9 +31,15 @@ pub fn records(truth: &Model, sensors: &[usize], seed: u64) -> (Record, Record) 
         },
         ..Default::default()
     };
+    simulate_record(truth, &spec).unwrap().0
+}
+
+/// The record (seed `seed`) and the validation record (seed `seed + 1000`)
+/// of `truth` at `sensors`, 2048 samples each.
+pub fn records(truth: &Model, sensors: &[usize], seed: u64) -> (Record, Record) {
     (
-        simulate_record(truth, &spec(seed)).unwrap().0,
-        simulate_record(truth, &spec(seed + 1000)).unwrap().0,
+        record(truth, sensors, 2048, seed),
+        record(truth, sensors, 2048, seed + 1000),
     )
 }
 
