@@ -2,31 +2,15 @@
 //! springs perturbed by up to ±3 % (seeded) and 2 % modal damping, the
 //! declared model data/lanl8dof.toml (1 % damping, nominal springs).
 
-use rand::Rng;
+mod diagnose_common;
+
+use diagnose_common::{imperfect, lanl};
 use tacit::calibrate::{calibrate, data_of, params, CalibrationSettings};
 use tacit::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
 use tacit::diagnose::DiagnoseSettings;
 use tacit::integrate::SimSettings;
-use tacit::model::{Contact, Damping, Model};
+use tacit::model::{Contact, Model};
 use tacit::simulate::{simulate_record, RecordSpec};
-
-fn lanl() -> Model {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
-    Model::from_file(std::path::Path::new(p)).unwrap()
-}
-
-fn imperfect(seed: u64) -> Model {
-    let mut m = lanl();
-    let mut g = tacit::signal::rng(seed);
-    for s in &mut m.springs {
-        s.stiffness *= 1.0 + 0.03 * (2.0 * g.random::<f64>() - 1.0);
-    }
-    m.damping = Damping::Modal {
-        ratio: Some(0.02),
-        ratios: vec![],
-    };
-    m
-}
 
 fn record(truth: &Model, seed: u64) -> tacit::record::Record {
     let spec = RecordSpec {

@@ -8,25 +8,10 @@
 
 mod diagnose_common;
 
-use diagnose_common::{lanl, record};
-use rand::Rng;
+use diagnose_common::{imperfect, lanl, record};
 use tacit::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
 use tacit::diagnose::DiagnoseSettings;
-use tacit::model::{Contact, Damping, Model};
-
-/// lanl8dof with springs within ±3 % (seeded) and 2 % modal damping.
-fn imperfect(seed: u64) -> Model {
-    let mut m = lanl();
-    let mut g = tacit::signal::rng(seed);
-    for s in &mut m.springs {
-        s.stiffness *= 1.0 + 0.03 * (2.0 * g.random::<f64>() - 1.0);
-    }
-    m.damping = Damping::Modal {
-        ratio: Some(0.02),
-        ratios: vec![],
-    };
-    m
-}
+use tacit::model::Contact;
 
 /// The declared damping is half the true one, so the diagnosis with the
 /// declared linear part leaves about 26 % on the record, and the
