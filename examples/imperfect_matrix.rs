@@ -399,6 +399,9 @@ fn truth_cell(c: &Case) -> String {
 
 /// The first ranking and the rounds of the diagnosis reported, on stderr.
 fn explain(d: &tacit::diagnose::Diagnosis) {
+    if let Some(l) = &d.prepared.located {
+        eprintln!("  located: {}", l.summary());
+    }
     for r in d.ranking.iter().take(8) {
         eprintln!(
             "  ranked {}: explained {:.3}, bic {:.1}, {:?}",
