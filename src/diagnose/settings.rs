@@ -96,10 +96,11 @@ pub struct NoiseSettings {
     /// it takes.
     pub relocate_factor: f64,
     /// Frequency bands the residual's spectrum is split into for the
-    /// measurement (default 16; 4 to 256). The level is the median over the
-    /// bands, so model error confined to fewer than half of them (at the
-    /// modes) does not raise it. Reason: 16 bands of a 4096-sample record
-    /// hold 128 lines each, a 12 % scatter per band.
+    /// measurement (default 16; 4 to 256). The level is the lower quartile
+    /// over the bands (corrected for white noise's own quartile), so model
+    /// error confined to fewer than three bands in four (at the modes) does
+    /// not raise it. Reason: 16 bands of a 4096-sample record hold 128
+    /// lines each, a 12 % scatter per band.
     pub bands: usize,
     /// Multiple-shooting relative error at or below `floor_multiple ×`
     /// the noise level is taken as noise and integration error: no effect
