@@ -667,7 +667,7 @@ impl Integrator {
                 sw.pending[j] += 1;
                 continue;
             }
-            if let Some(pw) = powers {
+            if let (Some(pw), true) = (powers, sw.pending[j] != 0) {
                 flush_seed(pw, n, j, sw);
             }
             gather(sw, j, n);
@@ -1143,7 +1143,9 @@ impl Rows {
 fn flush_all(powers: Option<&[f64]>, n: usize, sw: &mut SensWork) {
     if let Some(pw) = powers {
         for j in 0..sw.s {
-            flush_seed(pw, n, j, sw);
+            if sw.pending[j] != 0 {
+                flush_seed(pw, n, j, sw);
+            }
         }
     }
 }
