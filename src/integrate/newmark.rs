@@ -717,12 +717,7 @@ impl Integrator {
             }
         }
         let y = &mut ws.y3;
-        y.fill(0.0);
-        for (col, &xc) in map.full.chunks_exact(3 * n).zip(x.iter()) {
-            for (yi, &c) in y.iter_mut().zip(col) {
-                *yi += c * xc;
-            }
-        }
+        dense::mat_vec(&map.full, &x[..5 * n], &mut y[..3 * n]);
         ws.u.copy_from_slice(&y[..n]);
         ws.v.copy_from_slice(&y[n..2 * n]);
         ws.a.copy_from_slice(&y[2 * n..]);
