@@ -194,9 +194,9 @@ struct SampleMap {
     /// inputs `(u, v, a, f_prev, f_next)`.
     full: Vec<f64>,
     /// Per contact (in element order): its relative displacement after
-    /// each sub-step of the sample as `S` rows of `5n` coefficients of the
-    /// sample's inputs (the gaps are the integrator's: the map does not
-    /// depend on them).
+    /// each sub-step of the sample as `S` coefficients per input, `5n`
+    /// such columns (the gaps are the integrator's: the map does not
+    /// depend on them), so that every sub-step's sum advances at once.
     contacts: Vec<Vec<f64>>,
 }
 
@@ -669,10 +669,20 @@ impl Integrator {
             out[n..2 * n].copy_from_slice(&ws.v);
             out[2 * n..].copy_from_slice(&ws.a);
         }
-        Some(SampleMap {
-            full,
-            contacts: deltas,
-        })
+        // by input: sub-step `sub` of input `col` at `col S + sub`
+        let contacts = deltas
+            .iter()
+            .map(|d| {
+                let mut t = vec![0.0; s * m5];
+                for (sub, row) in d.chunks_exact(m5).enumerate() {
+                    for (col, &c) in row.iter().enumerate() {
+                        t[col * s + sub] = c;
+                    }
+                }
+                t
+            })
+            .collect();
+        Some(SampleMap { full, contacts })
     }
 
     /// Take the whole sample (forces in `ws.f_prev`, `ws.f_next`) by the
@@ -683,7 +693,6 @@ impl Integrator {
             return false;
         }
         let n = self.n;
-        let m5 = 5 * n;
         let x = &mut ws.x5;
         for (q, v) in [&ws.u, &ws.v, &ws.a, &ws.f_prev, &ws.f_next]
             .iter()
@@ -691,21 +700,24 @@ impl Integrator {
         {
             x[q * n..(q + 1) * n].copy_from_slice(&v[..n]);
         }
-        for (rows, &gap) in map.contacts.iter().zip(&self.contact_gaps) {
-            for row in rows.chunks_exact(m5) {
-                let d: f64 = row.iter().zip(x.iter()).map(|(r, x)| r * x).sum();
-                if !(d <= gap) {
-                    return false;
+        // each sub-step's relative displacement Σ_c r_c x_c, summed in the
+        // order of the inputs for all sub-steps at once (only compared)
+        let s = self.settings.substeps;
+        ws.dist.resize(s, 0.0);
+        for (cols, &gap) in map.contacts.iter().zip(&self.contact_gaps) {
+            let d = &mut ws.dist[..s];
+            d.fill(-0.0);
+            for (col, &xc) in cols.chunks_exact(s).zip(x.iter()) {
+                for (di, &r) in d.iter_mut().zip(col) {
+                    *di += r * xc;
                 }
+            }
+            if !d.iter().all(|&d| d <= gap) {
+                return false;
             }
         }
         let y = &mut ws.y3;
-        y.fill(0.0);
-        for (col, &xc) in map.full.chunks_exact(3 * n).zip(x.iter()) {
-            for (yi, &c) in y.iter_mut().zip(col) {
-                *yi += c * xc;
-            }
-        }
+        dense::mat_vec(&map.full, &x[..5 * n], &mut y[..3 * n]);
         ws.u.copy_from_slice(&y[..n]);
         ws.v.copy_from_slice(&y[n..2 * n]);
         ws.a.copy_from_slice(&y[2 * n..]);
@@ -1014,6 +1026,9 @@ struct Work {
     /// Scratch of a batched sample: its inputs (5n) and the new state (3n).
     x5: Vec<f64>,
     y3: Vec<f64>,
+    /// Scratch of a batched sample: a contact's relative displacement
+    /// after each of its sub-steps.
+    dist: Vec<f64>,
 }
 
 impl Work {
@@ -1050,6 +1065,7 @@ impl Work {
             iterated: false,
             x5: vec![0.0; 5 * n],
             y3: vec![0.0; 3 * n],
+            dist: Vec::new(),
         }
     }
 }

@@ -44,6 +44,50 @@ pub(super) fn mat_vec_axpy<const N: usize>(a: &[f64], n: usize, x: &[f64], s: f6
     }
 }
 
+/// `y = A x` (A column-major, `4Q` rows, `x.len()` columns): the sums of
+/// [`mat_vec_axpy`] with `s = 1` from `y = 0`, column after column, each
+/// row in the same order (the same bits), with the `4Q` sums held in `Q`
+/// arrays of four for the whole product instead of stored after each
+/// column.
+#[inline(always)]
+#[allow(clippy::needless_range_loop)]
+pub(super) fn mat_vec_quads<const Q: usize>(a: &[f64], x: &[f64], y: &mut [f64]) {
+    let m = 4 * Q;
+    let mut acc = [[0.0; 4]; Q];
+    for (col, &xj) in a.chunks_exact(m).zip(x) {
+        let sx = 1.0 * xj;
+        for q in 0..Q {
+            for l in 0..4 {
+                acc[q][l] += col[4 * q + l] * sx;
+            }
+        }
+    }
+    for (yq, aq) in y[..m].chunks_exact_mut(4).zip(&acc) {
+        yq.copy_from_slice(aq);
+    }
+}
+
+/// `y = A x` (A column-major with `y.len()` rows and `x.len()` columns,
+/// `y` overwritten): [`mat_vec_quads`] for 12 or 24 rows (the derivative
+/// and whole-sample maps of 4 and 8 DOFs), else [`mat_vec_axpy`]'s sums
+/// from zero; the same bits either way.
+#[inline(always)]
+pub(super) fn mat_vec(a: &[f64], x: &[f64], y: &mut [f64]) {
+    match y.len() {
+        12 => mat_vec_quads::<3>(a, x, y),
+        24 => mat_vec_quads::<6>(a, x, y),
+        m => {
+            y.fill(0.0);
+            for (col, &xj) in a.chunks_exact(m).zip(x) {
+                let sx = 1.0 * xj;
+                for (yi, &aij) in y.iter_mut().zip(col) {
+                    *yi += aij * sx;
+                }
+            }
+        }
+    }
+}
+
 /// `max(m, maxᵢ |xᵢ|)`, NaNs ignored (as `f64::max` does). `m ≥ 0` and the
 /// `|xᵢ|` are never −0, so the order of the comparisons cannot change the
 /// result: four independent lanes instead of one serial chain.
@@ -192,6 +236,29 @@ mod tests {
             for (p, q) in x.iter().zip(&lu) {
                 approx::assert_relative_eq!(p, q, max_relative = 1e-12);
             }
+        }
+    }
+
+    #[test]
+    fn quads_product_equals_the_axpy_bit_for_bit() {
+        for seed in 1..4 {
+            let (a, _) = spd(24, seed);
+            let x: Vec<f64> = a[..24].iter().map(|v| v * 3.7 - 1.0).collect();
+            let mut y = vec![0.0; 24];
+            mat_vec_axpy::<0>(&a, 24, &x, 1.0, &mut y);
+            let mut q = vec![f64::NAN; 24];
+            mat_vec_quads::<6>(&a, &x, &mut q);
+            assert_eq!(y, q);
+            // a tall map (rows 4Q, more columns)
+            let mut yt = vec![0.0; 12];
+            for (col, &xj) in a[..12 * 20].chunks_exact(12).zip(&x[..20]) {
+                for (yi, &c) in yt.iter_mut().zip(col) {
+                    *yi += c * xj;
+                }
+            }
+            let mut qt = vec![f64::NAN; 12];
+            mat_vec_quads::<3>(&a[..12 * 20], &x[..20], &mut qt);
+            assert_eq!(yt, qt);
         }
     }
 

@@ -52,7 +52,7 @@
 //! point, not as the explicit predictor. At a contact's switching point
 //! itself (`δ = gap` exactly) the open side is used.
 
-use super::dense::{chol_solve, cholesky_in_place, dim, mat_vec_axpy};
+use super::dense::{chol_solve, cholesky_in_place, dim, mat_vec, mat_vec_axpy};
 use super::{Integrator, OperatorCache, Outputs, SimStatus, Simulation, Work};
 use crate::error::{Result, TacitError};
 use crate::model::elements::{self, ElementParam};
@@ -667,7 +667,7 @@ impl Integrator {
                 sw.pending[j] += 1;
                 continue;
             }
-            if let Some(pw) = powers {
+            if let (Some(pw), true) = (powers, sw.pending[j] != 0) {
                 flush_seed(pw, n, j, sw);
             }
             gather(sw, j, n);
@@ -1007,8 +1007,7 @@ fn flush_seed_body(powers: &[f64], n: usize, j: usize, sw: &mut SensWork) {
     let pw = &powers[(c - 1) * m3 * m3..c * m3 * m3];
     gather(sw, j, n);
     let y = &mut sw.y3;
-    y.fill(0.0);
-    mat_vec_axpy::<0>(pw, m3, &sw.one, 1.0, y);
+    mat_vec(pw, &sw.one[..m3], &mut y[..m3]);
     sw.one.copy_from_slice(y);
     scatter(sw, j, n);
 }
@@ -1143,7 +1142,9 @@ impl Rows {
 fn flush_all(powers: Option<&[f64]>, n: usize, sw: &mut SensWork) {
     if let Some(pw) = powers {
         for j in 0..sw.s {
-            flush_seed(pw, n, j, sw);
+            if sw.pending[j] != 0 {
+                flush_seed(pw, n, j, sw);
+            }
         }
     }
 }
