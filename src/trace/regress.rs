@@ -1009,21 +1009,35 @@ fn evaluate(
             }
         }
     }
-    let damping = ctx.damping.filter(|_| cand.kind.dissipative());
-    if let Some((d, _)) = damping {
-        cols.extend(d.iter().cloned());
-    }
-    let fit = sel.fit_block(&cols, r)?;
+    let positive = |f: &Fit| !positive_only(cand.kind) || f.coef[0] > 0.0;
+    let alone = sel.fit_block(&cols, r).filter(positive);
+    // a dissipative candidate also beside the damping's columns, measured
+    // against them alone; the larger share is taken
+    let beside = ctx
+        .damping
+        .filter(|_| cand.kind.dissipative())
+        .and_then(|(d, base)| {
+            let mut all = cols.clone();
+            all.extend(d.iter().cloned());
+            let f = sel.fit_block(&all, r).filter(positive)?;
+            Some((all, f, base))
+        });
+    let share = |rss: f64, base: f64| if base > 0.0 { 1.0 - rss / base } else { 0.0 };
+    let (cols, fit, base) = match (alone, beside) {
+        (Some(a), Some((all, f, base))) if share(f.rss, base) > share(a.rss, sel.rss) => {
+            (all, f, Some(base))
+        }
+        (Some(a), _) => (cols, a, None),
+        (None, Some((all, f, base))) => (all, f, Some(base)),
+        (None, None) => return None,
+    };
     let th = fit.coef[0];
-    if positive_only(cand.kind) && !(th > 0.0) {
-        return None;
-    }
     let mut hidden = vec![0.0; if used.is_empty() { 0 } else { ctx.hidden.len() }];
     for (k, &j) in used.iter().enumerate() {
         hidden[j] = fit.coef[k + 1] / th;
     }
     Some(Eval {
-        base: damping.map(|d| d.1),
+        base,
         rss: fit.rss,
         th,
         var: fit.inv_diag[0],
