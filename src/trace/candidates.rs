@@ -412,7 +412,7 @@ fn modal_parts(m: &DMatrix<f64>, k: &DMatrix<f64>, ratios: &[f64]) -> Vec<DMatri
             break;
         };
         let v = mphi.column(r);
-        parts[i] += &v * v.transpose() * (2.0 * ratios[i] * modes.omega[r]);
+        parts[i] += v * v.transpose() * (2.0 * ratios[i] * modes.omega[r]);
     }
     parts
 }
