@@ -113,7 +113,7 @@ pub(super) fn choose(
     };
     let mut sims = 0;
     for best in pool {
-        let (model, _, all) = add_to(st, &best);
+        let (model, eff, all) = add_to(st, &best);
         let mut predicted = None;
         let mut start = None;
         // (a spring to ground on a free-free model is judged on states
@@ -137,7 +137,8 @@ pub(super) fn choose(
                 predicted = p.at;
                 start = p.start;
                 add_time(&mut st.timings, "fit", t);
-                if let Some(g) = g.filter(|&g| g < below.screen) {
+                let screen = with_damping_freed(&eff, below.screen, ctx.settings);
+                if let Some(g) = g.filter(|&g| g < screen) {
                     below.screened_out.push((best.label.clone(), g));
                     continue;
                 }
@@ -151,6 +152,25 @@ pub(super) fn choose(
         return (Some(chosen), below, sims);
     }
     (None, below, sims)
+}
+
+/// The screen of a candidate below the trace's: `screen`, or
+/// [`super::settings::ScreenSettings::companion_screen_far`] when it is
+/// lower for a dissipative law fitted with the model's damping freed
+/// beside it ([`AddedEffect::nuisance`]). The joint linearization is taken
+/// at zero strength, where a friction law's derivative is a viscous-like
+/// force that the freed damping takes up; what a finite level adds (the
+/// masses sticking) it does not see. On a record of a bumper 7→6 with
+/// 0.3 N of friction on every mass, after the contact on a damping the
+/// refinement had raised to take the friction (modal ratios +138 to
+/// +232 % against +100 %), the friction on every mass was predicted to
+/// remove 12.3 % of the fit cost and removed 48 % of the squared error
+/// fitted.
+fn with_damping_freed(eff: &AddedEffect, screen: f64, settings: &DiagnoseSettings) -> f64 {
+    match eff.candidate.kind.dissipative() && !eff.nuisance.is_empty() {
+        true => screen.min(settings.screen.companion_screen_far),
+        false => screen,
+    }
 }
 
 /// The companion screen at multiple-shooting error `err`

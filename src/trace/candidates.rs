@@ -370,3 +370,49 @@ pub fn library(model: &Model, has_damping: bool, vreg: f64) -> Vec<Candidate> {
     }
     out
 }
+
+/// The model's viscous damping matrix split into the parts its damping
+/// parameters scale, each at the parameter's value (so a part is the
+/// derivative of `C` along a relative change of that parameter): one per
+/// flexible mode with its own ratio, the whole `C` for one ratio of every
+/// mode, `α M` and `β K` for Rayleigh damping; parts that are zero are
+/// left out, and so is everything when the modes cannot be solved.
+pub fn damping_parts(model: &Model) -> Vec<DMatrix<f64>> {
+    use crate::model::Damping;
+    let (m, k) = (model.mass_matrix(), model.stiffness_matrix());
+    let parts = match &model.damping {
+        Damping::None => vec![],
+        Damping::Rayleigh { alpha, beta } => vec![&m * *alpha, &k * *beta],
+        Damping::Modal { ratio: Some(_), .. } => {
+            crate::model::damping_matrix(&model.damping, &m, &k)
+                .ok()
+                .into_iter()
+                .collect()
+        }
+        Damping::Modal {
+            ratio: None,
+            ratios,
+        } => modal_parts(&m, &k, ratios),
+    };
+    parts.into_iter().filter(|p| p.amax() > 0.0).collect()
+}
+
+/// [`damping_parts`] of per-mode ratios: the flexible modes beyond the
+/// last ratio take it (as [`crate::model::damping_matrix`] does).
+fn modal_parts(m: &DMatrix<f64>, k: &DMatrix<f64>, ratios: &[f64]) -> Vec<DMatrix<f64>> {
+    let Ok(modes) = crate::modal::solve(m, k) else {
+        return vec![];
+    };
+    let n = m.nrows();
+    let mphi = m * &modes.shapes;
+    let mut parts = vec![DMatrix::zeros(n, n); ratios.len()];
+    let flexible = (0..modes.omega.len()).filter(|&r| !modes.rigid[r]);
+    for (flex, r) in flexible.enumerate() {
+        let Some(i) = ratios.len().checked_sub(1).map(|last| flex.min(last)) else {
+            break;
+        };
+        let v = mphi.column(r);
+        parts[i] += v * v.transpose() * (2.0 * ratios[i] * modes.omega[r]);
+    }
+    parts
+}

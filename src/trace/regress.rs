@@ -1,7 +1,7 @@
 //! Segment-wise regression of the residual on candidate effects, and the
 //! greedy selection with the Bayesian information criterion.
 
-use super::candidates::{library, Candidate, EffectKind};
+use super::candidates::{damping_parts, library, Candidate, EffectKind};
 use crate::linear::SampledModel;
 use crate::model::Model;
 use nalgebra::{DMatrix, DVector};
@@ -538,6 +538,7 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
         }
     };
     let hidden = hidden_trajectories(sm, input.cy, ns);
+    let damping = damping_columns(input, &lib, &w, seg, &nodes, &hidden);
     let mut sel = Selection {
         q: vec![],
         blocks: vec![],
@@ -560,6 +561,7 @@ pub fn trace(input: &TraceInput<'_>, settings: &TraceSettings) -> TraceResult {
             settings,
             nodes: &nodes,
             hidden: &hidden,
+            damping: beside(&damping, &selected, &sel, &r),
         };
         // candidates are independent: in parallel, collected in library
         // order (the same ranking whatever the thread count)
@@ -791,21 +793,116 @@ struct Context<'a, 'b> {
     nodes: &'a [DMatrix<f64>],
     /// Hidden trajectories at the samples.
     hidden: &'a [DMatrix<f64>],
+    /// The damping's columns fitted beside a dissipative candidate, with
+    /// the residual energy they leave alone ([`beside`]).
+    damping: Option<(&'a [DVector<f64>], f64)>,
 }
 
 struct Scored {
     effect: RankedEffect,
 }
 
+/// The response columns of the model's damping parts
+/// ([`damping_parts`]: one per damping parameter, the force `C_i v̂` on
+/// the reconstructed states), computed once for the trace; empty when no
+/// candidate is dissipative or the model has no damping. A dissipative
+/// candidate (friction, a nonlinear damper) is fitted in the loop with the
+/// damping's parameters free beside it (`diagnose::effects::damping_targets`),
+/// and a damping calibrated without it has taken its equivalent viscous
+/// part: on that damping alone the law's share of the residual is the
+/// difference between the law and its linearization, small.
+fn damping_columns(
+    input: &TraceInput<'_>,
+    lib: &[Candidate],
+    w: &[f64],
+    seg: usize,
+    nodes: &[DMatrix<f64>],
+    hidden: &[DMatrix<f64>],
+) -> Vec<DVector<f64>> {
+    let sm = input.sampled;
+    if !lib.iter().any(|c| c.kind.dissipative())
+        || input.exclude.iter().any(|c| frees_damping(c.kind))
+    {
+        return vec![];
+    }
+    let settings = TraceSettings::default();
+    let ctx = Context {
+        input,
+        w,
+        seg,
+        settings: &settings,
+        nodes,
+        hidden,
+        damping: None,
+    };
+    damping_parts(input.model)
+        .iter()
+        .filter(|c| c.shape() == (sm.n, sm.n))
+        .map(|c| column_of_matrix(c, &ctx, input.states))
+        .collect()
+}
+
+/// An effect of this kind already frees the model's damping: no damping
+/// columns beside another.
+fn frees_damping(kind: EffectKind) -> bool {
+    kind.dissipative() || kind == EffectKind::Damping
+}
+
+/// The damping's columns and the residual energy they leave on top of the
+/// selection, for the candidates of this round; None when there are none,
+/// an effect selected frees the damping already, or they are rank
+/// deficient.
+fn beside<'a>(
+    damping: &'a [DVector<f64>],
+    selected: &[RankedEffect],
+    sel: &Selection,
+    r: &DVector<f64>,
+) -> Option<(&'a [DVector<f64>], f64)> {
+    if damping.is_empty() || selected.iter().any(|s| frees_damping(s.candidate.kind)) {
+        return None;
+    }
+    let fit = sel.fit_block(damping, r)?;
+    Some((damping, fit.rss))
+}
+
+/// Weighted stacked response column of the force `−C v̂` (`c` n × n), as
+/// [`column`] forms a force at every DOF.
+fn column_of_matrix(
+    c: &DMatrix<f64>,
+    ctx: &Context<'_, '_>,
+    states: &DMatrix<f64>,
+) -> DVector<f64> {
+    let sm = ctx.input.sampled;
+    let (n, ns) = (sm.n, ctx.input.measured.ncols());
+    let mut y = DMatrix::zeros(ctx.input.cy.nrows(), ns);
+    let mut k0 = 0;
+    while k0 < ns {
+        let k1 = (k0 + ctx.seg).min(ns);
+        let hires = crate::linear::hermite_upsample(
+            &states.columns(k0, k1 - k0).into_owned(),
+            sm.fs,
+            sm.substeps,
+        );
+        let f = -(c * hires.rows(n, n));
+        node_response(ctx, NodeForce::Full(&f), &mut y, k0, k1);
+        k0 = k1;
+    }
+    stack(&y, ctx.w)
+}
+
 /// One evaluation of a candidate.
 struct Eval {
+    /// Residual energy its share is measured against: the damping's
+    /// columns' alone when they are fitted beside it (None: the
+    /// selection's).
+    base: Option<f64>,
     /// Residual energy with it.
     rss: f64,
     /// Strength.
     th: f64,
     /// `(PᵀP)⁻¹` of the strength (its variance per unit noise variance).
     var: f64,
-    /// Strength column, then the hidden-state columns.
+    /// Strength column, then the hidden-state columns or the damping's.
     cols: Vec<DVector<f64>>,
     /// Orthonormal basis of the projected columns.
     qs: Vec<DVector<f64>>,
@@ -912,16 +1009,35 @@ fn evaluate(
             }
         }
     }
-    let fit = sel.fit_block(&cols, r)?;
+    let positive = |f: &Fit| !positive_only(cand.kind) || f.coef[0] > 0.0;
+    let alone = sel.fit_block(&cols, r).filter(positive);
+    // a dissipative candidate also beside the damping's columns, measured
+    // against them alone; the larger share is taken
+    let beside = ctx
+        .damping
+        .filter(|_| cand.kind.dissipative())
+        .and_then(|(d, base)| {
+            let mut all = cols.clone();
+            all.extend(d.iter().cloned());
+            let f = sel.fit_block(&all, r).filter(positive)?;
+            Some((all, f, base))
+        });
+    let share = |rss: f64, base: f64| if base > 0.0 { 1.0 - rss / base } else { 0.0 };
+    let (cols, fit, base) = match (alone, beside) {
+        (Some(a), Some((all, f, base))) if share(f.rss, base) > share(a.rss, sel.rss) => {
+            (all, f, Some(base))
+        }
+        (Some(a), _) => (cols, a, None),
+        (None, Some((all, f, base))) => (all, f, Some(base)),
+        (None, None) => return None,
+    };
     let th = fit.coef[0];
-    if positive_only(cand.kind) && !(th > 0.0) {
-        return None;
-    }
     let mut hidden = vec![0.0; if used.is_empty() { 0 } else { ctx.hidden.len() }];
     for (k, &j) in used.iter().enumerate() {
         hidden[j] = fit.coef[k + 1] / th;
     }
     Some(Eval {
+        base,
         rss: fit.rss,
         th,
         var: fit.inv_diag[0],
@@ -1039,13 +1155,17 @@ fn score(
         (cand.clone(), evaluate(cand, ctx, sel, r, sims, None)?, None)
     };
     let rss = ev.rss;
-    let gain = if sel.rss > 0.0 {
-        1.0 - rss / sel.rss
-    } else {
-        0.0
-    };
+    // a dissipative candidate is measured against the damping's columns
+    // alone: its share is what the damping cannot take
+    let base = ev.base.unwrap_or(sel.rss);
+    let gain = if base > 0.0 { 1.0 - rss / base } else { 0.0 };
     let npar = cand.nparams() + ev.cols.len() - 1;
-    let bic = sel.nobs * (rss.max(1e-300) / sel.rss.max(1e-300)).ln() + npar as f64 * sel.nobs.ln();
+    let counted = npar
+        - ctx
+            .damping
+            .filter(|_| ev.base.is_some())
+            .map_or(0, |d| d.0.len());
+    let bic = sel.nobs * (rss.max(1e-300) / base.max(1e-300)).ln() + counted as f64 * sel.nobs.ln();
     let dof = (sel.nobs - (sel.npar + npar) as f64).max(1.0);
     let se_th = (rss.max(0.0) / dof * ev.var).max(0.0).sqrt();
     let mut parameters = vec![];
