@@ -52,7 +52,8 @@ pub struct GroundSpring {
 /// damping free, every other spring held) leaves the lowest output error
 /// on `data`, when that error is at most [`MAX_RATIO`] of the error left
 /// by the damping alone; None otherwise, on a model that has a spring to
-/// ground already, or one without springs.
+/// ground already, or one without springs (a DOF whose calibration fails
+/// is left out).
 pub fn ground_spring(
     linear: &Model,
     data: &[Data],
@@ -92,15 +93,18 @@ pub fn ground_spring(
                         stiffness: k0,
                         name: Some(format!("ground{dof}")),
                     });
-                    calibrate(&m, data, &held).map(|c| (dof, c))
+                    calibrate(&m, data, &held).map(|c| (dof, c)).ok()
                 })
                 .collect::<Vec<_>>()
         },
     );
-    let without = without?;
+    // a calibration that fails (a trial spring so stiff or so soft that
+    // the model's response is not finite) leaves that DOF out
+    let Ok(without) = without else {
+        return Ok(None);
+    };
     let mut best: Option<GroundSpring> = None;
-    for t in tried {
-        let (dof, c) = t?;
+    for (dof, c) in tried.into_iter().flatten() {
         if !usable(&c.status) || best.as_ref().is_some_and(|b| b.error <= c.error_after) {
             continue;
         }
