@@ -25,6 +25,7 @@
 //! `max_relative_std` (a parameter the sensors cannot see, or can see only
 //! in combination with others, has a large one).
 
+pub mod grounding;
 pub mod params;
 pub mod varpro;
 

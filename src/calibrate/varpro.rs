@@ -96,6 +96,12 @@ fn observability_basis(
         o.rows_mut(k * p, p).copy_from(&block);
         block = &block * a;
     }
+    // (an SVD of a matrix with a non-finite entry does not end)
+    if o.iter().any(|v| !v.is_finite()) {
+        return Err(TacitError::Numerical(
+            "calibration: the observability matrix is not finite".into(),
+        ));
+    }
     let svd = o.svd(true, false);
     let u = svd.u.ok_or_else(|| {
         TacitError::Numerical("calibration: SVD of the observability matrix failed".into())

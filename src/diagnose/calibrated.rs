@@ -67,6 +67,7 @@ use crate::error::Result;
 use crate::integrate::SimSettings;
 use crate::model::Model;
 use crate::record::Record;
+use crate::trace::{Candidate, EffectKind, RankedEffect};
 use crate::update::{Parameter, Target};
 use serde::Serialize;
 use std::borrow::Cow;
@@ -307,6 +308,14 @@ pub fn diagnose_calibrated(
     {
         from_calibrated = ctx.damping_alternative(from_calibrated)?;
     }
+    // a free-free declared model left above the noise: a spring to ground
+    // it lacks gives the rigid-body mode a frequency that the calibration
+    // of springs and damping cannot
+    let on: Vec<&Record> = match linear_records.is_empty() {
+        true => vec![rec],
+        false => linear_records.iter().collect(),
+    };
+    from_calibrated = ctx.ground_spring_alternative(from_calibrated, &on)?;
     let Some(trusted) = trusted else {
         // linear values marked free, or the declared ones off on the
         // low-level records: the calibrated diagnosis is the only one
@@ -531,6 +540,87 @@ impl Context<'_> {
         )
     }
 
+    /// A spring to ground added to `current`'s model when the declared
+    /// model is free-free (no spring to ground, springs of a lumped model,
+    /// not marked free) and `current` is left above the noise with no
+    /// spring or law against ground: the linear part `current` reached is
+    /// calibrated on `on` with a spring to ground at each DOF
+    /// ([`calibrate::grounding::ground_spring`]); the best one, with the
+    /// damping calibrated beside it, is added as an effect and every
+    /// parameter refined with the effects found ([`Self::refined`]); kept
+    /// when it removes more than the screen's `companion_improvement` of
+    /// the squared error above the squared noise level, as an effect
+    /// fitted below the screen is ([`super::decide`]). The calibration of
+    /// springs and damping cannot give the rigid-body mode the frequency
+    /// the spring gives it, and the location along the linear part it
+    /// leaves can miss the spring's DOF (a contact 2→3 with a spring of
+    /// 1500 N/m at 8: the force located at pair 2–3 only, the springs
+    /// beside 5–6 taking part of it in the refinement).
+    fn ground_spring_alternative(
+        &self,
+        current: RefinedPath,
+        on: &[&Record],
+    ) -> Result<RefinedPath> {
+        use super::prepare::grounded;
+        let d0 = &current.d;
+        let applies = !grounded(self.declared)
+            && self.declared.free.is_none()
+            && !self.declared.calibrated_by_scales()
+            && !grounded(&d0.model)
+            && super::ground::ground_laws(&d0.model).is_empty()
+            && !self.at_noise(d0);
+        if !applies {
+            return Ok(current);
+        }
+        (self.progress)("calibrate a spring to ground at each DOF");
+        let data = on
+            .iter()
+            .map(|r| calibrate::data_of(r, self.declared.ndof(), self.sensors, 0))
+            .collect::<Result<Vec<_>>>()?;
+        let linear = d0.model.linear_part();
+        let cs = &self.cal.calibration;
+        let Some(g) = calibrate::grounding::ground_spring(&linear, &data, cs)? else {
+            return Ok(current);
+        };
+        let mut t = with_ground_spring(d0, &g);
+        (self.progress)(&format!(
+            "refine with {}",
+            t.added.last().map_or("", |a| &a.label)
+        ));
+        let (after, pred) = t.prepared.comparison.errors(&t.model, sim_of(&t));
+        (t.after, t.predictions.1) = (after, pred);
+        let mut next = self.refined(t, &linear)?;
+        let (a, b) = (d0.after.relative_error, next.d.after.relative_error);
+        let noise = d0.noise_level(self.settings);
+        let need = self.settings.screen.companion_improvement;
+        let named = next
+            .d
+            .added
+            .iter()
+            .any(|e| e.candidate.kind == EffectKind::GroundSpring);
+        let pays = named
+            && matches!((a, b), (Some(a), Some(b)) if super::decide::removes(a, b, need, noise * noise));
+        let compared = format!(
+            "a spring to ground at {} calibrated ({:.4e} N/m; output error {} against {} without it) and refined with the effects: multiple-shooting error on the record {} against {}",
+            g.dof,
+            g.stiffness,
+            pct(Some(g.error)),
+            pct(Some(g.without)),
+            pct(b),
+            pct(a)
+        );
+        if !pays {
+            return Ok(RefinedPath {
+                note: format!("{}; {compared}: not kept", current.note),
+                ..current
+            });
+        }
+        next.note = format!("{}; {}; {compared}: kept", current.note, next.note);
+        next.start_errors = current.start_errors;
+        next.start_validation_errors = current.start_validation_errors;
+        Ok(next)
+    }
+
     /// Whether `d` explains the record up to the noise: its
     /// multiple-shooting error at most [`AT_NOISE`] times the noise level it
     /// ran at ([`Diagnosis::noise_level`]).
@@ -740,6 +830,47 @@ fn choice(errs: &[Option<f64>; 3], chosen: &str) -> String {
         pct(errs[1]),
         errs[2].map_or("not run (the calibrated one is at the noise)".into(), |e| pct(Some(e)))
     )
+}
+
+/// `d` with the spring to ground `g` added as an effect (at its
+/// calibrated stiffness, the model's damping from `g`'s calibration, whose
+/// lowest flexible mode is the former rigid-body mode).
+fn with_ground_spring(d: &Diagnosis, g: &calibrate::grounding::GroundSpring) -> Diagnosis {
+    let mut t = d.clone();
+    t.model.damping = g.model.damping.clone();
+    let candidate = Candidate::new(EffectKind::GroundSpring, vec![g.dof - 1]);
+    let ranked = RankedEffect {
+        label: candidate.label(),
+        candidate,
+        parameters: vec![("stiffness".into(), g.stiffness)],
+        std_errors: vec![],
+        residual_explained: 0.0,
+        force_explained: None,
+        bic_change: 0.0,
+        hidden: vec![],
+    };
+    let added = effects::add(&mut t.model, &ranked);
+    let values = effects::values(&t.model, &added);
+    t.effects.push(super::EffectReport {
+        kind: EffectKind::GroundSpring,
+        dofs: vec![g.dof],
+        label: added.label.clone(),
+        parameters: values.iter().cloned().collect(),
+        std_errors: Default::default(),
+        group_estimates: Default::default(),
+        traced: values.into_iter().collect(),
+        undetermined: vec![],
+        unobservable: vec![],
+        score: super::Score {
+            residual_explained: 0.0,
+            bic_change: 0.0,
+            force_explained: None,
+            error_before: d.after.relative_error,
+            error_after: None,
+        },
+    });
+    t.added.push(added);
+    t
 }
 
 /// One joint refinement of `d`'s model; the note and, when kept, the

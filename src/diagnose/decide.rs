@@ -105,7 +105,7 @@ pub(super) fn judge(
 /// Whether going from error `a` to error `b` removes more than `need` of
 /// the squared error above the squared noise level `noise2` (0: of the
 /// whole squared error).
-fn removes(a: f64, b: f64, need: f64, noise2: f64) -> bool {
+pub(super) fn removes(a: f64, b: f64, need: f64, noise2: f64) -> bool {
     a * a - b * b > need * (a * a - noise2)
 }
 
