@@ -8,10 +8,10 @@
 
 mod diagnose_common;
 
-use diagnose_common::{imperfect, lanl, record};
+use diagnose_common::{assert_validation_at_noise, imperfect, imperfect_with, lanl, record};
 use tacit::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
 use tacit::diagnose::{diagnose, DiagnoseSettings};
-use tacit::model::{Contact, Damping, Friction};
+use tacit::model::{Contact, Damping, Friction, Spring};
 
 /// The declared damping is half the true one, so the diagnosis with the
 /// declared linear part leaves about 26 % on the record, and the
@@ -56,9 +56,7 @@ fn the_bumper_seen_from_three_sensors_without_a_linear_record() {
     for (name, want) in [("gap", 0.381e-3), ("stiffness", 2e6)] {
         assert!((p[name] / want - 1.0).abs() <= 0.1, "{name}: {p:?}");
     }
-    let noise = d.noise.as_ref().expect("noise measured").level;
-    let v = d.validation.as_ref().unwrap().after.relative_error.unwrap();
-    assert!(v <= 1.5 * noise, "validation {v} against noise {noise}");
+    assert_validation_at_noise(&d);
 }
 
 /// The friction on every mass behind a damping that took it: the linear
@@ -114,9 +112,7 @@ fn friction_on_every_mass_behind_a_damping_that_took_it() {
     );
     let level = d.effects[1].parameters["level"];
     assert!((level / 0.3 - 1.0).abs() <= 0.1, "friction level {level}");
-    let noise = d.noise.as_ref().expect("noise measured").level;
-    let v = d.validation.as_ref().unwrap().after.relative_error.unwrap();
-    assert!(v <= 1.5 * noise, "validation {v} against noise {noise}");
+    assert_validation_at_noise(&d);
 }
 
 /// A contact 2→3 beside a spring of 1500 N/m from mass 8 to ground, on a
@@ -131,20 +127,8 @@ fn friction_on_every_mass_behind_a_damping_that_took_it() {
 /// validation error within 1.5 × the measured noise.
 #[test]
 fn a_contact_beside_a_spring_to_ground_without_a_linear_record() {
-    use rand::Rng;
-    use tacit::integrate::SimSettings;
-    use tacit::model::{Damping, Spring};
-    use tacit::simulate::{simulate_record, RecordSpec};
     // the matrix's structure of row 6 on seed 93557
-    let mut truth = lanl();
-    let mut g = tacit::signal::rng(93557 + 6);
-    for s in &mut truth.springs {
-        s.stiffness *= 1.0 + 0.04 * (2.0 * g.random::<f64>() - 1.0);
-    }
-    truth.damping = Damping::Modal {
-        ratio: Some(0.03),
-        ratios: vec![],
-    };
+    let mut truth = imperfect_with(93557 + 6, 0.04, 0.03);
     truth.contacts = vec![Contact {
         dofs: vec![2, 3],
         gap: 0.35e-3,
@@ -155,21 +139,11 @@ fn a_contact_beside_a_spring_to_ground_without_a_linear_record() {
         stiffness: 1500.0,
         name: None,
     });
-    let rec_of = |seed: u64| {
-        let spec = RecordSpec {
-            samples: 4096,
-            sensors: (1..=8).collect(),
-            noise: 0.01,
-            seed,
-            settings: SimSettings {
-                substeps: 40,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
-        simulate_record(&truth, &spec).unwrap().0
-    };
-    let (rec, val) = (rec_of(935571), rec_of(935572));
+    let all: Vec<usize> = (1..=8).collect();
+    let (rec, val) = (
+        record(&truth, &all, 4096, 935571),
+        record(&truth, &all, 4096, 935572),
+    );
     let d = diagnose_calibrated(
         &lanl(),
         &rec,
@@ -194,7 +168,5 @@ fn a_contact_beside_a_spring_to_ground_without_a_linear_record() {
         let p = &d.effects[i].parameters;
         assert!((p[name] / want - 1.0).abs() <= 0.1, "{name}: {p:?}");
     }
-    let noise = d.noise.as_ref().expect("noise measured").level;
-    let v = d.validation.as_ref().unwrap().after.relative_error.unwrap();
-    assert!(v <= 1.5 * noise, "validation {v} against noise {noise}");
+    assert_validation_at_noise(&d);
 }

@@ -11,7 +11,7 @@
 //! ([`crate::diagnose::calibrated`] then refines it with the effects found
 //! and keeps it when it pays).
 
-use super::{calibrate, CalibrationSettings, CalibrationStatus, Data, Freedom};
+use super::{calibrate, CalibrationSettings, Data, Freedom};
 use crate::error::Result;
 use crate::model::{Model, Spring};
 use rayon::prelude::*;
@@ -75,12 +75,6 @@ pub fn ground_spring(
     let mut k: Vec<f64> = linear.springs.iter().map(|s| s.stiffness).collect();
     k.sort_by(f64::total_cmp);
     let k0 = START_FRACTION * k[k.len() / 2];
-    let usable = |s: &CalibrationStatus| {
-        matches!(
-            s,
-            CalibrationStatus::Converged | CalibrationStatus::EvaluationLimit
-        )
-    };
     let (without, tried) = rayon::join(
         || calibrate(linear, data, &held),
         || {
@@ -105,7 +99,7 @@ pub fn ground_spring(
     };
     let mut best: Option<GroundSpring> = None;
     for (dof, c) in tried.into_iter().flatten() {
-        if !usable(&c.status) || best.as_ref().is_some_and(|b| b.error <= c.error_after) {
+        if !c.status.usable() || best.as_ref().is_some_and(|b| b.error <= c.error_after) {
             continue;
         }
         let stiffness = c.model.springs.last().map_or(0.0, |s| s.stiffness);

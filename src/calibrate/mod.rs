@@ -186,6 +186,14 @@ pub enum CalibrationStatus {
     },
 }
 
+impl CalibrationStatus {
+    /// Whether the calibrated model can be used: converged, or the best
+    /// parameters found when the evaluation budget ran out.
+    pub fn usable(&self) -> bool {
+        matches!(self, Self::Converged | Self::EvaluationLimit)
+    }
+}
+
 /// One corrected number of the linear part.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Correction {

@@ -522,10 +522,7 @@ impl Context<'_> {
         };
         let data = calibrate::data_of(self.rec, self.declared.ndof(), self.sensors, 0)?;
         let c = calibrate::calibrate(self.declared, &[data], &cs)?;
-        if !matches!(
-            c.status,
-            calibrate::CalibrationStatus::Converged | calibrate::CalibrationStatus::EvaluationLimit
-        ) {
+        if !c.status.usable() {
             return Ok(current);
         }
         self.better_of(

@@ -320,11 +320,10 @@ fn band_powers(x: &[f64], bands: usize) -> Vec<f64> {
 /// The lower quartile of the finite values of `x` (linear interpolation
 /// between order statistics at position `(n − 1) / 4`); NaN when none.
 fn lower_quartile(x: &[f64]) -> f64 {
-    let mut v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    let v = sorted_finite(x);
     if v.is_empty() {
         return f64::NAN;
     }
-    v.sort_by(f64::total_cmp);
     let q = 0.25 * (v.len() - 1) as f64;
     let (i, t) = (q.floor() as usize, q.fract());
     v[i] * (1.0 - t) + v[(i + 1).min(v.len() - 1)] * t
@@ -397,12 +396,18 @@ fn normal_quantile(p: f64) -> f64 {
     }
 }
 
-fn median(x: &[f64]) -> f64 {
+/// The finite values of `x`, sorted.
+fn sorted_finite(x: &[f64]) -> Vec<f64> {
     let mut v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    v
+}
+
+fn median(x: &[f64]) -> f64 {
+    let v = sorted_finite(x);
     if v.is_empty() {
         return f64::NAN;
     }
-    v.sort_by(f64::total_cmp);
     let m = v.len() / 2;
     if v.len() % 2 == 1 {
         v[m]

@@ -872,9 +872,23 @@ fn column_of_matrix(
     ctx: &Context<'_, '_>,
     states: &DMatrix<f64>,
 ) -> DVector<f64> {
+    let n = ctx.input.sampled.n;
+    let mut y = DMatrix::zeros(ctx.input.cy.nrows(), ctx.input.measured.ncols());
+    full_force_response(ctx, states, &mut y, |hires| -(c * hires.rows(n, n)));
+    stack(&y, ctx.w)
+}
+
+/// The response `y` to a force at every DOF, `force` of the node states
+/// (2n × nodes), formed one segment at a time on the cubic Hermite
+/// interpolation of `states` (no record-long matrix at the node rate).
+fn full_force_response(
+    ctx: &Context<'_, '_>,
+    states: &DMatrix<f64>,
+    y: &mut DMatrix<f64>,
+    force: impl Fn(&DMatrix<f64>) -> DMatrix<f64>,
+) {
     let sm = ctx.input.sampled;
-    let (n, ns) = (sm.n, ctx.input.measured.ncols());
-    let mut y = DMatrix::zeros(ctx.input.cy.nrows(), ns);
+    let ns = ctx.input.measured.ncols();
     let mut k0 = 0;
     while k0 < ns {
         let k1 = (k0 + ctx.seg).min(ns);
@@ -883,11 +897,9 @@ fn column_of_matrix(
             sm.fs,
             sm.substeps,
         );
-        let f = -(c * hires.rows(n, n));
-        node_response(ctx, NodeForce::Full(&f), &mut y, k0, k1);
+        node_response(ctx, NodeForce::Full(&force(&hires)), y, k0, k1);
         k0 = k1;
     }
-    stack(&y, ctx.w)
 }
 
 /// One evaluation of a candidate.
@@ -943,20 +955,7 @@ fn column(
             };
             node_response(ctx, NodeForce::Along(&dir, &phi), &mut y, 0, ns);
         }
-        None => {
-            let mut k0 = 0;
-            while k0 < ns {
-                let k1 = (k0 + ctx.seg).min(ns);
-                let hires = crate::linear::hermite_upsample(
-                    &states.columns(k0, k1 - k0).into_owned(),
-                    sm.fs,
-                    sm.substeps,
-                );
-                let f = -cand.force(&hires, &sm.c);
-                node_response(ctx, NodeForce::Full(&f), &mut y, k0, k1);
-                k0 = k1;
-            }
-        }
+        None => full_force_response(ctx, states, &mut y, |hires| -cand.force(hires, &sm.c)),
     }
     stack(&y, ctx.w)
 }

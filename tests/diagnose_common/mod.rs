@@ -21,16 +21,30 @@ pub fn lanl() -> Model {
 /// lanl8dof as a test sees it: springs within ±3 % of nominal (seeded
 /// with `seed`) and 2 % modal damping.
 pub fn imperfect(seed: u64) -> Model {
+    imperfect_with(seed, 0.03, 0.02)
+}
+
+/// lanl8dof with springs within ±`spread` of nominal (seeded with `seed`)
+/// and modal damping `ratio` on every mode.
+pub fn imperfect_with(seed: u64, spread: f64, ratio: f64) -> Model {
     let mut m = lanl();
     let mut g = tacit::signal::rng(seed);
     for s in &mut m.springs {
-        s.stiffness *= 1.0 + 0.03 * (2.0 * g.random::<f64>() - 1.0);
+        s.stiffness *= 1.0 + spread * (2.0 * g.random::<f64>() - 1.0);
     }
     m.damping = Damping::Modal {
-        ratio: Some(0.02),
+        ratio: Some(ratio),
         ratios: vec![],
     };
     m
+}
+
+/// The validation error after the diagnosis is at most 1.5 × the noise
+/// measured on the record.
+pub fn assert_validation_at_noise(d: &Diagnosis) {
+    let noise = d.noise.as_ref().expect("noise measured").level;
+    let v = d.validation.as_ref().unwrap().after.relative_error.unwrap();
+    assert!(v <= 1.5 * noise, "validation {v} against noise {noise}");
 }
 
 /// A record of `truth` as these tests simulate it: `samples` samples,
