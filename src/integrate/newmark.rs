@@ -31,6 +31,18 @@ pub use sensitivity::{ElementSeed, ParamSeed, Seeds, Sensitivities, Tape};
 use serde::Serialize;
 pub use stability::{Divergence, MAX_SUBSTEPS};
 
+/// Newton tolerance relative to the step's physical forces (external and
+/// inertial, the elements'), where it is tighter than the settings'
+/// `newton_tol` relative to `max(‖J0 u‖∞, ‖b‖∞)` (see
+/// `Integrator::residual`): an acceleration error below 1e-6 of the
+/// forces.
+const FORCE_TOLERANCE: f64 = 1e-6;
+
+/// Share of `max(‖J0 u‖∞, ‖b‖∞)` below which the Newton residual is
+/// accepted whatever the tolerance (see `Integrator::residual`): the
+/// residual's rounding is a few `n ε` of it.
+const ROUNDING_FLOOR: f64 = 1e-13;
+
 /// Integrator settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SimSettings {
@@ -158,6 +170,9 @@ pub struct Integrator {
     j0_chol: Option<Vec<f64>>,
     /// M's diagonal when M is diagonal (lumped masses): `M z` in n products.
     m_diag: Option<Vec<f64>>,
+    /// `‖M‖∞` (largest absolute row sum): `‖M a‖∞ ≤ ‖M‖∞ ‖a‖∞` bounds the
+    /// inertial force of the Newton tolerance's scale in n operations.
+    m_norm: f64,
     /// Powers of the sub-step map of a derivative when no element is
     /// active (taken on first use by the sensitivities from the cache of
     /// integrators with the same linear part; see
@@ -291,6 +306,9 @@ impl Integrator {
             .enumerate()
             .all(|(i, &x)| i % n == i / n || x == 0.0);
         let m_diag = is_diag.then(|| m.diagonal().as_slice().to_vec());
+        let m_norm = (0..n)
+            .map(|i| m.row(i).iter().map(|x| x.abs()).sum::<f64>())
+            .fold(0.0, f64::max);
         let contacts = (0..elements.len())
             .filter(|&e| matches!(elements[e], Element::Contact { .. }))
             .collect();
@@ -307,6 +325,7 @@ impl Integrator {
             contact_gaps,
             n,
             m_diag,
+            m_norm,
             m,
             c,
             k,
@@ -740,6 +759,7 @@ impl Integrator {
         for ((bi, fp), fnx) in b.iter_mut().zip(&ws.f_prev).zip(&ws.f_next) {
             *bi = fp * (1.0 - frac) + fnx * frac;
         }
+        ws.force_scale = max_abs::<N>(0.0, b, n).max(self.m_norm * max_abs::<N>(0.0, a, n));
         // affine parts: a = a0 u + z, v = a1 u + w
         for i in 0..n {
             z[i] = -a0 * u[i] - a2 * v[i] - a3 * a[i];
@@ -780,10 +800,11 @@ impl Integrator {
         let (r, b, un) = (&mut ws.r[..n], &ws.b[..n], &ws.un[..n]);
         r.fill(0.0);
         mat_vec_axpy::<N>(self.j0.as_slice(), n, un, 1.0, r);
-        let mut scale = max_abs::<N>(max_abs::<N>(0.0, r, n), b, n);
+        let inertial = max_abs::<N>(max_abs::<N>(0.0, r, n), b, n);
         for i in 0..n {
             r[i] -= b[i];
         }
+        let mut elements = 0.0;
         if !self.elements.is_empty() {
             let (vn, fnl) = (&mut ws.vn[..n], &mut ws.fnl[..n]);
             for i in 0..n {
@@ -795,13 +816,31 @@ impl Integrator {
                 *s = e.force_and_slope_at(un, vn, z, fnl);
             }
             // c1 > 0: max |c1 f| = c1 max |f| (rounding is monotone)
-            scale = scale.max(c1 * max_abs::<N>(0.0, fnl, n));
+            elements = c1 * max_abs::<N>(0.0, fnl, n);
             for i in 0..n {
                 r[i] += c1 * fnl[i];
             }
         }
         let norm = max_abs::<N>(0.0, r, n);
-        (norm, scale)
+        let physical = ws.force_scale.max(elements);
+        (norm, self.tolerance_scale(inertial.max(elements), physical))
+    }
+
+    /// The scale of the Newton tolerance: `max(‖J0 u‖∞, ‖b‖∞, ‖c1 f‖∞)`
+    /// (`inertial`, the elements' forces included), or where tighter the
+    /// step's physical forces (`physical`: external, inertial, the
+    /// elements') at [`FORCE_TOLERANCE`]. `J0 u` and `b` hold
+    /// `M u / (β h²)`, which grows with the displacement (a rigid-body
+    /// drift) and as 1/h²: a tolerance on them alone left an acceleration
+    /// error of `tol ‖u‖ / (β h²)` at fine sub-steps. Their rounding
+    /// remains a floor ([`ROUNDING_FLOOR`]).
+    #[inline(always)]
+    fn tolerance_scale(&self, inertial: f64, physical: f64) -> f64 {
+        let tol = self.settings.newton_tol;
+        let physical = (FORCE_TOLERANCE / tol) * physical;
+        inertial
+            .min(physical)
+            .max((ROUNDING_FLOOR / tol) * inertial)
     }
 
     /// Newton iterations on ws.un; Ok(iterations) or Err((iterations, residual)).
@@ -1010,6 +1049,8 @@ struct Work {
     f_next: Vec<f64>,
     fnl: Vec<f64>,
     rhs: Vec<f64>,
+    /// The sub-step's physical force scale: `max(‖f_t‖∞, ‖M‖∞ ‖a_n‖∞)`.
+    force_scale: f64,
     /// Factor of the last Newton matrix (valid when `jac_factored`) and
     /// the slopes it was built from.
     jac: Vec<f64>,
@@ -1056,6 +1097,7 @@ impl Work {
             f_next: z(),
             fnl: z(),
             rhs: z(),
+            force_scale: 0.0,
             jac: vec![0.0; n * n],
             jac_factored: false,
             jac_slopes: vec![0.0; n_elements],
