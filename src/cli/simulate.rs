@@ -82,10 +82,14 @@ pub struct Args {
     /// Seed of the input and the noise.
     #[arg(long, default_value_t = 7)]
     seed: u64,
-    /// Integration sub-steps per sample, 1 to 1000 (a stiff contact needs
-    /// more: 40 resolve the shipped bumper at 512 Hz).
-    #[arg(long, default_value_t = 10, value_name = "N")]
-    substeps: usize,
+    /// Integration sub-steps per sample, 1 to 1000. Default: enough for the
+    /// record to stand for the continuous structure (ω h ≤ 0.02 for the
+    /// stiffest spring, contact or clearance, and for a cubic or quadratic
+    /// spring's tangent at the largest stroke of a first run; at least
+    /// 100, at most 1000): 4.8 % of integration error at 10 sub-steps on
+    /// data/lanl8dof.toml, 0.3 % at 40.
+    #[arg(long, value_name = "N")]
+    substeps: Option<usize>,
     /// HHT-α in [-1/3, 0] (0 = Newmark average acceleration).
     #[arg(
         long,
@@ -102,7 +106,9 @@ pub struct Args {
 
 /// Check every numeric option (before the model is read).
 fn validate(a: &Args) -> anyhow::Result<()> {
-    check::substeps(a.substeps)?;
+    if let Some(n) = a.substeps {
+        check::substeps(n)?;
+    }
     check::in_range("--hht-alpha", a.hht_alpha, -1.0 / 3.0, 0.0, "HHT-α")?;
     check::in_range(
         "--noise",
@@ -211,19 +217,32 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         noise: a.noise,
         seed: a.seed,
         settings: SimSettings {
-            substeps: a.substeps,
+            substeps: a
+                .substeps
+                .unwrap_or_else(|| auto_substeps(&model, fs, None)),
             hht_alpha: a.hht_alpha,
             ..Default::default()
         },
         u0: vec![],
         v0: vec![],
     };
-    check::memory(
-        check::integration_bytes(n, model.contacts.len(), a.substeps, samples),
-        &format!("{samples} samples of {n} DOFs at {} sub-steps", a.substeps),
-    )?;
+    let memory = |substeps: usize| {
+        check::memory(
+            check::integration_bytes(n, model.contacts.len(), substeps, samples),
+            &format!("{samples} samples of {n} DOFs at {substeps} sub-steps"),
+        )
+    };
+    memory(spec.settings.substeps)?;
     let t = std::time::Instant::now();
-    let (mut rec, sim) = simulate_record(&model, &spec)?;
+    let (mut rec, mut sim) = simulate_record(&model, &spec)?;
+    // a cubic or quadratic spring's tangent is known after a first run
+    let strokes = (a.substeps.is_none()).then(|| auto_substeps(&model, fs, Some(&sim.u)));
+    if let Some(more) = strokes.filter(|&m| m > spec.settings.substeps) {
+        let mut spec = spec;
+        spec.settings.substeps = more;
+        memory(more)?;
+        (rec, sim) = simulate_record(&model, &spec)?;
+    }
     if labelled.is_some() {
         for c in rec.inputs.iter_mut().chain(rec.outputs.iter_mut()) {
             c.point = Some(model.dof_name(c.dof));
@@ -379,3 +398,20 @@ fn load_model(a: &Args) -> anyhow::Result<(Model, Labelled)> {
     }
     Ok((model, Some((sensors, input_dof))))
 }
+
+/// Sub-steps at which a record stands for the continuous structure: ω h
+/// ≤ [`AUTO_OMEGA_H`] for `model`'s stiffest element (a cubic or quadratic
+/// spring's tangent at the largest stroke of the displacements `u`, DOF ×
+/// sample, when given), at least [`AUTO_MIN`], at most
+/// [`tacit::integrate::newmark::MAX_SUBSTEPS`].
+fn auto_substeps(model: &Model, fs: f64, u: Option<&nalgebra::DMatrix<f64>>) -> usize {
+    let max = tacit::integrate::newmark::MAX_SUBSTEPS;
+    tacit::diagnose::auto_substeps(model, fs, AUTO_MIN, AUTO_OMEGA_H, max, u)
+}
+
+/// Target ω h of [`auto_substeps`]: a period error `(ω h)²/12` of 3e-5.
+const AUTO_OMEGA_H: f64 = 0.02;
+
+/// Fewest sub-steps of [`auto_substeps`]: 0.05 % of integration error on
+/// data/lanl8dof.toml (docs/diagnose.md, *Integration error and noise*).
+const AUTO_MIN: usize = 100;

@@ -472,6 +472,9 @@ pub(super) fn both(
         timings.insert("noise".into(), t.elapsed().as_secs_f64());
         noise = Some(n);
     }
+    // the integration error kept below the record's noise
+    let level = noise.as_ref().map_or(eff.noise.level, |n| n.level);
+    eff.substeps = eff.substeps.at_noise(level.clamp(MIN_LEVEL, MAX_LEVEL));
     let (prep, vprep) = rayon::join(
         || prepare_from(declared, st, &eff, found.clone(), Instant::now()),
         || {
