@@ -112,6 +112,42 @@ pub fn input_history(spec: &RecordSpec) -> Result<Vec<f64>> {
     }
 }
 
+/// Sub-steps at which a record of `model` at `fs` Hz stands for the
+/// continuous structure: ω h ≤ [`CONTINUOUS_OMEGA_H`] for the stiffest
+/// spring, contact or clearance (`k Σ 1/m`) and, given the displacements
+/// `u` (DOF × sample) of a first run, for a cubic or quadratic spring's
+/// tangent at its largest stroke; at least [`CONTINUOUS_MIN`], at most
+/// [`crate::integrate::newmark::MAX_SUBSTEPS`].
+pub fn continuous_substeps(model: &Model, fs: f64, u: Option<&DMatrix<f64>>) -> usize {
+    let max = crate::integrate::newmark::MAX_SUBSTEPS;
+    crate::diagnose::auto_substeps(model, fs, CONTINUOUS_MIN, CONTINUOUS_OMEGA_H, max, u)
+}
+
+/// Target ω h of [`continuous_substeps`]: a period error `(ω h)²/12` of
+/// 3e-5.
+pub const CONTINUOUS_OMEGA_H: f64 = 0.02;
+
+/// Fewest sub-steps of [`continuous_substeps`]: 0.05 % of integration
+/// error on the LANL testbed's linear model at 512 Hz, against 4.8 % at
+/// 10 (docs/diagnose.md, *Integration error and noise*).
+pub const CONTINUOUS_MIN: usize = 100;
+
+/// [`simulate_record`] at [`continuous_substeps`] (`spec.settings.substeps`
+/// ignored): a first run at the sub-steps of the springs, contacts and
+/// clearances, a second one when a cubic or quadratic spring's tangent at
+/// the strokes of the first asks for more.
+pub fn simulate_continuous(model: &Model, spec: &RecordSpec) -> Result<(Record, Simulation)> {
+    let mut spec = spec.clone();
+    spec.settings.substeps = continuous_substeps(model, spec.fs, None);
+    let (rec, sim) = simulate_record(model, &spec)?;
+    let more = continuous_substeps(model, spec.fs, Some(&sim.u));
+    if more <= spec.settings.substeps {
+        return Ok((rec, sim));
+    }
+    spec.settings.substeps = more;
+    simulate_record(model, &spec)
+}
+
 /// Simulate and sample a record. The simulation is returned too: when it
 /// did not complete (`sim.status`), the record is not built and the error
 /// says when and why.

@@ -792,7 +792,15 @@ fn stiff_spring_simulation_diverges_with_the_facts() {
     let d = tempfile::tempdir().unwrap();
     let m = stiff_model(d.path(), "stiff.toml", "1e20", "kind = \"none\"");
     let out = d.path().join("s.csv");
-    let o = tacit(&["simulate", "--model", p(&m), "-o", p(&out)]);
+    let o = tacit(&[
+        "simulate",
+        "--model",
+        p(&m),
+        "--substeps",
+        "10",
+        "-o",
+        p(&out),
+    ]);
     fails_with(
         &o,
         &[
@@ -803,6 +811,15 @@ fn stiff_spring_simulation_diverges_with_the_facts() {
         ],
     );
     assert!(!out.exists());
+    // by default: the most sub-steps allowed, with a warning
+    let o = tacit(&["simulate", "--model", p(&m), "-o", p(&out)]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("asks for 2132557885 sub-steps per sample")
+            && err.contains("at the most allowed, 1000"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -13,7 +13,7 @@ use tacit::diagnose::{calibrated, report, DiagnoseSettings};
 use tacit::identify::{identify_located, LocatedSettings, Problem};
 use tacit::integrate::SimSettings;
 use tacit::record::{model_checks, Quantity};
-use tacit::simulate::{simulate_record, InputSpec, RecordSpec};
+use tacit::simulate::{simulate_continuous, simulate_record, InputSpec, RecordSpec};
 
 /// Frequencies (Hz), shapes (columns) and rigid-body flags.
 type ModesOut<'py> = (
@@ -58,7 +58,8 @@ fn input_spec(
 /// `input_dof` (from 1). `sensors`: DOFs from 1 (default: every DOF);
 /// `kinds`: any of `disp`, `vel`, `accel`; `noise`: standard deviation as
 /// a fraction of each channel's RMS; `substeps`: Newmark sub-steps per
-/// sample (a stiff contact needs 40 at 512 Hz). A model from matrices
+/// sample (default: enough for the record to stand for the continuous
+/// structure, as `tacit simulate` chooses them). A model from matrices
 /// takes `points` (sensor labels) and `input_point` instead of `sensors`
 /// and `input_dof`: it is reduced onto them (cut-off twice the top of the
 /// input's band) and the channels are named by point (`accel:n20:uy`).
@@ -66,7 +67,7 @@ fn input_spec(
 #[pyo3(signature = (model, samples = 4096, fs = 512.0, input = "random", rms = 20.0,
     band = (5.0, 200.0), amplitude = 10.0, sweep = (5.0, 150.0), force = None,
     input_dof = 1, sensors = None, kinds = vec!["accel".to_string()], noise = 0.0,
-    seed = 7, substeps = 10, points = None, input_point = None))]
+    seed = 7, substeps = None, points = None, input_point = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn simulate(
     py: Python<'_>,
@@ -84,7 +85,7 @@ pub fn simulate(
     kinds: Vec<String>,
     noise: f64,
     seed: u64,
-    substeps: usize,
+    substeps: Option<usize>,
     points: Option<Vec<String>>,
     input_point: Option<String>,
 ) -> PyResult<Record> {
@@ -121,7 +122,7 @@ pub fn simulate(
         noise,
         seed,
         settings: SimSettings {
-            substeps,
+            substeps: substeps.unwrap_or(1),
             ..Default::default()
         },
         u0: vec![],
@@ -129,7 +130,11 @@ pub fn simulate(
     };
     spec.settings.validate().map_err(err)?;
     let m = &**model;
-    let (mut inner, _) = py.detach(|| simulate_record(m, &spec)).map_err(err)?;
+    let run = || match substeps {
+        Some(_) => simulate_record(m, &spec),
+        None => simulate_continuous(m, &spec),
+    };
+    let (mut inner, _) = py.detach(run).map_err(err)?;
     if !m.points.is_empty() {
         for c in inner.inputs.iter_mut().chain(inner.outputs.iter_mut()) {
             c.point = Some(m.dof_name(c.dof));

@@ -6,7 +6,9 @@ use std::path::PathBuf;
 use tacit::integrate::SimSettings;
 use tacit::model::Model;
 use tacit::record::{self, Quantity};
-use tacit::simulate::{simulate_record, InputSpec, RecordSpec};
+use tacit::simulate::{
+    continuous_substeps, simulate_continuous, simulate_record, InputSpec, RecordSpec,
+};
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
 enum InputKind {
@@ -219,29 +221,27 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         settings: SimSettings {
             substeps: a
                 .substeps
-                .unwrap_or_else(|| auto_substeps(&model, fs, None)),
+                .unwrap_or_else(|| continuous_substeps(&model, fs, None)),
             hht_alpha: a.hht_alpha,
             ..Default::default()
         },
         u0: vec![],
         v0: vec![],
     };
-    let memory = |substeps: usize| {
-        check::memory(
-            check::integration_bytes(n, model.contacts.len(), substeps, samples),
-            &format!("{samples} samples of {n} DOFs at {substeps} sub-steps"),
-        )
-    };
-    memory(spec.settings.substeps)?;
+    check::memory(
+        check::integration_bytes(n, model.contacts.len(), spec.settings.substeps, samples),
+        &format!(
+            "{samples} samples of {n} DOFs at {} sub-steps",
+            spec.settings.substeps
+        ),
+    )?;
     let t = std::time::Instant::now();
-    let (mut rec, mut sim) = simulate_record(&model, &spec)?;
-    // a cubic or quadratic spring's tangent is known after a first run
-    let strokes = (a.substeps.is_none()).then(|| auto_substeps(&model, fs, Some(&sim.u)));
-    if let Some(more) = strokes.filter(|&m| m > spec.settings.substeps) {
-        let mut spec = spec;
-        spec.settings.substeps = more;
-        memory(more)?;
-        (rec, sim) = simulate_record(&model, &spec)?;
+    let (mut rec, sim) = match a.substeps {
+        Some(_) => simulate_record(&model, &spec)?,
+        None => simulate_continuous(&model, &spec)?,
+    };
+    if a.substeps.is_none() {
+        unresolved_warning(&model, fs, &sim);
     }
     if labelled.is_some() {
         for c in rec.inputs.iter_mut().chain(rec.outputs.iter_mut()) {
@@ -399,19 +399,22 @@ fn load_model(a: &Args) -> anyhow::Result<(Model, Labelled)> {
     Ok((model, Some((sensors, input_dof))))
 }
 
-/// Sub-steps at which a record stands for the continuous structure: ω h
-/// ≤ [`AUTO_OMEGA_H`] for `model`'s stiffest element (a cubic or quadratic
-/// spring's tangent at the largest stroke of the displacements `u`, DOF ×
-/// sample, when given), at least [`AUTO_MIN`], at most
-/// [`tacit::integrate::newmark::MAX_SUBSTEPS`].
-fn auto_substeps(model: &Model, fs: f64, u: Option<&nalgebra::DMatrix<f64>>) -> usize {
-    let max = tacit::integrate::newmark::MAX_SUBSTEPS;
-    tacit::diagnose::auto_substeps(model, fs, AUTO_MIN, AUTO_OMEGA_H, max, u)
+/// A warning when the default sub-steps stopped at the most allowed below
+/// what the stiffest element asks for.
+fn unresolved_warning(model: &Model, fs: f64, sim: &tacit::integrate::Simulation) {
+    let need = tacit::diagnose::auto_substeps(
+        model,
+        fs,
+        tacit::simulate::CONTINUOUS_MIN,
+        tacit::simulate::CONTINUOUS_OMEGA_H,
+        usize::MAX,
+        Some(&sim.u),
+    );
+    let used = sim.steps / sim.len().saturating_sub(1).max(1);
+    if need > used {
+        eprintln!(
+            "tacit: warning: the stiffest element asks for {need} sub-steps per sample (ω h ≤ {}); simulated at the most allowed, {used} (pass --substeps to choose)",
+            tacit::simulate::CONTINUOUS_OMEGA_H
+        );
+    }
 }
-
-/// Target ω h of [`auto_substeps`]: a period error `(ω h)²/12` of 3e-5.
-const AUTO_OMEGA_H: f64 = 0.02;
-
-/// Fewest sub-steps of [`auto_substeps`]: 0.05 % of integration error on
-/// data/lanl8dof.toml (docs/diagnose.md, *Integration error and noise*).
-const AUTO_MIN: usize = 100;
