@@ -137,7 +137,17 @@ pub(super) fn choose(
                 predicted = p.at;
                 start = p.start;
                 add_time(&mut st.timings, "fit", t);
-                let screen = with_damping_freed(&eff, below.screen, ctx.settings);
+                let mut screen = with_damping_freed(&eff, below.screen, ctx.settings);
+                // experiment: far above the measured noise, a dissipative
+                // law with the damping freed is fitted whatever its
+                // linearized prediction
+                let far_measured = match (st.error, ctx.measured_noise) {
+                    (Some(e), Some(m)) => e > 2.0 * m,
+                    _ => false,
+                };
+                if far_measured && eff.candidate.kind.dissipative() && !eff.nuisance.is_empty() {
+                    screen = 0.0;
+                }
                 if let Some(g) = g.filter(|&g| g < screen) {
                     below.screened_out.push((best.label.clone(), g));
                     continue;
