@@ -80,7 +80,7 @@ mod validation;
 
 pub use errors::{ChannelError, Comparison, ErrorSet, ErrorStatus, ShotError};
 pub use outcome::{
-    AlternativeTried, BelowScreen, Decision, Diagnosis, EffectReport, OpenLoopCheck, Round, Score,
+    AlternativeTried, BelowScreen, Decision, Diagnosis, EffectReport, Round, Score,
     ToleratedFailure, Validation, WithdrawReason,
 };
 pub use prepare::{

@@ -264,26 +264,6 @@ pub struct BelowScreen {
     /// The screen: the fraction of the fit cost a candidate had to be
     /// predicted to remove.
     pub screen: f64,
-    /// The open-loop errors a dissipative law was judged on when the
-    /// multiple-shooting error did not keep it ([`super::decide`]).
-    pub open_loop: Option<OpenLoopCheck>,
-}
-
-/// A dissipative law below the screen judged by the open-loop error on
-/// the record ([`super::decide`]).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct OpenLoopCheck {
-    /// Open-loop error of the model before it.
-    pub before: Option<f64>,
-    /// With it, fitted.
-    pub after: Option<f64>,
-    /// Switched off in the fitted model.
-    pub without: Option<f64>,
-    /// Share of the squared error above the measured noise it had to
-    /// remove against each.
-    pub need: f64,
-    /// Whether it did.
-    pub kept: bool,
 }
 
 /// Why a fitted effect was withdrawn.

@@ -752,18 +752,15 @@ fn below_note(b: &BelowScreen) -> String {
             screened_out(b)
         )
     };
-    let ol = b.open_loop.as_ref().map_or(String::new(), |o| {
-        format!(
-            "; open-loop error on the record {} → {} ({} switched off), {} {:.0} % of the squared error above the measured noise",
-            p4(o.before),
-            p4(o.after),
-            p4(o.without),
-            if o.kept { "removes" } else { "does not remove" },
-            100.0 * o.need
-        )
-    });
+    if b.screen == 0.0 {
+        // [`crate::diagnose::ScreenSettings::dissipative_far`]
+        return format!(
+            " (below the screen: {}{pre}; a dissipative law with the damping free beside it, fitted whatever the joint linearization predicts while the error is far above the measured noise)",
+            b.trace
+        );
+    }
     format!(
-        " (below the screen: {}{pre}; fitted because the joint linearization predicts it removes at least {:.0} % of the fit cost{ol})",
+        " (below the screen: {}{pre}; fitted because the joint linearization predicts it removes at least {:.0} % of the fit cost)",
         b.trace,
         100.0 * b.screen
     )

@@ -110,7 +110,6 @@ pub(super) fn choose(
         trace: trace_reason.to_string(),
         screened_out: vec![],
         screen: companion_screen(st.error, ctx.settings),
-        open_loop: None,
     };
     let mut sims = 0;
     for best in pool {
@@ -138,10 +137,14 @@ pub(super) fn choose(
                 predicted = p.at;
                 start = p.start;
                 add_time(&mut st.timings, "fit", t);
-                let screen = with_damping_freed(&eff, below.screen, st.error, ctx);
+                let screen = with_damping_freed(&eff, below.screen, st, ctx);
                 if let Some(g) = g.filter(|&g| g < screen) {
                     below.screened_out.push((best.label.clone(), g));
                     continue;
+                }
+                // fitted whatever its prediction (the report says so)
+                if screen == 0.0 {
+                    below.screen = 0.0;
                 }
             }
         }
@@ -158,32 +161,41 @@ pub(super) fn choose(
 /// The screen of a candidate below the trace's: `screen`, or
 /// [`super::settings::ScreenSettings::companion_screen_far`] when it is
 /// lower for a dissipative law fitted with the model's damping freed
-/// beside it ([`AddedEffect::nuisance`]), and none at all for such a law
-/// while the multiple-shooting error `err` is above
-/// [`super::settings::ScreenSettings::dissipative_far`] × the noise
+/// beside it ([`AddedEffect::nuisance`]); none at all for a dissipative
+/// law with the damping free beside it (its nuisance parameters, or a
+/// damping change found before it) while the multiple-shooting error is
+/// above [`super::settings::ScreenSettings::dissipative_far`] × the noise
 /// measured on the record. The joint linearization is taken at zero
 /// strength, where a friction law's derivative is a viscous-like force
-/// that the freed damping takes up; what a finite level adds (the masses
+/// that the free damping takes up; what a finite level adds (the masses
 /// sticking) it does not see. On a record of a bumper 7→6 with 0.3 N of
 /// friction on every mass, after the contact on a damping the refinement
 /// had raised to take the friction (modal ratios +136 to +253 % against
 /// +100 %, error 3.2 % at 1.5 % measured noise), the friction on every
 /// mass was predicted to remove 2.5 % of the fit cost; fitted, it takes
-/// the error to 1.0 %. Such a law is fitted at most once a diagnosis: once
-/// one is kept the damping is free and the next one carries no nuisance
-/// parameters; one withdrawn ends the loop.
-fn with_damping_freed(eff: &AddedEffect, screen: f64, err: Option<f64>, ctx: &Context<'_>) -> f64 {
-    if !eff.candidate.kind.dissipative() || eff.nuisance.is_empty() {
+/// the error to 1.0 %. The cost is one fit a round, in a loop of at most
+/// [`super::settings::ScreenSettings::max_effects`] rounds, and a
+/// candidate below the screen that is withdrawn ends the loop.
+fn with_damping_freed(eff: &AddedEffect, screen: f64, st: &State, ctx: &Context<'_>) -> f64 {
+    if !eff.candidate.kind.dissipative() {
         return screen;
     }
+    let own = !eff.nuisance.is_empty();
+    let beside = st
+        .added
+        .iter()
+        .any(|a| a.effect.candidate.kind == EffectKind::Damping);
     let s = &ctx.settings.screen;
-    let far = match (err, ctx.measured_noise) {
+    let far = match (st.error, ctx.measured_noise) {
         (Some(e), Some(m)) => e > s.dissipative_far * m,
         _ => false,
     };
-    match far {
-        true => 0.0,
-        false => screen.min(s.companion_screen_far),
+    if far && (own || beside) {
+        0.0
+    } else if own {
+        screen.min(s.companion_screen_far)
+    } else {
+        screen
     }
 }
 

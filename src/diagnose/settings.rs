@@ -305,8 +305,8 @@ pub struct ScreenSettings {
     /// beside it: 18.9 % predicted, 25 % → 1.2 % fitted).
     pub companion_screen_far: f64,
     /// While the multiple-shooting error is above this multiple of the
-    /// noise measured on the record, a dissipative law fitted with the
-    /// model's damping freed beside it is fitted whatever the joint
+    /// noise measured on the record, a dissipative law with the model's
+    /// damping free beside it is fitted whatever the joint
     /// linearization predicts (default 2; ≥ 1). Reason: linearized at zero
     /// strength a friction's derivative is a viscous force the freed
     /// damping takes up; what a finite level adds (the masses sticking) it
