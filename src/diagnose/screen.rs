@@ -171,9 +171,9 @@ pub(super) fn choose(
 /// sticking) it does not see. On a record of a bumper 7→6 with 0.3 N of
 /// friction on every mass, after the contact on a damping the refinement
 /// had raised to take the friction (modal ratios +136 to +253 % against
-/// +100 %, error 3.2 % at 1.5 % measured noise), the friction on every
+/// +100 %, error 3.3 % at 1.5 % measured noise), the friction on every
 /// mass was predicted to remove 2.5 % of the fit cost; fitted, it takes
-/// the error to 1.0 %. The cost is one fit a round, in a loop of at most
+/// the error to 2.5 % and the refinement beside it to 0.99 %. The cost is one fit a round, in a loop of at most
 /// [`super::settings::ScreenSettings::max_effects`] rounds, and a
 /// candidate below the screen that is withdrawn ends the loop.
 fn with_damping_freed(eff: &AddedEffect, screen: f64, st: &State, ctx: &Context<'_>) -> f64 {
