@@ -12,7 +12,7 @@
 
 use tacit::diagnose::{diagnose, DiagnoseSettings};
 use tacit::integrate::SimSettings;
-use tacit::model::{Cubic, Damping, Friction, Model};
+use tacit::model::{Contact, Cubic, Damping, Friction, Model};
 use tacit::record::Record;
 use tacit::simulate::{simulate_record, RecordSpec};
 
@@ -98,5 +98,68 @@ fn friction_beside_a_cubic_is_not_taken_for_noise() {
     assert!((k3 / 3e12 - 1.0).abs() <= 0.1, "k3 {k3}");
     let level = find("friction").parameters["level"];
     assert!((level / 0.1 - 1.0).abs() <= 0.1, "friction level {level}");
+    assert!(v <= 1.5 * noise, "validation {v} against noise {noise}");
+}
+
+/// A bumper 7→6 (gap 0.4 mm, 1.5e6 N/m) on lanl8dof with 2 % modal
+/// damping and 0.3 N of friction on every mass, diagnosed with a linear
+/// part whose modal damping took more than the friction's share (1.3 ×
+/// the ratios a refinement of the linear part beside the contact reached
+/// on such a record, which were +136 to +253 % of the true 2 %). After the
+/// contact and a damping change the error is 3.4 % at 1.5 % measured
+/// noise; the friction on every mass is predicted to remove 18 % of the
+/// fit cost, below the 20 % screen of a candidate below the trace's, and
+/// must be fitted all the same (`screen.dissipative_far`). Named, it takes
+/// the validation error to the noise; its level is not checked closely:
+/// the damping change scales every mode's ratio alike and leaves part of
+/// the friction in the damping (the calibrated diagnosis frees each mode
+/// and reaches 0.300 N on such a record).
+#[test]
+fn friction_beside_a_bumper_is_fitted_far_above_the_noise() {
+    let mut t = lanl();
+    t.damping = Damping::Modal {
+        ratio: Some(0.02),
+        ratios: vec![],
+    };
+    t.frictions = (1..=8)
+        .map(|d| Friction {
+            dof: d,
+            level: 0.3,
+            velocity: 1e-3,
+        })
+        .collect();
+    t.contacts = vec![Contact {
+        dofs: vec![7, 6],
+        gap: 0.4e-3,
+        stiffness: 1.5e6,
+    }];
+    let mut declared = lanl();
+    declared.damping = Damping::Modal {
+        ratio: None,
+        ratios: vec![0.0459, 0.0373, 0.0346, 0.0321, 0.0319, 0.0307, 0.0308],
+    };
+    let (rec, val) = (record(&t, 314151), record(&t, 314152));
+    let settings = DiagnoseSettings::default();
+    let d = diagnose(&declared, &rec, Some(&val), None, &settings, &|_| {}).unwrap();
+    let noise = d.noise.as_ref().unwrap().level;
+    let v = d.validation.as_ref().unwrap().after.relative_error.unwrap();
+    eprintln!(
+        "{} | after {:?} | validation {v} | noise {noise}",
+        d.verdict, d.after.relative_error
+    );
+    for e in &d.effects {
+        eprintln!("  {} {:?}", e.label, e.parameters);
+    }
+    let find = |kind: &str| {
+        d.effects
+            .iter()
+            .find(|e| e.kind.name() == kind)
+            .unwrap_or_else(|| panic!("no {kind}: {}", d.verdict))
+    };
+    assert_eq!(find("contact").dofs, vec![7, 6]);
+    let f = find("friction");
+    assert_eq!(f.dofs, (1..=8).collect::<Vec<_>>());
+    let level = f.parameters["level"];
+    assert!((0.1..=0.45).contains(&level), "friction level {level}");
     assert!(v <= 1.5 * noise, "validation {v} against noise {noise}");
 }

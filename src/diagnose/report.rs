@@ -752,6 +752,13 @@ fn below_note(b: &BelowScreen) -> String {
             screened_out(b)
         )
     };
+    if b.screen == 0.0 {
+        // [`crate::diagnose::ScreenSettings::dissipative_far`]
+        return format!(
+            " (below the screen: {}{pre}; a dissipative law with the damping free beside it, fitted whatever the joint linearization predicts while the error is far above the measured noise)",
+            b.trace
+        );
+    }
     format!(
         " (below the screen: {}{pre}; fitted because the joint linearization predicts it removes at least {:.0} % of the fit cost)",
         b.trace,
