@@ -324,11 +324,65 @@ fn refine_with(
     segments: &[Segment],
     (iterations, with_rescue): (usize, bool),
 ) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
-    let (mut segs, mut y, mut fit) = refine_local(cmp, model, sim, segments, iterations, true);
     if !model.is_nonlinear() || iterations == 0 {
-        return (segs, y, fit);
+        return refine_local(cmp, model, sim, segments, iterations, true);
     }
     let sweeps = with_rescue && sweep::weakly_observed(cmp, model);
+    let deep = iterations.max(WEAKLY_OBSERVED_ITERATIONS);
+    if !sweeps || deep == iterations {
+        return refine_path(cmp, model, sim, segments, (iterations, with_rescue));
+    }
+    // a model scored from fewer sensors than it has DOFs: a second path
+    // with more iterations, each segment's better start kept
+    // ([`WEAKLY_OBSERVED_ITERATIONS`])
+    let (a, b) = rayon::join(
+        || refine_path(cmp, model, sim, segments, (iterations, true)),
+        || refine_path(cmp, model, sim, segments, (deep, true)),
+    );
+    better_of(cmp, a, b)
+}
+
+/// Each segment's better start of two refinements of the same segments
+/// (`a`'s where they tie or neither predicts it), their accounts summed.
+fn better_of(
+    cmp: &Comparison,
+    (mut segs, mut y, mut fit): (Vec<Segment>, DMatrix<f64>, StartFit),
+    (segs_b, y_b, fit_b): (Vec<Segment>, DMatrix<f64>, StartFit),
+) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
+    let mut res: Vec<Option<(DVector<f64>, f64)>> =
+        segs.iter().map(|s| residual(cmp, s, &y)).collect();
+    for (i, sb) in segs_b.into_iter().enumerate() {
+        let Some(rb) = residual(cmp, &sb, &y_b) else {
+            continue;
+        };
+        if res[i].as_ref().is_none_or(|ra| rb.1 < ra.1) {
+            copy_segment(&mut y, &y_b, &sb);
+            res[i] = Some(rb);
+            segs[i] = sb;
+        }
+    }
+    fit.iterations = fit.iterations.max(fit_b.iterations);
+    fit.continued += fit_b.continued;
+    fit.grown += fit_b.grown;
+    fit.rescued += fit_b.rescued;
+    fit.simulations += fit_b.simulations;
+    fit.stalled = fit.stalled.min(fit_b.stalled);
+    fit.stuck = stuck(&segs, &segment_costs(&res), cmp.starts.outlier);
+    fit.cost.1 = res.iter().flatten().map(|r| r.1).sum();
+    (segs, y, fit)
+}
+
+/// [`refine_with`] along one path: the local refinement with
+/// `iterations`, then the run-ins, sweeps, rescues and growing horizons.
+fn refine_path(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    segments: &[Segment],
+    (iterations, with_rescue): (usize, bool),
+) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
+    let sweeps = with_rescue && sweep::weakly_observed(cmp, model);
+    let (mut segs, mut y, mut fit) = refine_local(cmp, model, sim, segments, iterations, true);
     // segments left far above the others: run in again from where the
     // (now refined) segment before ends, then refine those alone
     let mut res: Vec<Option<(DVector<f64>, f64)>> =
@@ -399,6 +453,21 @@ fn refine_with(
     fit.cost.1 = res.iter().flatten().map(|r| r.1).sum();
     (segs, y, fit)
 }
+
+/// Gauss–Newton iterations of the second path of [`refine`] (at least;
+/// the first has [`super::settings::StartSettings::iterations`]) when a
+/// nonlinear model is scored from fewer sensors than it has DOFs
+/// ([`sweep::weakly_observed`]); each segment keeps the better of the two
+/// starts. Reason: a clearance 2–3 of 1e6 N/m on lanl8dof (engaged mode
+/// near 360 Hz, above the 256 Hz Nyquist frequency) seen from sensors 2,
+/// 3 and 7: the cost in the start state is rough, and which path reaches
+/// a segment's true basin differs from segment to segment. With three
+/// iterations the exact model's segments stayed at up to 946 × the median
+/// cost where their true starts give 1–2 × (the exact model scored 5.16 %
+/// on a validation record with 1 % noise, 0.99 % with ten iterations),
+/// with ten alone a record of another seed went from 1.20 % to 3.00 %
+/// (docs/diagnose.md, "Declared models that are not exact").
+const WEAKLY_OBSERVED_ITERATIONS: usize = 10;
 
 /// Each segment's cost (infinite where its prediction failed).
 fn segment_costs(res: &[Option<(DVector<f64>, f64)>]) -> Vec<f64> {
