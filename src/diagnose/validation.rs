@@ -1,8 +1,9 @@
 //! The model found, scored on a validation record it was not fitted to.
 
-use super::errors::{error_simulations, ErrorSet, ShotResult};
+use super::errors::{error_simulations, Comparison, ErrorSet, ShotError, ShotResult};
 use super::outcome::{DatumShift, Validation};
 use super::prepare::Prepared;
+use super::starts;
 use super::uncertainty::gap_unobservable;
 use crate::error::Result;
 use crate::integrate::SimSettings;
@@ -23,7 +24,7 @@ pub(super) fn score(
     count: &mut usize,
 ) -> Result<Validation> {
     let cmp = &prep.comparison;
-    let (before, _) = cmp.errors(declared, sims.0);
+    let (before, _) = cmp.errors_of(declared, sims.0, shot(cmp, declared, sims.0));
     // the fitted model from its own reconstruction when it needs one
     let (after, datum, n) = after_errors(fitted, own.unwrap_or(prep), quantiles, sims.1);
     *count += error_simulations(&before, cmp) + n;
@@ -66,7 +67,7 @@ pub(super) fn after_errors(
 ) -> (ErrorSet, Vec<DatumShift>, usize) {
     let cmp = &prep.comparison;
     let Some(r) = rezero(fitted, prep, quantiles, sim) else {
-        let (after, _) = cmp.errors(fitted, sim);
+        let (after, _) = cmp.errors_of(fitted, sim, shot(cmp, fitted, sim));
         let n = error_simulations(&after, cmp);
         return (after, vec![], n);
     };
@@ -74,6 +75,24 @@ pub(super) fn after_errors(
     let (after, _) = cmp.errors_of(&r.model, sim, r.shot);
     let n = error_simulations(&after, cmp) + r.simulations - cmp.segments.len();
     (after, r.shifts, n)
+}
+
+/// The multiple shooting of `model` on a validation record: as
+/// [`Comparison::shoot`], the start states refined along both paths of
+/// [`starts::refine_both`] (a nonlinear model from fewer sensors than it
+/// has DOFs; no segment above its score along the first path alone).
+fn shot(cmp: &Comparison, model: &Model, sim: SimSettings) -> ShotResult {
+    if cmp.starts.iterations == 0 {
+        return cmp.shoot(model, sim);
+    }
+    let (segs, y, fit) = starts::refine_both(cmp, model, sim, &cmp.segments, cmp.starts.iterations);
+    if let Some(k) = (0..y.ncols()).find(|&k| y.column(k).iter().any(|v| v.is_nan())) {
+        let segment = segs
+            .iter()
+            .position(|s| k >= s.start && k < s.start + s.len);
+        return Err(ShotError::Segment { segment, sample: k });
+    }
+    Ok((y, segs, Some(fit)))
 }
 
 /// The fitted model with the gaps of its contacts against ground that the
