@@ -328,18 +328,24 @@ pub fn refine_both(
     segments: &[Segment],
     iterations: usize,
 ) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
+    if !two_paths(cmp, model, iterations) {
+        return refine(cmp, model, sim, segments, iterations);
+    }
     let deep = iterations.max(WEAKLY_OBSERVED_ITERATIONS);
-    if !model.is_nonlinear() || iterations == 0 || deep == iterations {
-        return refine(cmp, model, sim, segments, iterations);
-    }
-    if !sweep::weakly_observed(cmp, model) {
-        return refine(cmp, model, sim, segments, iterations);
-    }
     let (a, b) = rayon::join(
         || refine(cmp, model, sim, segments, iterations),
         || refine(cmp, model, sim, segments, deep),
     );
     better_of(cmp, a, b)
+}
+
+/// Whether [`refine_both`] takes its second path for `model` on `cmp`
+/// with `iterations`.
+pub fn two_paths(cmp: &Comparison, model: &Model, iterations: usize) -> bool {
+    model.is_nonlinear()
+        && iterations > 0
+        && iterations < WEAKLY_OBSERVED_ITERATIONS
+        && sweep::weakly_observed(cmp, model)
 }
 
 /// Each segment's better start of two refinements of the same segments

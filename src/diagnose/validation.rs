@@ -24,7 +24,7 @@ pub(super) fn score(
     count: &mut usize,
 ) -> Result<Validation> {
     let cmp = &prep.comparison;
-    let (before, _) = cmp.errors_of(declared, sims.0, shot(cmp, declared, sims.0));
+    let (before, _) = errors(cmp, declared, sims.0);
     // the fitted model from its own reconstruction when it needs one
     let (after, datum, n) = after_errors(fitted, own.unwrap_or(prep), quantiles, sims.1);
     *count += error_simulations(&before, cmp) + n;
@@ -67,7 +67,7 @@ pub(super) fn after_errors(
 ) -> (ErrorSet, Vec<DatumShift>, usize) {
     let cmp = &prep.comparison;
     let Some(r) = rezero(fitted, prep, quantiles, sim) else {
-        let (after, _) = cmp.errors_of(fitted, sim, shot(cmp, fitted, sim));
+        let (after, _) = errors(cmp, fitted, sim);
         let n = error_simulations(&after, cmp);
         return (after, vec![], n);
     };
@@ -77,22 +77,29 @@ pub(super) fn after_errors(
     (after, r.shifts, n)
 }
 
-/// The multiple shooting of `model` on a validation record: as
-/// [`Comparison::shoot`], the start states refined along both paths of
-/// [`starts::refine_both`] (a nonlinear model from fewer sensors than it
-/// has DOFs; no segment above its score along the first path alone).
-fn shot(cmp: &Comparison, model: &Model, sim: SimSettings) -> ShotResult {
-    if cmp.starts.iterations == 0 {
-        return cmp.shoot(model, sim);
+/// The errors of `model` on a validation record ([`Comparison::errors`]),
+/// the start states refined along both paths of [`starts::refine_both`]
+/// when it takes two (a nonlinear model from fewer sensors than it has
+/// DOFs; no segment then scores above the first path alone).
+fn errors(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+) -> (ErrorSet, Option<nalgebra::DMatrix<f64>>) {
+    if !starts::two_paths(cmp, model, cmp.starts.iterations) {
+        return cmp.errors(model, sim);
     }
     let (segs, y, fit) = starts::refine_both(cmp, model, sim, &cmp.segments, cmp.starts.iterations);
-    if let Some(k) = (0..y.ncols()).find(|&k| y.column(k).iter().any(|v| v.is_nan())) {
-        let segment = segs
-            .iter()
-            .position(|s| k >= s.start && k < s.start + s.len);
-        return Err(ShotError::Segment { segment, sample: k });
-    }
-    Ok((y, segs, Some(fit)))
+    let shot = match (0..y.ncols()).find(|&k| y.column(k).iter().any(|v| v.is_nan())) {
+        Some(k) => {
+            let segment = segs
+                .iter()
+                .position(|s| k >= s.start && k < s.start + s.len);
+            Err(ShotError::Segment { segment, sample: k })
+        }
+        None => Ok((y, segs, Some(fit))),
+    };
+    cmp.errors_of(model, sim, shot)
 }
 
 /// The fitted model with the gaps of its contacts against ground that the
