@@ -1,8 +1,9 @@
 //! The model found, scored on a validation record it was not fitted to.
 
-use super::errors::{error_simulations, ErrorSet, ShotResult};
+use super::errors::{error_simulations, Comparison, ErrorSet, ShotError, ShotResult};
 use super::outcome::{DatumShift, Validation};
 use super::prepare::Prepared;
+use super::starts;
 use super::uncertainty::gap_unobservable;
 use crate::error::Result;
 use crate::integrate::SimSettings;
@@ -23,7 +24,7 @@ pub(super) fn score(
     count: &mut usize,
 ) -> Result<Validation> {
     let cmp = &prep.comparison;
-    let (before, _) = cmp.errors(declared, sims.0);
+    let (before, _) = errors(cmp, declared, sims.0);
     // the fitted model from its own reconstruction when it needs one
     let (after, datum, n) = after_errors(fitted, own.unwrap_or(prep), quantiles, sims.1);
     *count += error_simulations(&before, cmp) + n;
@@ -66,7 +67,7 @@ pub(super) fn after_errors(
 ) -> (ErrorSet, Vec<DatumShift>, usize) {
     let cmp = &prep.comparison;
     let Some(r) = rezero(fitted, prep, quantiles, sim) else {
-        let (after, _) = cmp.errors(fitted, sim);
+        let (after, _) = errors(cmp, fitted, sim);
         let n = error_simulations(&after, cmp);
         return (after, vec![], n);
     };
@@ -74,6 +75,31 @@ pub(super) fn after_errors(
     let (after, _) = cmp.errors_of(&r.model, sim, r.shot);
     let n = error_simulations(&after, cmp) + r.simulations - cmp.segments.len();
     (after, r.shifts, n)
+}
+
+/// The errors of `model` on a validation record ([`Comparison::errors`]),
+/// the start states refined along both paths of [`starts::refine_both`]
+/// when it takes two (a nonlinear model from fewer sensors than it has
+/// DOFs; no segment then scores above the first path alone).
+fn errors(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+) -> (ErrorSet, Option<nalgebra::DMatrix<f64>>) {
+    if !starts::two_paths(cmp, model, cmp.starts.iterations) {
+        return cmp.errors(model, sim);
+    }
+    let (segs, y, fit) = starts::refine_both(cmp, model, sim, &cmp.segments, cmp.starts.iterations);
+    let shot = match (0..y.ncols()).find(|&k| y.column(k).iter().any(|v| v.is_nan())) {
+        Some(k) => {
+            let segment = segs
+                .iter()
+                .position(|s| k >= s.start && k < s.start + s.len);
+            Err(ShotError::Segment { segment, sample: k })
+        }
+        None => Ok((y, segs, Some(fit))),
+    };
+    cmp.errors_of(model, sim, shot)
 }
 
 /// The fitted model with the gaps of its contacts against ground that the
