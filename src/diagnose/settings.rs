@@ -214,7 +214,7 @@ impl SubstepSettings {
         if !(ratio > 1.0) {
             return *self;
         }
-        let scaled = |n: usize| (n as f64 * ratio.sqrt()).ceil() as usize;
+        let scaled = |n: usize| (n as f64 * ratio.sqrt()).round() as usize;
         SubstepSettings {
             omega_h: self.omega_h / ratio,
             min: scaled(self.min),
@@ -1024,6 +1024,22 @@ impl DiagnoseSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sub_steps_follow_a_noise_below_the_reference_up_to_four_times() {
+        let s = SubstepSettings::default();
+        for level in [0.01, 0.03, 0.5] {
+            assert_eq!(s.at_noise(level), s, "at {level}");
+        }
+        let quarter = s.at_noise(0.0025);
+        assert!((quarter.omega_h - 0.0375).abs() < 1e-15);
+        assert_eq!((quarter.min, quarter.max, quarter.base), (80, 160, 10));
+        assert_eq!(s.at_noise(1e-5), quarter, "the ratio stops at 4");
+        let near = s.at_noise(0.00999);
+        assert_eq!((near.min, near.max), (40, 80), "no jump just below 1 %");
+        let low = s.at_noise(0.003);
+        assert_eq!((low.min, low.max), (73, 146));
+    }
 
     /// The defaults pass, and the noise floor derived from the noise level
     /// is the 0.025 used before it was derived, to the bit.
