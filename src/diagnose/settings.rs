@@ -198,7 +198,7 @@ pub struct SubstepSettings {
     /// where the cost has grown fourfold and a noise-free record would
     /// ask for no end of sub-steps. Reason: at 0.3 % noise the true model
     /// scored at 40–49 sub-steps against records integrated at 400 left
-    /// 1.1–1.55 × the noise, at 164 sub-steps 0.93–0.94 ×.
+    /// 1.1–1.55 × the noise, at 160 sub-steps 0.93–0.94 ×.
     pub noise_reference: f64,
 }
 
