@@ -423,7 +423,7 @@ impl Context<'_> {
                 "round {}: diagnose with the refined linear part",
                 round + 1
             ));
-            let linear = best.d.model.linear_part();
+            let linear = without_null_springs(best.d.model.linear_part());
             let d = super::diagnose(
                 &linear,
                 self.rec,
@@ -1710,12 +1710,39 @@ pub(super) fn lower(a: Option<f64>, b: Option<f64>) -> bool {
     }
 }
 
+/// `model` without its springs of zero stiffness (a spring to ground the
+/// refinement took to its bound at 0 acts as no spring, and a model file
+/// may not hold one).
+fn without_null_springs(mut model: Model) -> Model {
+    model.springs.retain(|s| s.stiffness > 0.0);
+    model
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::model::Contact;
     use crate::simulate::{simulate_record, RecordSpec};
     use crate::trace::{Candidate, EffectKind, RankedEffect};
+
+    #[test]
+    fn a_spring_refined_to_zero_leaves_a_valid_model() {
+        let mut m = crate::model::Model::from_toml_str(
+            "masses = [1.0, 1.0]\n[[spring]]\ndofs = [1, 2]\nstiffness = 5e4\n",
+            "test",
+        )
+        .unwrap();
+        m.springs.push(crate::model::Spring {
+            dofs: vec![2],
+            stiffness: 0.0,
+            name: Some("ground2".into()),
+        });
+        assert!(m.validate("test").is_err());
+        let kept = without_null_springs(m);
+        assert_eq!(kept.springs.len(), 1);
+        assert_eq!(kept.springs[0].stiffness, 5e4);
+        assert!(kept.validate("test").is_ok());
+    }
 
     /// A contact 3→2 on lanl8dof diagnosed, a quadratic 2–3 named beside
     /// it (as on a linear part the calibration biased): refined again
