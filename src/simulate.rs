@@ -119,8 +119,13 @@ pub fn input_history(spec: &RecordSpec) -> Result<Vec<f64>> {
 /// tangent at its largest stroke; at least [`CONTINUOUS_MIN`], at most
 /// [`crate::integrate::newmark::MAX_SUBSTEPS`].
 pub fn continuous_substeps(model: &Model, fs: f64, u: Option<&DMatrix<f64>>) -> usize {
-    let max = crate::integrate::newmark::MAX_SUBSTEPS;
-    crate::diagnose::auto_substeps(model, fs, CONTINUOUS_MIN, CONTINUOUS_OMEGA_H, max, u)
+    continuous_need(model, fs, u).min(crate::integrate::newmark::MAX_SUBSTEPS)
+}
+
+/// [`continuous_substeps`] without its upper bound: what the stiffest
+/// element asks for.
+pub fn continuous_need(model: &Model, fs: f64, u: Option<&DMatrix<f64>>) -> usize {
+    crate::diagnose::auto_substeps(model, fs, CONTINUOUS_MIN, CONTINUOUS_OMEGA_H, usize::MAX, u)
 }
 
 /// Target ω h of [`continuous_substeps`]: a period error `(ω h)²/12` of

@@ -10,17 +10,11 @@
 //! tenth of its level (the damping took its share), must be named and
 //! fitted near its level.
 
-use tacit::diagnose::{diagnose, DiagnoseSettings};
-use tacit::integrate::SimSettings;
-use tacit::model::{Contact, Cubic, Damping, Friction, Model};
-use tacit::record::Record;
-use tacit::simulate::{simulate_record, RecordSpec};
+mod diagnose_common;
 
-/// `data/lanl8dof.toml`.
-fn lanl() -> Model {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
-    Model::from_file(std::path::Path::new(p)).unwrap()
-}
+use diagnose_common::{assert_validation_at_noise, lanl, record};
+use tacit::diagnose::{diagnose, DiagnoseSettings, Diagnosis, EffectReport};
+use tacit::model::{Contact, Cubic, Damping, Friction, Model};
 
 /// The structure: lanl8dof with Rayleigh damping, 0.1 N of friction on
 /// every mass and a cubic spring 1–2.
@@ -56,27 +50,15 @@ fn declared() -> Model {
     m
 }
 
-fn record(m: &Model, seed: u64) -> Record {
-    let spec = RecordSpec {
-        samples: 4096,
-        sensors: (1..=8).collect(),
-        noise: 0.01,
-        seed,
-        settings: SimSettings {
-            substeps: 40,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    simulate_record(m, &spec).unwrap().0
-}
-
-#[test]
-fn friction_beside_a_cubic_is_not_taken_for_noise() {
-    let t = truth();
-    let (rec, val) = (record(&t, 779091), record(&t, 779092));
+/// The records of `truth` (seeds `seeds`: the record, the validation
+/// record; 4096 samples, every mass) diagnosed with `declared`; the
+/// verdict, errors and effects printed.
+fn diagnosed(declared: &Model, truth: &Model, seeds: (u64, u64)) -> Diagnosis {
+    let all: Vec<usize> = (1..=8).collect();
+    let rec = record(truth, &all, 4096, seeds.0);
+    let val = record(truth, &all, 4096, seeds.1);
     let settings = DiagnoseSettings::default();
-    let d = diagnose(&declared(), &rec, Some(&val), None, &settings, &|_| {}).unwrap();
+    let d = diagnose(declared, &rec, Some(&val), None, &settings, &|_| {}).unwrap();
     let noise = d.noise.as_ref().unwrap().level;
     let v = d.validation.as_ref().unwrap().after.relative_error.unwrap();
     eprintln!(
@@ -86,19 +68,27 @@ fn friction_beside_a_cubic_is_not_taken_for_noise() {
     for e in &d.effects {
         eprintln!("  {} {:?}", e.label, e.parameters);
     }
-    let find = |kind: &str| {
-        d.effects
-            .iter()
-            .find(|e| e.kind.name() == kind)
-            .unwrap_or_else(|| panic!("no {kind}: {}", d.verdict))
-    };
-    let cubic = find("cubic");
+    d
+}
+
+/// The effect of `kind` that `d` named.
+fn named<'a>(d: &'a Diagnosis, kind: &str) -> &'a EffectReport {
+    d.effects
+        .iter()
+        .find(|e| e.kind.name() == kind)
+        .unwrap_or_else(|| panic!("no {kind}: {}", d.verdict))
+}
+
+#[test]
+fn friction_beside_a_cubic_is_not_taken_for_noise() {
+    let d = diagnosed(&declared(), &truth(), (779091, 779092));
+    let cubic = named(&d, "cubic");
     assert_eq!(cubic.dofs, vec![1, 2]);
     let k3 = cubic.parameters["k3"];
     assert!((k3 / 3e12 - 1.0).abs() <= 0.1, "k3 {k3}");
-    let level = find("friction").parameters["level"];
+    let level = named(&d, "friction").parameters["level"];
     assert!((level / 0.1 - 1.0).abs() <= 0.1, "friction level {level}");
-    assert!(v <= 1.5 * noise, "validation {v} against noise {noise}");
+    assert_validation_at_noise(&d);
 }
 
 /// A bumper 7→6 (gap 0.4 mm, 1.5e6 N/m) on lanl8dof with 2 % modal
@@ -138,28 +128,11 @@ fn friction_beside_a_bumper_is_fitted_far_above_the_noise() {
         ratio: None,
         ratios: vec![0.0459, 0.0373, 0.0346, 0.0321, 0.0319, 0.0307, 0.0308],
     };
-    let (rec, val) = (record(&t, 314151), record(&t, 314152));
-    let settings = DiagnoseSettings::default();
-    let d = diagnose(&declared, &rec, Some(&val), None, &settings, &|_| {}).unwrap();
-    let noise = d.noise.as_ref().unwrap().level;
-    let v = d.validation.as_ref().unwrap().after.relative_error.unwrap();
-    eprintln!(
-        "{} | after {:?} | validation {v} | noise {noise}",
-        d.verdict, d.after.relative_error
-    );
-    for e in &d.effects {
-        eprintln!("  {} {:?}", e.label, e.parameters);
-    }
-    let find = |kind: &str| {
-        d.effects
-            .iter()
-            .find(|e| e.kind.name() == kind)
-            .unwrap_or_else(|| panic!("no {kind}: {}", d.verdict))
-    };
-    assert_eq!(find("contact").dofs, vec![7, 6]);
-    let f = find("friction");
+    let d = diagnosed(&declared, &t, (314151, 314152));
+    assert_eq!(named(&d, "contact").dofs, vec![7, 6]);
+    let f = named(&d, "friction");
     assert_eq!(f.dofs, (1..=8).collect::<Vec<_>>());
     let level = f.parameters["level"];
     assert!((0.1..=0.45).contains(&level), "friction level {level}");
-    assert!(v <= 1.5 * noise, "validation {v} against noise {noise}");
+    assert_validation_at_noise(&d);
 }

@@ -59,7 +59,7 @@ pub fn ground_spring(
     data: &[Data],
     settings: &CalibrationSettings,
 ) -> Result<Option<GroundSpring>> {
-    if linear.springs.iter().any(|s| s.dofs.len() == 1) || linear.springs.is_empty() {
+    if linear.has_ground_spring() || linear.springs.is_empty() {
         return Ok(None);
     }
     let held = CalibrationSettings {

@@ -399,21 +399,14 @@ fn load_model(a: &Args) -> anyhow::Result<(Model, Labelled)> {
     Ok((model, Some((sensors, input_dof))))
 }
 
-/// A warning when the default sub-steps stopped at the most allowed below
-/// what the stiffest element asks for.
+/// A warning when what the stiffest element asks for (at the strokes of
+/// `sim`) is beyond the most sub-steps allowed, at which the default ran.
 fn unresolved_warning(model: &Model, fs: f64, sim: &tacit::integrate::Simulation) {
-    let need = tacit::diagnose::auto_substeps(
-        model,
-        fs,
-        tacit::simulate::CONTINUOUS_MIN,
-        tacit::simulate::CONTINUOUS_OMEGA_H,
-        usize::MAX,
-        Some(&sim.u),
-    );
-    let used = sim.steps / sim.len().saturating_sub(1).max(1);
-    if need > used {
+    let need = tacit::simulate::continuous_need(model, fs, Some(&sim.u));
+    let most = tacit::integrate::newmark::MAX_SUBSTEPS;
+    if need > most {
         eprintln!(
-            "tacit: warning: the stiffest element asks for {need} sub-steps per sample (ω h ≤ {}); simulated at the most allowed, {used} (pass --substeps to choose)",
+            "tacit: warning: the stiffest element asks for {need} sub-steps per sample (ω h ≤ {}); simulated at the most allowed, {most} (pass --substeps to choose)",
             tacit::simulate::CONTINUOUS_OMEGA_H
         );
     }

@@ -218,12 +218,18 @@ pub fn diagnose_calibrated(
         },
         ..cal.clone()
     };
-    let calibrate_on = |on: Vec<&Record>| -> Result<Calibration> {
+    // what the linear part is calibrated on: the low-level records, or
+    // the record itself
+    let on: Vec<&Record> = match linear_records.is_empty() {
+        true => vec![rec],
+        false => linear_records.iter().collect(),
+    };
+    let data = on
+        .iter()
+        .map(|r| calibrate::data_of(r, declared.ndof(), sensors, 0))
+        .collect::<Result<Vec<_>>>()?;
+    let calibrate_on = || -> Result<Calibration> {
         progress("calibrate the linear part");
-        let data = on
-            .iter()
-            .map(|r| calibrate::data_of(r, declared.ndof(), sensors, 0))
-            .collect::<Result<Vec<_>>>()?;
         calibrate::calibrate(declared, &data, &cal.calibration)
     };
     // with low-level records the calibration comes first: when the
@@ -231,7 +237,7 @@ pub fn diagnose_calibrated(
     // diagnosis that trusts it cannot win and is not run
     let early = match linear_records.is_empty() {
         true => None,
-        false => Some(calibrate_on(linear_records.iter().collect())?),
+        false => Some(calibrate_on()?),
     };
     let off = early.as_ref().and_then(|c| declared_off(c, settings));
     // the declared model trusted, as the alternative the calibrated
@@ -263,7 +269,7 @@ pub fn diagnose_calibrated(
     }
     let calibration = match early {
         Some(c) => c,
-        None => calibrate_on(vec![rec])?,
+        None => calibrate_on()?,
     };
     // a calibration that absorbs a localized effect keeps the declared
     // values: the diagnosis on them is the trusted one
@@ -281,6 +287,7 @@ pub fn diagnose_calibrated(
     let ctx = Context {
         declared,
         low_level: !linear_records.is_empty(),
+        data: &data,
         rec,
         validation,
         sensors,
@@ -311,11 +318,7 @@ pub fn diagnose_calibrated(
     // a free-free declared model left above the noise: a spring to ground
     // it lacks gives the rigid-body mode a frequency that the calibration
     // of springs and damping cannot
-    let on: Vec<&Record> = match linear_records.is_empty() {
-        true => vec![rec],
-        false => linear_records.iter().collect(),
-    };
-    from_calibrated = ctx.ground_spring_alternative(from_calibrated, &on)?;
+    from_calibrated = ctx.ground_spring_alternative(from_calibrated)?;
     let Some(trusted) = trusted else {
         // linear values marked free, or the declared ones off on the
         // low-level records: the calibrated diagnosis is the only one
@@ -387,6 +390,9 @@ struct Context<'a> {
     /// The linear part was calibrated on low-level records (not biased by
     /// the effects on the record diagnosed).
     low_level: bool,
+    /// The calibration data of the records the linear part is calibrated
+    /// on (the low-level records, or the record itself).
+    data: &'a [calibrate::Data],
     rec: &'a Record,
     validation: Option<&'a Record>,
     sensors: Option<&'a [usize]>,
@@ -520,8 +526,8 @@ impl Context<'_> {
             },
             ..self.cal.calibration.clone()
         };
-        let data = calibrate::data_of(self.rec, self.declared.ndof(), self.sensors, 0)?;
-        let c = calibrate::calibrate(self.declared, &[data], &cs)?;
+        // (run without low-level records: `data` is the record's)
+        let c = calibrate::calibrate(self.declared, self.data, &cs)?;
         if !c.status.usable() {
             return Ok(current);
         }
@@ -541,7 +547,7 @@ impl Context<'_> {
     /// model is free-free (no spring to ground, springs of a lumped model,
     /// not marked free) and `current` is left above the noise with no
     /// spring or law against ground: the linear part `current` reached is
-    /// calibrated on `on` with a spring to ground at each DOF
+    /// calibrated on the linear part's data (`data`) with a spring to ground at each DOF
     /// ([`calibrate::grounding::ground_spring`]); the best one, with the
     /// damping calibrated beside it, is added as an effect and every
     /// parameter refined with the effects found ([`Self::refined`]); kept
@@ -553,30 +559,21 @@ impl Context<'_> {
     /// leaves can miss the spring's DOF (a contact 2→3 with a spring of
     /// 1500 N/m at 8: the force located at pair 2–3 only, the springs
     /// beside 5–6 taking part of it in the refinement).
-    fn ground_spring_alternative(
-        &self,
-        current: RefinedPath,
-        on: &[&Record],
-    ) -> Result<RefinedPath> {
-        use super::prepare::grounded;
+    fn ground_spring_alternative(&self, current: RefinedPath) -> Result<RefinedPath> {
         let d0 = &current.d;
-        let applies = !grounded(self.declared)
+        let applies = !self.declared.has_ground_spring()
             && self.declared.free.is_none()
             && !self.declared.calibrated_by_scales()
-            && !grounded(&d0.model)
+            && !d0.model.has_ground_spring()
             && super::ground::ground_laws(&d0.model).is_empty()
             && !self.at_noise(d0);
         if !applies {
             return Ok(current);
         }
         (self.progress)("calibrate a spring to ground at each DOF");
-        let data = on
-            .iter()
-            .map(|r| calibrate::data_of(r, self.declared.ndof(), self.sensors, 0))
-            .collect::<Result<Vec<_>>>()?;
         let linear = d0.model.linear_part();
         let cs = &self.cal.calibration;
-        let Some(g) = calibrate::grounding::ground_spring(&linear, &data, cs)? else {
+        let Some(g) = calibrate::grounding::ground_spring(&linear, self.data, cs)? else {
             return Ok(current);
         };
         let mut t = with_ground_spring(d0, &g);
@@ -940,7 +937,7 @@ fn own<'a>(model: &Model, base: &'a super::prepare::Prepared) -> Cow<'a, super::
 
 /// [`own`] when it differs from `base`.
 fn owned(model: &Model, base: &super::prepare::Prepared) -> Option<super::prepare::Prepared> {
-    if super::prepare::grounded(model) {
+    if model.has_ground_spring() {
         return None;
     }
     super::ground::corrected(model, base)

@@ -95,18 +95,33 @@ pub type Shot = (DMatrix<f64>, Vec<Segment>, Option<StartFit>);
 /// A model's multiple shooting, or why it failed.
 pub type ShotResult = std::result::Result<Shot, ShotError>;
 
+/// A refinement of the segments' start states ([`super::starts::refine`],
+/// [`super::starts::refine_both`]).
+pub(super) type Refine = fn(
+    &Comparison,
+    &Model,
+    SimSettings,
+    &[Segment],
+    usize,
+) -> (Vec<Segment>, DMatrix<f64>, StartFit);
+
 impl Comparison {
     /// Multiple-shooting predictions of `model` (p × N) with the start
     /// states refined for it ([`super::starts::refine`], when
     /// `starts.iterations > 0`), the segments used and the refinement; Err
     /// names a failed simulation.
     pub fn shoot(&self, model: &Model, sim: SimSettings) -> ShotResult {
+        self.shoot_by(model, sim, super::starts::refine)
+    }
+
+    /// [`Comparison::shoot`] with the start states refined by `refine`
+    /// (one of [`super::starts`]'s refinements).
+    pub(super) fn shoot_by(&self, model: &Model, sim: SimSettings, refine: Refine) -> ShotResult {
         if self.starts.iterations == 0 {
             let y = self.predict(model, &self.segments, sim)?;
             return Ok((y, self.segments.clone(), None));
         }
-        let (segs, y, fit) =
-            super::starts::refine(self, model, sim, &self.segments, self.starts.iterations);
+        let (segs, y, fit) = refine(self, model, sim, &self.segments, self.starts.iterations);
         if let Some(k) = (0..y.ncols()).find(|&k| y.column(k).iter().any(|v| v.is_nan())) {
             let segment = segs
                 .iter()
@@ -119,8 +134,21 @@ impl Comparison {
     /// Both errors of `model`, and its segment predictions (p × N; None
     /// when a segment simulation failed).
     pub fn errors(&self, model: &Model, sim: SimSettings) -> (ErrorSet, Option<DMatrix<f64>>) {
+        self.errors_by(model, sim, super::starts::refine)
+    }
+
+    /// [`Comparison::errors`] with the start states refined by `refine`.
+    pub(super) fn errors_by(
+        &self,
+        model: &Model,
+        sim: SimSettings,
+        refine: Refine,
+    ) -> (ErrorSet, Option<DMatrix<f64>>) {
         // the open-loop run is one long simulation: beside the segments'
-        let (shot, whole) = rayon::join(|| self.shoot(model, sim), || self.open_loop(model, sim));
+        let (shot, whole) = rayon::join(
+            || self.shoot_by(model, sim, refine),
+            || self.open_loop(model, sim),
+        );
         self.errors_with(shot, whole)
     }
 

@@ -712,10 +712,9 @@ pub(super) fn propose(
     ctx: &super::state::Context<'_>,
     st: &super::state::State,
 ) -> Option<RankedEffect> {
-    use super::prepare::grounded;
     let loc = ctx.prep.located.as_ref()?;
     let d = loc.directions.iter().find(|x| x.dofs.len() == 1)?.dofs[0] - 1;
-    if grounded(ctx.declared) || grounded(&st.current) {
+    if ctx.declared.has_ground_spring() || st.current.has_ground_spring() {
         return None;
     }
     if st.added.iter().any(|a| a.effect.candidate.dofs == [d]) {

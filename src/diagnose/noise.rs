@@ -223,9 +223,9 @@ fn channel_noise(
     assumed: f64,
     rms: f64,
 ) -> ChannelNoise {
-    let med = median(ratios);
+    let med = quantile(ratios, 0.5);
     let lines = input.measured.ncols() / 2 / ratios.len().max(1);
-    let level = lower_quartile(ratios) / quartile_of_white(ratios.len(), lines);
+    let level = quantile(ratios, 0.25) / quartile_of_white(ratios.len(), lines);
     let (worst, &max) = ratios
         .iter()
         .enumerate()
@@ -317,19 +317,21 @@ fn band_powers(x: &[f64], bands: usize) -> Vec<f64> {
     out
 }
 
-/// The lower quartile of the finite values of `x` (linear interpolation
-/// between order statistics at position `(n − 1) / 4`); NaN when none.
-fn lower_quartile(x: &[f64]) -> f64 {
-    let v = sorted_finite(x);
+/// The `q` quantile of the finite values of `x` (linear interpolation
+/// between order statistics at position `q (n − 1)`: the median at 0.5,
+/// the lower quartile at 0.25); NaN when none.
+fn quantile(x: &[f64], q: f64) -> f64 {
+    let mut v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
     if v.is_empty() {
         return f64::NAN;
     }
-    let q = 0.25 * (v.len() - 1) as f64;
-    let (i, t) = (q.floor() as usize, q.fract());
+    let at = q * (v.len() - 1) as f64;
+    let (i, t) = (at.floor() as usize, at.fract());
     v[i] * (1.0 - t) + v[(i + 1).min(v.len() - 1)] * t
 }
 
-/// The expected lower quartile ([`lower_quartile`]) of `bands` band ratios
+/// The expected lower quartile ([`quantile`] at 0.25) of `bands` band ratios
 /// of white noise over white noise, each band `lines` lines of a Hann
 /// periodogram. Adjacent Hann lines of white noise correlate at −2/3 in
 /// amplitude (4/9 in power), lines two apart at 1/6 (1/36), so a band's
@@ -396,26 +398,6 @@ fn normal_quantile(p: f64) -> f64 {
     }
 }
 
-/// The finite values of `x`, sorted.
-fn sorted_finite(x: &[f64]) -> Vec<f64> {
-    let mut v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
-    v.sort_by(f64::total_cmp);
-    v
-}
-
-fn median(x: &[f64]) -> f64 {
-    let v = sorted_finite(x);
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
-    } else {
-        0.5 * (v[m - 1] + v[m])
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -428,7 +410,7 @@ mod tests {
         let n = 4096;
         let noise: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut g)).collect();
         let white = band_powers(&noise, 16);
-        let m = median(&white);
+        let m = quantile(&white, 0.5);
         assert!(white.iter().all(|w| (w / m - 1.0).abs() < 0.4), "{white:?}");
         // 100 Hz at fs 512: band 100 / 16 = 6
         let sine: Vec<f64> = (0..n)
@@ -436,7 +418,7 @@ mod tests {
             .collect();
         let p = band_powers(&sine, 16);
         assert!(p[6] / m > 50.0, "{}", p[6] / m);
-        assert!((median(&p) / m - 1.0).abs() < 0.1);
+        assert!((quantile(&p, 0.5) / m - 1.0).abs() < 0.1);
     }
 
     /// The quartile of white-noise band ratios over white noise, by
@@ -452,7 +434,7 @@ mod tests {
                 || -> Vec<f64> { (0..n).map(|_| StandardNormal.sample(&mut g)).collect() };
             let (a, b) = (band_powers(&white(), bands), band_powers(&white(), bands));
             let r: Vec<f64> = a.iter().zip(&b).map(|(x, y)| x / y).collect();
-            sum += lower_quartile(&r).ln();
+            sum += quantile(&r, 0.25).ln();
         }
         let measured = (sum / trials as f64).exp();
         let predicted = quartile_of_white(bands, n / 2 / bands);
@@ -473,15 +455,15 @@ mod tests {
 
     #[test]
     fn lower_quartile_interpolates() {
-        assert_eq!(lower_quartile(&[4.0, 1.0, 3.0, 2.0, 5.0]), 2.0);
-        assert_eq!(lower_quartile(&[4.0, 1.0, 2.0, 3.0]), 1.75);
-        assert!(lower_quartile(&[]).is_nan());
+        assert_eq!(quantile(&[4.0, 1.0, 3.0, 2.0, 5.0], 0.25), 2.0);
+        assert_eq!(quantile(&[4.0, 1.0, 2.0, 3.0], 0.25), 1.75);
+        assert!(quantile(&[], 0.25).is_nan());
     }
 
     #[test]
     fn median_of_even_and_odd() {
-        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
-        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
-        assert!(median(&[]).is_nan());
+        assert_eq!(quantile(&[3.0, 1.0, 2.0], 0.5), 2.0);
+        assert_eq!(quantile(&[4.0, 1.0, 2.0, 3.0], 0.5), 2.5);
+        assert!(quantile(&[], 0.5).is_nan());
     }
 }

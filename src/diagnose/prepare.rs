@@ -532,11 +532,6 @@ fn measure_noise(
     noise::measure(&input, &settings.lifted_settings(), settings.noise.bands)
 }
 
-/// True when `model` has a spring from a DOF to ground.
-pub(super) fn grounded(model: &Model) -> bool {
-    model.springs.iter().any(|s| s.dofs.len() == 1)
-}
-
 /// The record prepared again for scoring `model` when it has a spring to
 /// ground and the declared model has none: the states are then
 /// reconstructed with `model`'s linear part (the directions located
@@ -560,10 +555,10 @@ pub(super) fn rescore_prep(
     located: Option<&locate::Located>,
     base: Option<&Prepared>,
 ) -> Result<Option<Prepared>> {
-    if grounded(declared) {
+    if declared.has_ground_spring() {
         return Ok(None);
     }
-    if grounded(model) {
+    if model.has_ground_spring() {
         return prepare_located(model, rec, sensors, settings, located).map(Some);
     }
     if super::ground::ground_laws(model).is_empty() {

@@ -15,7 +15,6 @@ use super::effects::{self, AddedEffect};
 use super::errors::Comparison;
 use super::joint;
 use super::outcome::BelowScreen;
-use super::prepare::grounded;
 use super::state::{add_time, add_to, Context, KeptEffect, State};
 use super::DiagnoseSettings;
 use crate::error::Result;
@@ -121,7 +120,9 @@ pub(super) fn choose(
         // linearized on the declared model's reconstruction its gain is
         // not seen, and with modal damping its derivative at zero is
         // infinite; the fit decides)
-        let own = grounded(&model) && !grounded(&st.current) && !grounded(ctx.declared);
+        let own = model.has_ground_spring()
+            && !st.current.has_ground_spring()
+            && !ctx.declared.has_ground_spring();
         if !screened && !own {
             if let Some((segs, sim)) = st.fitted.as_ref() {
                 let t = Instant::now();
@@ -173,7 +174,8 @@ pub(super) fn choose(
 /// had raised to take the friction (modal ratios +136 to +253 % against
 /// +100 %, error 3.3 % at 1.5 % measured noise), the friction on every
 /// mass was predicted to remove 2.5 % of the fit cost; fitted, it takes
-/// the error to 2.5 % and the refinement beside it to 0.99 %. The cost is one fit a round, in a loop of at most
+/// the error to 2.5 % and the refinement beside it to 0.99 %. The cost is
+/// one fit a round, in a loop of at most
 /// [`super::settings::ScreenSettings::max_effects`] rounds, and a
 /// candidate below the screen that is withdrawn ends the loop.
 fn with_damping_freed(eff: &AddedEffect, screen: f64, st: &State, ctx: &Context<'_>) -> f64 {

@@ -341,7 +341,7 @@ pub fn refine_both(
 
 /// Whether [`refine_both`] takes its second path for `model` on `cmp`
 /// with `iterations`.
-pub fn two_paths(cmp: &Comparison, model: &Model, iterations: usize) -> bool {
+fn two_paths(cmp: &Comparison, model: &Model, iterations: usize) -> bool {
     model.is_nonlinear()
         && iterations > 0
         && iterations < WEAKLY_OBSERVED_ITERATIONS

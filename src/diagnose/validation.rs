@@ -1,6 +1,6 @@
 //! The model found, scored on a validation record it was not fitted to.
 
-use super::errors::{error_simulations, Comparison, ErrorSet, ShotError, ShotResult};
+use super::errors::{error_simulations, Comparison, ErrorSet, ShotResult};
 use super::outcome::{DatumShift, Validation};
 use super::prepare::Prepared;
 use super::starts;
@@ -86,20 +86,7 @@ fn errors(
     model: &Model,
     sim: SimSettings,
 ) -> (ErrorSet, Option<nalgebra::DMatrix<f64>>) {
-    if !starts::two_paths(cmp, model, cmp.starts.iterations) {
-        return cmp.errors(model, sim);
-    }
-    let (segs, y, fit) = starts::refine_both(cmp, model, sim, &cmp.segments, cmp.starts.iterations);
-    let shot = match (0..y.ncols()).find(|&k| y.column(k).iter().any(|v| v.is_nan())) {
-        Some(k) => {
-            let segment = segs
-                .iter()
-                .position(|s| k >= s.start && k < s.start + s.len);
-            Err(ShotError::Segment { segment, sample: k })
-        }
-        None => Ok((y, segs, Some(fit))),
-    };
-    cmp.errors_of(model, sim, shot)
+    cmp.errors_by(model, sim, starts::refine_both)
 }
 
 /// The fitted model with the gaps of its contacts against ground that the

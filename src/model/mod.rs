@@ -333,6 +333,11 @@ impl Model {
         }
     }
 
+    /// True when a spring joins a DOF to ground.
+    pub fn has_ground_spring(&self) -> bool {
+        self.springs.iter().any(|s| s.dofs.len() == 1)
+    }
+
     /// Check every value; errors name the key (`spring[2].dofs`, ...).
     pub fn validate(&self, src: &str) -> Result<()> {
         let err = |m: String| Err(TacitError::model(src, m));

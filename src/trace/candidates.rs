@@ -292,8 +292,9 @@ pub fn spring_pairs(model: &Model) -> Vec<(usize, usize, usize)> {
 
 /// The candidate library for a model: contact on each spring-joined pair in
 /// both directions (and, for a model from matrices or one with a spring to
-/// ground, a stop against ground at each DOF), friction at each DOF and at all DOFs with one level, a
-/// cubic spring on each spring-joined pair and from each DOF to ground, a
+/// ground, a stop against ground at each DOF), friction at each DOF and at
+/// all DOFs with one level, a cubic spring on each spring-joined pair and
+/// from each DOF to ground, a
 /// stiffness change of each spring, a spring to ground at each DOF, a
 /// change of the viscous damping (when the model has damping); then a
 /// quadratic spring, a quadratic and a cubic damper on each spring-joined
@@ -311,8 +312,7 @@ pub fn library(model: &Model, has_damping: bool, vreg: f64) -> Vec<Candidate> {
     // against ground at each DOF too (a free-free lumped model's absolute
     // displacement drifts: its ground laws are screened apart,
     // `diagnose::ground`)
-    let grounded = model.springs.iter().any(|s| s.dofs.len() == 1);
-    if !model.points.is_empty() || grounded {
+    if !model.points.is_empty() || model.has_ground_spring() {
         for d in 0..n {
             out.push(Candidate::new(EffectKind::Contact, vec![d]));
         }
