@@ -110,7 +110,7 @@ pub fn per_mode(model: &Model) -> Result<Model> {
         let all = (0..nf)
             .map(|r| {
                 ratio
-                    .or_else(|| ratios.get(r).or(ratios.last()).copied())
+                    .or_else(|| crate::model::modal_ratio_index(r, ratios.len()).map(|i| ratios[i]))
                     .unwrap_or(0.0)
             })
             .collect();

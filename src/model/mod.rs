@@ -338,6 +338,13 @@ impl Model {
         self.springs.iter().any(|s| s.dofs.len() == 1)
     }
 
+    /// True when a spring or a nonlinear element joins a DOF to ground
+    /// (friction against ground included): the structure's rigid-body
+    /// momentum is then not conserved.
+    pub fn has_ground_element(&self) -> bool {
+        self.has_ground_spring() || elements::compile(self).iter().any(|e| e.ends().1.is_none())
+    }
+
     /// Check every value; errors name the key (`spring[2].dofs`, ...).
     pub fn validate(&self, src: &str) -> Result<()> {
         let err = |m: String| Err(TacitError::model(src, m));
@@ -662,7 +669,7 @@ pub fn damping_matrix(d: &Damping, m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result
                 }
                 let z = match ratio {
                     Some(z) => *z,
-                    None => *ratios.get(flex).or(ratios.last()).unwrap_or(&0.0),
+                    None => modal_ratio_index(flex, ratios.len()).map_or(0.0, |i| ratios[i]),
                 };
                 *dr = 2.0 * z * modes.omega[r];
                 flex += 1;
@@ -673,6 +680,12 @@ pub fn damping_matrix(d: &Damping, m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result
             Ok((&c + c.transpose()) * 0.5)
         }
     }
+}
+
+/// Which of `count` per-mode damping ratios the flexible mode `flex`
+/// (from 0) takes: its own, the last one beyond them, None without ratios.
+pub fn modal_ratio_index(flex: usize, count: usize) -> Option<usize> {
+    count.checked_sub(1).map(|last| flex.min(last))
 }
 
 /// Add a spring of stiffness `k` between `ends` into a stiffness matrix.
@@ -704,6 +717,20 @@ kind = "rayleigh"
 alpha = 0.1
 beta = 0.001
 "#;
+
+    #[test]
+    fn an_element_to_ground_of_any_kind_grounds_the_model() {
+        let free =
+            "name = \"free\"\nmasses = [1.0, 2.0]\n[[spring]]\ndofs = [1, 2]\nstiffness = 100.0\n";
+        let with = |extra: &str| Model::from_toml_str(&format!("{free}{extra}"), "t").unwrap();
+        assert!(!with("").has_ground_element());
+        let between = "[[relative_friction]]\ndofs = [1, 2]\nlevel = 0.1\n[[quadratic]]\ndofs = [2, 1]\nk2 = 1e6\n";
+        assert!(!with(between).has_ground_element());
+        let quadratic = with("[[quadratic]]\ndofs = [2]\nk2 = 1e6\n");
+        assert!(quadratic.has_ground_element() && !quadratic.has_ground_spring());
+        assert!(with("[[spring]]\ndofs = [1]\nstiffness = 5.0\n").has_ground_element());
+        assert!(with("[[friction]]\ndof = 2\nlevel = 0.1\n").has_ground_element());
+    }
 
     #[test]
     fn parses_and_assembles() {

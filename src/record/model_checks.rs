@@ -120,12 +120,8 @@ fn scale_finding(rec: &Record, model: &Model, s: &CheckSettings) -> Option<Findi
 /// of a model with no element to ground and no damping of its rigid
 /// motion, when every DOF the mode moves carries an accelerometer.
 fn balances(rec: &Record, model: &Model) -> Vec<Balance> {
-    let grounded = model.springs.iter().any(|s| s.dofs.len() < 2)
-        || model.contacts.iter().any(|c| c.dofs.len() < 2)
-        || !model.frictions.is_empty()
-        || model.cubics.iter().any(|c| c.dofs.len() < 2);
     let n = model.ndof();
-    if grounded || rec.inputs.iter().chain(&rec.outputs).any(|c| c.dof > n) {
+    if model.has_ground_element() || rec.inputs.iter().chain(&rec.outputs).any(|c| c.dof > n) {
         return vec![];
     }
     let (m, k) = (model.mass_matrix(), model.stiffness_matrix());
@@ -241,6 +237,17 @@ mod tests {
         let found = warnings(&rec, &model, None).unwrap();
         let b = found.iter().find(|f| f.kind == Kind::Momentum).unwrap();
         assert_eq!(b.channel.as_deref(), Some("accel_6"), "{b:?}");
+    }
+
+    #[test]
+    fn a_model_with_any_element_to_ground_has_no_momentum_balance() {
+        let (rec, mut model) = bumper();
+        assert_eq!(balances(&rec, &model).len(), 1);
+        model.quadratics.push(crate::model::Quadratic {
+            dofs: vec![8],
+            k2: 1e6,
+        });
+        assert!(balances(&rec, &model).is_empty());
     }
 
     #[test]

@@ -412,7 +412,7 @@ fn modal_parts(m: &DMatrix<f64>, k: &DMatrix<f64>, ratios: &[f64]) -> Vec<DMatri
     let mut parts = vec![DMatrix::zeros(n, n); ratios.len()];
     let flexible = (0..modes.omega.len()).filter(|&r| !modes.rigid[r]);
     for (flex, r) in flexible.enumerate() {
-        let Some(i) = ratios.len().checked_sub(1).map(|last| flex.min(last)) else {
+        let Some(i) = crate::model::modal_ratio_index(flex, ratios.len()) else {
             break;
         };
         let v = mphi.column(r);
