@@ -26,6 +26,8 @@ use nalgebra::{DMatrix, DMatrixView};
 mod dense;
 mod sensitivity;
 mod stability;
+#[cfg(target_arch = "x86_64")]
+use dense::Lanes;
 use dense::{chol_solve, cholesky_in_place, dim, lu_solve, mat_vec_axpy, max_abs};
 pub use sensitivity::{ElementSeed, ParamSeed, Seeds, Sensitivities, Tape};
 use serde::Serialize;
@@ -519,19 +521,33 @@ impl Integrator {
         ws: &mut Work,
         sub: usize,
     ) -> std::result::Result<usize, (usize, f64)> {
+        // SAFETY: each copy runs only where the CPU has its features
+        // (detected at run time by `dense::lanes`)
         #[cfg(target_arch = "x86_64")]
-        if dense::wide() {
-            // SAFETY: the CPU has AVX2 (checked at run time)
-            return unsafe { self.advance_avx2::<N>(ws, sub) };
+        match dense::lanes() {
+            Lanes::Eight => return unsafe { self.advance_avx512::<N>(ws, sub) },
+            Lanes::Four => return unsafe { self.advance_avx2::<N>(ws, sub) },
+            Lanes::Two => {}
         }
         self.advance_body::<N>(ws, sub)
     }
 
     /// [`Integrator::advance`] compiled for AVX2 (the same operations in
-    /// the same order, so the same bits; see [`dense::wide`]).
+    /// the same order, so the same bits; see [`dense::Lanes`]).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn advance_avx2<const N: usize>(
+        &self,
+        ws: &mut Work,
+        sub: usize,
+    ) -> std::result::Result<usize, (usize, f64)> {
+        self.advance_body::<N>(ws, sub)
+    }
+
+    /// [`Integrator::advance`] compiled for AVX-512 (the same bits).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,avx512f")]
+    fn advance_avx512<const N: usize>(
         &self,
         ws: &mut Work,
         sub: usize,

@@ -20,15 +20,43 @@ pub(super) fn dim<const N: usize>(n: usize) -> usize {
     }
 }
 
-/// True when the CPU runs AVX2 (x86-64, detected once and cached): the
-/// Newton iterations and the derivative steps then run a copy compiled
-/// for it, with four lanes where the baseline has two. Rust never fuses
-/// a product and a sum on its own and keeps the order of every sum, so
-/// the copy performs the same operations as the baseline: the same bits.
-#[cfg(target_arch = "x86_64")]
+/// The vector width the Newton iterations and the derivative steps run
+/// at: a copy of each compiled for AVX-512 (eight lanes) or AVX2 (four)
+/// when the CPU runs it (x86-64, detected at run time), else the baseline
+/// (two). Rust never fuses a product and a sum on its own and keeps the
+/// order of every sum, so every copy performs the same operations as the
+/// baseline: the same bits (test
+/// `every_vector_width_gives_the_same_bits`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Lanes {
+    Two,
+    Four,
+    Eight,
+}
+
+#[cfg(test)]
+thread_local! {
+    /// A width forced on this thread (tests of the copies).
+    pub(crate) static FORCED: std::cell::Cell<Option<Lanes>> = const { std::cell::Cell::new(None) };
+}
+
+/// The widest copy the CPU runs ([`Lanes`]).
 #[inline(always)]
-pub(super) fn wide() -> bool {
-    std::arch::is_x86_feature_detected!("avx2")
+pub(crate) fn lanes() -> Lanes {
+    #[cfg(test)]
+    if let Some(l) = FORCED.with(|f| f.get()) {
+        return l;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            return Lanes::Eight;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return Lanes::Four;
+        }
+    }
+    Lanes::Two
 }
 
 /// y += s A x (A column-major n×n).

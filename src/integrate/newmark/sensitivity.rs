@@ -52,6 +52,8 @@
 //! point, not as the explicit predictor. At a contact's switching point
 //! itself (`δ = gap` exactly) the open side is used.
 
+#[cfg(target_arch = "x86_64")]
+use super::dense::Lanes;
 use super::dense::{chol_solve, cholesky_in_place, dim, mat_vec, mat_vec_axpy};
 use super::{Integrator, OperatorCache, Outputs, SimStatus, Simulation, Work};
 use crate::error::{Result, TacitError};
@@ -604,20 +606,38 @@ impl Integrator {
         prep: &[Prepared],
         powers: Option<&[f64]>,
     ) -> bool {
+        // SAFETY: each copy runs only where the CPU has its features
+        // (detected at run time by `dense::lanes`)
         #[cfg(target_arch = "x86_64")]
-        if super::dense::wide() {
-            // SAFETY: the CPU has AVX2 (checked at run time)
-            return unsafe { self.sensitivity_step_avx2::<N>(ws, sw, prep, powers) };
+        match super::dense::lanes() {
+            Lanes::Eight => {
+                return unsafe { self.sensitivity_step_avx512::<N>(ws, sw, prep, powers) }
+            }
+            Lanes::Four => return unsafe { self.sensitivity_step_avx2::<N>(ws, sw, prep, powers) },
+            Lanes::Two => {}
         }
         self.sensitivity_step_body::<N>(ws, sw, prep, powers)
     }
 
     /// [`Integrator::sensitivity_step`] compiled for AVX2 (the same
     /// operations in the same order, so the same bits; see
-    /// [`super::dense::wide`]).
+    /// [`super::dense::Lanes`]).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn sensitivity_step_avx2<const N: usize>(
+        &self,
+        ws: &Work,
+        sw: &mut SensWork,
+        prep: &[Prepared],
+        powers: Option<&[f64]>,
+    ) -> bool {
+        self.sensitivity_step_body::<N>(ws, sw, prep, powers)
+    }
+
+    /// [`Integrator::sensitivity_step`] compiled for AVX-512 (the same bits).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,avx512f")]
+    fn sensitivity_step_avx512<const N: usize>(
         &self,
         ws: &Work,
         sw: &mut SensWork,
@@ -980,19 +1000,29 @@ impl Integrator {
 /// Advance seed `j` over its pending sub-steps (`powers` from
 /// [`Integrator::linear_powers`]).
 fn flush_seed(powers: &[f64], n: usize, j: usize, sw: &mut SensWork) {
+    // SAFETY: each copy runs only where the CPU has its features
+    // (detected at run time by `dense::lanes`)
     #[cfg(target_arch = "x86_64")]
-    if super::dense::wide() {
-        // SAFETY: the CPU has AVX2 (checked at run time)
-        return unsafe { flush_seed_avx2(powers, n, j, sw) };
+    match super::dense::lanes() {
+        Lanes::Eight => return unsafe { flush_seed_avx512(powers, n, j, sw) },
+        Lanes::Four => return unsafe { flush_seed_avx2(powers, n, j, sw) },
+        Lanes::Two => {}
     }
     flush_seed_body(powers, n, j, sw)
 }
 
 /// [`flush_seed`] compiled for AVX2 (the same bits; see
-/// [`super::dense::wide`]).
+/// [`super::dense::Lanes`]).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn flush_seed_avx2(powers: &[f64], n: usize, j: usize, sw: &mut SensWork) {
+    flush_seed_body(powers, n, j, sw)
+}
+
+/// [`flush_seed`] compiled for AVX-512 (the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f")]
+fn flush_seed_avx512(powers: &[f64], n: usize, j: usize, sw: &mut SensWork) {
     flush_seed_body(powers, n, j, sw)
 }
 

@@ -846,3 +846,56 @@ fn a_tape_cut_to_a_segment_replays_the_segment_bit_for_bit() {
     assert_eq!(carried.u.column(200), longer.u.column(200));
     assert_eq!(carried.v.column(200), longer.v.column(200));
 }
+
+#[test]
+fn every_vector_width_gives_the_same_bits() {
+    use crate::integrate::newmark::dense::{Lanes, FORCED};
+    let mut widths = vec![Lanes::Two];
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            widths.push(Lanes::Four);
+        }
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            widths.push(Lanes::Eight);
+        }
+    }
+    // the bumper alone (open stretches batched, seeds flushed) and with
+    // friction at DOF 3 (a Newton iteration every sub-step)
+    let bumper = lanl(true);
+    let mut rubbing = lanl(true);
+    rubbing.frictions = vec![Friction {
+        dof: 3,
+        level: 0.3,
+        velocity: 1e-3,
+    }];
+    let f = shaker(300, 40.0);
+    let (u0, v0) = ([0.0; 8], [0.0; 8]);
+    for model in [bumper, rubbing] {
+        let seeds = Seeds {
+            state: DMatrix::identity(16, 16),
+            params: vec![seed(&model, P::Gap(0)), seed(&model, P::Spring(4))],
+        };
+        let runs: Vec<_> = widths
+            .iter()
+            .map(|&w| {
+                FORCED.with(|c| c.set(Some(w)));
+                let integ = Integrator::new(&model, 512.0, SimSettings::default()).unwrap();
+                let run = integ
+                    .run_sensitivities(f.as_view(), &u0, &v0, &seeds)
+                    .unwrap();
+                FORCED.with(|c| c.set(None));
+                run
+            })
+            .collect();
+        let (sim, d) = &runs[0];
+        assert!(
+            sim.fint.row(4).iter().any(|&x| x != 0.0),
+            "the contact never closed"
+        );
+        for (w, (sim_w, d_w)) in widths.iter().zip(&runs).skip(1) {
+            assert_eq!(sim.a, sim_w.a, "{w:?}");
+            assert_eq!((&d.du, &d.dv, &d.da), (&d_w.du, &d_w.dv, &d_w.da), "{w:?}");
+        }
+    }
+}
