@@ -284,9 +284,14 @@ pub fn diagnose_calibrated(
             progress,
         )?,
     };
+    let (low_level, low_level_note) = match linear_records.is_empty() {
+        true => (false, None),
+        false => held(&calibration, &d, settings),
+    };
     let ctx = Context {
         declared,
-        low_level: !linear_records.is_empty(),
+        low_level,
+        low_level_note,
         data: &data,
         rec,
         validation,
@@ -351,6 +356,29 @@ pub fn diagnose_calibrated(
 /// diagnosis at the noise is 1.5 × the measured level).
 const AT_NOISE: f64 = 1.5;
 
+/// Whether the linear part calibrated on low-level records is trusted
+/// as one not biased by the effects: when the calibration explains them
+/// up to the noise (its output error at most [`AT_NOISE`] times the noise
+/// level measured on the record diagnosed, `d`'s). Low-level records
+/// with an effect of their own (friction everywhere: a stick–slip no
+/// linear model reproduces) bias it as the record itself would; it is
+/// then refined with the effects like a calibration on the record (the
+/// note says so). When the low-level records are relatively noisier than
+/// the record (absolute noise at a lower level), the rule errs towards
+/// refining.
+fn held(c: &Calibration, d: &Diagnosis, settings: &DiagnoseSettings) -> (bool, Option<String>) {
+    let level = d.noise_level(settings);
+    if c.error_after <= AT_NOISE * level {
+        return (true, None);
+    }
+    let note = format!(
+        "the linear part calibrated on the low-level records leaves {} on them (> {AT_NOISE} × the record's measured noise {}): not held, refined with the effects",
+        pct(Some(c.error_after)),
+        pct(Some(level))
+    );
+    (false, Some(note))
+}
+
 /// Why the declared linear part cannot win, when the calibration on the
 /// low-level records says so: its output error there exceeds the noise
 /// floor ([`DiagnoseSettings::noise_floor`]) and twice the calibrated
@@ -387,9 +415,12 @@ struct RefinedPath {
 /// The inputs of the calibrated diagnosis its steps share.
 struct Context<'a> {
     declared: &'a Model,
-    /// The linear part was calibrated on low-level records (not biased by
-    /// the effects on the record diagnosed).
+    /// The linear part was calibrated on low-level records that it
+    /// explains up to the noise ([`held`]: not biased by the effects on
+    /// the record diagnosed).
     low_level: bool,
+    /// Why a calibration on low-level records is not held ([`held`]).
+    low_level_note: Option<String>,
     /// The calibration data of the records the linear part is calibrated
     /// on (the low-level records, or the record itself).
     data: &'a [calibrate::Data],
@@ -732,7 +763,11 @@ impl Context<'_> {
                 vec![],
             )
         } else {
-            refine_once(&mut d, self.cal, self.settings, &bases, self.progress)?
+            let (n, std) = refine_once(&mut d, self.cal, self.settings, &bases, self.progress)?;
+            match &self.low_level_note {
+                Some(why) => (format!("{why}; {n}"), std),
+                None => (n, std),
+            }
         };
         if self.cal.open_loop {
             let vprep = bases.validation.as_ref().map(|v| own(&d.model, v));

@@ -261,6 +261,16 @@ impl Target {
         }
     }
 
+    /// Physical upper limit of the quantity: a damping ratio stays below
+    /// critical damping ([`RATIO_CEILING`]; the model accepts ratios in
+    /// [0, 1)); `None` for every other quantity.
+    pub fn physical_ceiling(&self) -> Option<f64> {
+        match self {
+            Target::DampingRatio | Target::ModalRatio(_) => Some(RATIO_CEILING),
+            _ => None,
+        }
+    }
+
     /// True when the value must be strictly positive.
     fn strictly_positive(&self) -> bool {
         matches!(
@@ -339,6 +349,9 @@ pub struct Parameter {
     pub scaling: Scaling,
 }
 
+/// The largest damping ratio a fit may reach ([`Target::physical_ceiling`]).
+pub const RATIO_CEILING: f64 = 0.999;
+
 /// Default relative bounds: the parameter may move from −95 % to +900 % of
 /// its nominal value (and never below its physical floor).
 pub const DEFAULT_RELATIVE_BOUNDS: (f64, f64) = (-0.95, 9.0);
@@ -361,13 +374,16 @@ impl Parameter {
         if let Some(f) = target.physical_floor() {
             lower = lower.max(f);
         }
+        let upper = target
+            .physical_ceiling()
+            .map_or(a.max(b), |c| a.max(b).min(c));
         Ok(Parameter {
             target,
             name,
             nominal: p0,
             start: p0,
             lower,
-            upper: a.max(b),
+            upper,
             scaling: Scaling::Relative,
         })
     }
@@ -402,6 +418,9 @@ impl Parameter {
         self.upper = a.max(b);
         if let Some(f) = self.target.physical_floor() {
             self.lower = self.lower.max(f);
+        }
+        if let Some(c) = self.target.physical_ceiling() {
+            self.upper = self.upper.min(c);
         }
         self
     }
@@ -488,6 +507,14 @@ impl Parameter {
                 return err(format!(
                     "nominal {} / lower bound {}: the value must stay {rule}",
                     self.nominal, self.lower
+                ));
+            }
+        }
+        if let Some(c) = self.target.physical_ceiling() {
+            if self.upper > c {
+                return err(format!(
+                    "upper bound {}: a damping ratio must stay at most {c}",
+                    self.upper
                 ));
             }
         }
@@ -707,6 +734,29 @@ k3 = 1e6
             .to_string()
             .contains("0 contacts"));
         assert!(parse_free("zeta", &m).is_err());
+    }
+
+    #[test]
+    fn a_damping_ratio_stays_below_critical() {
+        let mut m = chain();
+        m.damping = Damping::Modal {
+            ratio: None,
+            ratios: vec![0.3, 0.02],
+        };
+        let p = Parameter::relative(&m, Target::ModalRatio(0)).unwrap();
+        approx::assert_relative_eq!(p.lower, 0.015, epsilon = 1e-15);
+        assert_eq!(p.upper, RATIO_CEILING);
+        let wide = p.clone().with_relative_bounds(-0.99, 20.0);
+        assert_eq!(wide.upper, RATIO_CEILING);
+        let q = Parameter::relative(&m, Target::ModalRatio(1)).unwrap();
+        approx::assert_relative_eq!(q.upper, 0.2);
+        let mut over = p;
+        over.upper = 1.5;
+        assert!(over
+            .validate(&m)
+            .unwrap_err()
+            .to_string()
+            .contains("at most 0.999"));
     }
 
     #[test]
