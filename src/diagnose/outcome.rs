@@ -317,6 +317,11 @@ pub enum Decision {
         after: Option<f64>,
         /// When it came in below the screen.
         below: Option<BelowScreen>,
+        /// The Gauss–Newton iterations of the start states the errors were
+        /// scored on when the loop's own scoring withdrew it and the
+        /// converged one did not ([`super::StartSettings::confirm_iterations`];
+        /// None: kept on the loop's own scoring).
+        confirmed: Option<usize>,
     },
     /// The effect is withdrawn.
     Withdrawn {
@@ -327,6 +332,9 @@ pub enum Decision {
         /// The effects found, as refitted beside it, kept instead: error
         /// before and after.
         refit_kept: Option<(Option<f64>, Option<f64>)>,
+        /// The Gauss–Newton iterations of the start states the withdrawal
+        /// was confirmed on (None: on the loop's own scoring alone).
+        confirmed: Option<usize>,
     },
 }
 

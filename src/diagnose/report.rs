@@ -796,16 +796,19 @@ pub fn note(d: &Decision) -> String {
             before,
             after,
             below,
+            confirmed,
         } => format!(
-            "kept: multiple-shooting error {} → {}{}",
+            "kept: multiple-shooting error {} → {}{}{}",
             p4(*before),
             p4(*after),
+            on_converged(*confirmed),
             why(below)
         ),
         Decision::Withdrawn {
             reason,
             below,
             refit_kept,
+            confirmed,
         } => {
             let mut s = match reason {
                 WithdrawReason::NotItself { without, with, need } => format!(
@@ -827,6 +830,7 @@ pub fn note(d: &Decision) -> String {
                     why(below)
                 ),
             };
+            s = format!("{s}{}", on_converged(*confirmed));
             if let Some((a, w)) = refit_kept {
                 s = format!(
                     "{s}; the effects found, as refitted beside it, are kept: multiple-shooting error {} → {}",
@@ -837,6 +841,14 @@ pub fn note(d: &Decision) -> String {
             s
         }
     }
+}
+
+/// The words for errors scored on start states refined by `iterations`
+/// Gauss–Newton iterations to judge a withdrawal (empty when not).
+fn on_converged(iterations: Option<usize>) -> String {
+    iterations.map_or(String::new(), |n| {
+        format!(" (judged on start states refined by {n} Gauss–Newton iterations)")
+    })
 }
 
 /// How a round's fit ended, with the cubic alternative when one was tried.

@@ -192,6 +192,27 @@ impl<'a> Context<'a> {
         let error = shot.as_ref().ok().map(|y| self.cmp().total_error(&y.0));
         (Scored { own, shot, error }, n)
     }
+
+    /// A model's multiple-shooting error on the record with the start
+    /// states refined by `iterations` Gauss–Newton iterations
+    /// ([`super::starts::refine`]; from its own reconstruction when it
+    /// needs one), and the simulations run; None when a segment's
+    /// prediction is not finite.
+    pub fn shoot_error(
+        &self,
+        model: &Model,
+        sim: SimSettings,
+        iterations: usize,
+    ) -> (Option<f64>, usize) {
+        let own = self.own_prep(model, self.rec);
+        let cmp = own.as_ref().map_or(self.cmp(), |p| &p.comparison);
+        let (_, y, fit) = super::starts::refine(cmp, model, sim, &cmp.segments, iterations);
+        // as [`Comparison::shoot`]: a segment not predicted fails it
+        let failed = y.iter().any(|v| v.is_nan());
+        let error = self.cmp().total_error(&y);
+        let error = (!failed && error.is_finite()).then_some(error);
+        (error, fit.simulations)
+    }
 }
 
 /// The current model with `best` added at its traced values, its
