@@ -116,6 +116,13 @@ pub struct CalibratedSettings {
     /// ends in a linear part still far from it, from which the next
     /// round's diagnosis fits the effects better).
     pub max_rounds: usize,
+    /// After the joint refinement, when the record measures fewer DOFs
+    /// than the model has and the refined model with a contact or
+    /// clearance is left above the noise (1.5 × its noise level), search
+    /// each element's gap and stiffness along lines, every trial scored on
+    /// start states refined for it ([`super::gap_search`]), and refine
+    /// jointly again from the best (default true).
+    pub gap_search: bool,
 }
 
 impl Default for CalibratedSettings {
@@ -131,6 +138,7 @@ impl Default for CalibratedSettings {
             open_loop_iterations: 40,
             rounds: 2,
             max_rounds: 4,
+            gap_search: true,
         }
     }
 }
@@ -1065,6 +1073,9 @@ fn refine(
             best = long;
         }
     }
+    if let Some(n) = gap_searched(d, base, &mut best, cs, (settings, progress))? {
+        note = format!("{note}; {n}");
+    }
     let (problem, refined, segments, after, pred, prepared) = best;
     if !lower(after.relative_error, d.after.relative_error) {
         return Ok(Refined::NotKept(format!("{note}; not kept")));
@@ -1209,6 +1220,68 @@ fn long_stage(
         (problem, refined, jf.segments, after, pred, prepared),
         note,
     )))
+}
+
+/// The gap search ([`super::gap_search`]) from `at`'s model when
+/// [`CalibratedSettings::gap_search`] and it applies, `at` left above the
+/// noise; then the joint refinement again from the best point on the
+/// start states refined for it ([`more_passes`]). `at` becomes the result
+/// when its multiple-shooting error on the record is lower. None when the
+/// search did not run.
+fn gap_searched(
+    d: &Diagnosis,
+    base: &super::prepare::Prepared,
+    at: &mut Stage,
+    cs: &CalibratedSettings,
+    (settings, progress): (&DiagnoseSettings, &dyn Fn(&str)),
+) -> Result<Option<String>> {
+    let cmp =
+        at.5.as_ref()
+            .map_or(&d.prepared.comparison, |p| &p.comparison);
+    let level = d.noise_level(settings);
+    let at_noise = at.3.relative_error.is_some_and(|e| e <= AT_NOISE * level);
+    if !cs.gap_search || at_noise || !super::gap_search::applies(cmp, &at.1) {
+        return Ok(None);
+    }
+    let sim = sim_of(d);
+    progress("search the gaps and stiffnesses");
+    let Some(s) = super::gap_search::search(cmp, &at.1, sim, AT_NOISE * level) else {
+        return Ok(None);
+    };
+    let mut note = format!(
+        "gap search over {} models: multiple-shooting error {} → {}",
+        s.trials,
+        pct(Some(s.error.1)),
+        pct(Some(s.error.0))
+    );
+    if s.error.0 >= s.error.1 {
+        return Ok(Some(format!("{note}: nothing lower")));
+    }
+    let prepared = owned(&s.model, base);
+    let own_cmp = prepared
+        .as_ref()
+        .map_or(&d.prepared.comparison, |p| &p.comparison);
+    let (starts, after, pred) = scored(own_cmp, &s.model, sim);
+    let mut searched: Stage = (
+        at.0.clone(),
+        s.model,
+        spread(&starts, cs.refine_segments),
+        after,
+        pred,
+        prepared,
+    );
+    progress("joint refinement from the searched model");
+    let (_, n) = more_passes(d, base, &mut searched, starts, cs, settings)?;
+    if let Some(n) = n {
+        note = format!("{note}; {n}");
+    }
+    if lower(searched.3.relative_error, at.3.relative_error) {
+        *at = searched;
+        note = format!("{note}: kept");
+    } else {
+        note = format!("{note}: not kept");
+    }
+    Ok(Some(note))
 }
 
 /// The joint refinement of `model`'s linear parameters and `d`'s effects
