@@ -59,6 +59,7 @@ pub mod effects;
 pub mod errors;
 mod figures;
 mod fit;
+pub mod gap_search;
 pub mod ground;
 pub mod interface;
 pub mod joint;

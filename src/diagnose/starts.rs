@@ -339,6 +339,12 @@ pub fn refine_both(
     better_of(cmp, a, b)
 }
 
+/// Whether the record measures fewer distinct DOFs than `model` has
+/// ([`sweep::weakly_observed`]).
+pub(super) fn weakly_observed(cmp: &Comparison, model: &Model) -> bool {
+    sweep::weakly_observed(cmp, model)
+}
+
 /// Whether [`refine_both`] takes its second path for `model` on `cmp`
 /// with `iterations`.
 fn two_paths(cmp: &Comparison, model: &Model, iterations: usize) -> bool {
