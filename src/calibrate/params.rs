@@ -189,11 +189,15 @@ pub fn select(model: &Model, freedom: &Freedom) -> Vec<LinearParam> {
     out
 }
 
-/// `model` with every parameter at `p_0 e^{q}`.
+/// `model` with every parameter at `p_0 e^{q}`, a damping ratio at most
+/// its ceiling ([`Target::physical_ceiling`]: below critical; the log
+/// parameter is unbounded above).
 pub fn apply(model: &Model, params: &[LinearParam], p0: &[f64], q: &[f64]) -> Model {
     let mut m = model.clone();
     for ((p, v0), qi) in params.iter().zip(p0).zip(q) {
-        p.set(&mut m, v0 * qi.exp());
+        let v = v0 * qi.exp();
+        let v = p.target().physical_ceiling().map_or(v, |c| v.min(c));
+        p.set(&mut m, v);
     }
     m
 }

@@ -189,24 +189,26 @@ impl Target {
         match *self {
             Target::SpringStiffness(i) => model.springs[i].stiffness = value,
             Target::Mass(i) => model.masses[i] = value,
+            // every ratio below critical (RATIO_CEILING): a mean within
+            // its bounds may scale the largest of several past it
             Target::DampingRatio => match &mut model.damping {
-                Damping::Modal { ratio: Some(z), .. } => *z = value,
+                Damping::Modal { ratio: Some(z), .. } => *z = value.min(RATIO_CEILING),
                 Damping::Modal {
                     ratio: None,
                     ratios,
                 } if !ratios.is_empty() => {
                     let mean = mean_ratio(ratios);
                     let f = if mean > 0.0 { value / mean } else { 0.0 };
-                    ratios
-                        .iter_mut()
-                        .for_each(|z| *z = if mean > 0.0 { *z * f } else { value });
+                    ratios.iter_mut().for_each(|z| {
+                        *z = if mean > 0.0 { *z * f } else { value }.min(RATIO_CEILING)
+                    });
                 }
                 _ => {}
             },
             Target::ModalRatio(r) => {
                 if let Damping::Modal { ratios, .. } = &mut model.damping {
                     if let Some(z) = ratios.get_mut(r) {
-                        *z = value;
+                        *z = value.min(RATIO_CEILING);
                     }
                 }
             }
@@ -750,6 +752,15 @@ k3 = 1e6
         assert_eq!(wide.upper, RATIO_CEILING);
         let q = Parameter::relative(&m, Target::ModalRatio(1)).unwrap();
         approx::assert_relative_eq!(q.upper, 0.2);
+        // a mean within its bounds scales the largest ratio no further
+        // than critical
+        let mut all = m.clone();
+        Target::DampingRatio.set(&mut all, 0.6);
+        let Damping::Modal { ratios, .. } = &all.damping else {
+            panic!("modal")
+        };
+        assert_eq!(ratios[0], RATIO_CEILING);
+        approx::assert_relative_eq!(ratios[1], 0.02 * 0.6 / 0.16, epsilon = 1e-15);
         let mut over = p;
         over.upper = 1.5;
         assert!(over
