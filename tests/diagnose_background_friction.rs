@@ -12,18 +12,22 @@
 
 mod diagnose_common;
 
-use diagnose_common::{assert_validation_at_noise, imperfect_with, lanl, record};
-use tacit::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
+use diagnose_common::{
+    assert_validation_at_noise, calibrated_without_linear_record, imperfect_with, lanl,
+    matrix_record, record,
+};
 use tacit::diagnose::{diagnose, Decision, DiagnoseSettings, Diagnosis, EffectReport};
-use tacit::integrate::SimSettings;
 use tacit::model::{Contact, Cubic, Damping, Friction, Model};
-use tacit::record::Record;
-use tacit::simulate::{simulate_record, RecordSpec};
 
 /// The structure: lanl8dof with Rayleigh damping, 0.1 N of friction on
 /// every mass and a cubic spring 1–2.
 fn truth() -> Model {
-    let mut m = lanl();
+    with_friction_and_cubic(lanl())
+}
+
+/// `m` with Rayleigh damping (3 s⁻¹, 4e-5 s), 0.1 N of friction on every
+/// mass and a cubic spring 1–2 of 3e12 N/m³.
+fn with_friction_and_cubic(mut m: Model) -> Model {
     m.damping = Damping::Rayleigh {
         alpha: 3.0,
         beta: 4e-5,
@@ -156,50 +160,11 @@ fn friction_beside_a_bumper_is_fitted_far_above_the_noise() {
 #[test]
 fn friction_beside_a_cubic_is_judged_on_converged_start_states() {
     let seed = 15833;
-    let mut truth = imperfect_with(seed + 8, 0.03, 0.0);
-    truth.damping = Damping::Rayleigh {
-        alpha: 3.0,
-        beta: 4e-5,
-    };
-    truth.frictions = (1..=8)
-        .map(|d| Friction {
-            dof: d,
-            level: 0.1,
-            velocity: 1e-3,
-        })
-        .collect();
-    truth.cubics = vec![Cubic {
-        dofs: vec![1, 2],
-        k3: 3e12,
-    }];
-    let continuous = |seed: u64| -> Record {
-        let spec = RecordSpec {
-            samples: 4096,
-            sensors: (1..=8).collect(),
-            noise: 0.01,
-            seed,
-            settings: SimSettings {
-                substeps: 400,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
-        simulate_record(&truth, &spec).unwrap().0
-    };
-    let (rec, val) = (continuous(seed * 10 + 1), continuous(seed * 10 + 2));
-    let settings = DiagnoseSettings::default();
-    let cal = CalibratedSettings::default();
-    let d = diagnose_calibrated(
-        &lanl(),
-        &rec,
-        Some(&val),
-        &[],
-        None,
-        &settings,
-        &cal,
-        &|_| {},
-    )
-    .unwrap();
+    let truth = with_friction_and_cubic(imperfect_with(seed + 8, 0.03, 0.0));
+    let all: Vec<usize> = (1..=8).collect();
+    let rec = matrix_record(&truth, &all, seed * 10 + 1);
+    let val = matrix_record(&truth, &all, seed * 10 + 2);
+    let d = calibrated_without_linear_record(&rec, &val);
     let v = d.validation.as_ref().unwrap().after.relative_error;
     eprintln!(
         "{} | after {:?} | validation {v:?}",

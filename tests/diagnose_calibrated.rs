@@ -8,31 +8,12 @@
 
 mod diagnose_common;
 
-use diagnose_common::{assert_validation_at_noise, imperfect, imperfect_with, lanl, record};
-use tacit::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
+use diagnose_common::{
+    assert_validation_at_noise, calibrated_without_linear_record, imperfect, imperfect_with,
+    matrix_record, record,
+};
 use tacit::diagnose::{diagnose, DiagnoseSettings, Diagnosis};
 use tacit::model::{Contact, Damping, Friction, Spring};
-use tacit::record::Record;
-
-/// `rec` diagnosed from data/lanl8dof.toml by the calibrated diagnosis
-/// without a linear record (default settings), validated on `val`; the
-/// calibration's notes printed.
-fn calibrated_without_linear_record(rec: &Record, val: &Record) -> Diagnosis {
-    let d = diagnose_calibrated(
-        &lanl(),
-        rec,
-        Some(val),
-        &[],
-        None,
-        &DiagnoseSettings::default(),
-        &CalibratedSettings::default(),
-        &|_| {},
-    )
-    .unwrap();
-    let cal = d.calibration.as_ref().expect("calibrated");
-    eprintln!("{}\n{}", cal.refinement, cal.choice);
-    d
-}
 
 /// `d` named exactly the effects `labels`, and each `(effect, parameter,
 /// truth)` of `wants` within 10 % of the truth.
@@ -171,6 +152,20 @@ fn a_contact_beside_a_spring_to_ground_without_a_linear_record() {
     assert_validation_at_noise(&d);
 }
 
+/// The structure of `examples/imperfect_matrix.rs`'s row "clearance 2–3,
+/// modal 2.5 %, sensors 2, 3, 7" for matrix seed `seed` (the 15th row:
+/// springs seeded with `seed + 14`, ±3 %, 2.5 % modal damping) with its
+/// clearance 2–3 of 0.15 mm and 1e6 N/m.
+fn clearance_row(seed: u64) -> tacit::model::Model {
+    let mut truth = imperfect_with(seed + 14, 0.03, 0.025);
+    truth.clearances.push(tacit::model::Clearance {
+        dofs: vec![2, 3],
+        gap: 0.15e-3,
+        stiffness: 1e6,
+    });
+    truth
+}
+
 /// An exact model is scored at the noise from three sensors: the
 /// clearance 2–3 (0.15 mm, 1e6 N/m, engaged mode above the Nyquist
 /// frequency) on lanl8dof with springs within ±3 % and 2.5 % modal
@@ -184,13 +179,7 @@ fn a_contact_beside_a_spring_to_ground_without_a_linear_record() {
 #[test]
 fn the_exact_clearance_model_scores_at_the_noise_from_three_sensors() {
     let seed = 16180;
-    // the row's structure (the 15th row: seed + 14) and its clearance
-    let mut truth = imperfect_with(seed + 14, 0.03, 0.025);
-    truth.clearances.push(tacit::model::Clearance {
-        dofs: vec![2, 3],
-        gap: 0.15e-3,
-        stiffness: 1e6,
-    });
+    let truth = clearance_row(seed);
     let val = record(&truth, &[2, 3, 7], 4096, seed * 10 + 2);
     let settings = DiagnoseSettings::default();
     let prep = tacit::diagnose::prepare(&truth, &val, None, &settings).unwrap();
@@ -210,24 +199,6 @@ fn the_exact_clearance_model_scores_at_the_noise_from_three_sensors() {
     assert!(e <= 0.015, "the exact model scored {e}: {fit:?}");
 }
 
-/// A record of `truth` at `sensors` as `examples/imperfect_matrix.rs`
-/// simulates it: 4096 samples, 1 % noise (seed `seed`), 400 sub-steps per
-/// sample.
-fn matrix_record(truth: &tacit::model::Model, sensors: &[usize], seed: u64) -> Record {
-    let spec = tacit::simulate::RecordSpec {
-        samples: 4096,
-        sensors: sensors.to_vec(),
-        noise: 0.01,
-        seed,
-        settings: tacit::integrate::SimSettings {
-            substeps: 400,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    tacit::simulate::simulate_record(truth, &spec).unwrap().0
-}
-
 /// The clearance 2–3 (0.15 mm, 1e6 N/m, engaged mode near 357 Hz, above
 /// the 256 Hz Nyquist frequency) on lanl8dof with springs within ±3 % and
 /// 2.5 % modal damping, seen from sensors 2, 3 and 7 at 1 % noise: the
@@ -242,13 +213,7 @@ fn matrix_record(truth: &tacit::model::Model, sensors: &[usize], seed: u64) -> R
 #[test]
 fn the_gap_search_finds_a_clearance_seen_from_three_sensors() {
     let seed = 15833;
-    // the row's structure (the 15th row: seed + 14) and its clearance
-    let mut truth = imperfect_with(seed + 14, 0.03, 0.025);
-    truth.clearances.push(tacit::model::Clearance {
-        dofs: vec![2, 3],
-        gap: 0.15e-3,
-        stiffness: 1e6,
-    });
+    let truth = clearance_row(seed);
     let rec = matrix_record(&truth, &[2, 3, 7], seed * 10 + 1);
     let mut linear = truth.clone();
     linear.clearances.clear();

@@ -117,11 +117,24 @@ impl Comparison {
     /// [`Comparison::shoot`] with the start states refined by `refine`
     /// (one of [`super::starts`]'s refinements).
     pub(super) fn shoot_by(&self, model: &Model, sim: SimSettings, refine: Refine) -> ShotResult {
-        if self.starts.iterations == 0 {
+        self.shoot_refined(model, sim, refine, self.starts.iterations)
+    }
+
+    /// [`Comparison::shoot_by`] with `iterations` Gauss–Newton iterations
+    /// of the refinement in place of `starts.iterations` (0: the segments'
+    /// start states as they are).
+    pub(super) fn shoot_refined(
+        &self,
+        model: &Model,
+        sim: SimSettings,
+        refine: Refine,
+        iterations: usize,
+    ) -> ShotResult {
+        if iterations == 0 {
             let y = self.predict(model, &self.segments, sim)?;
             return Ok((y, self.segments.clone(), None));
         }
-        let (segs, y, fit) = refine(self, model, sim, &self.segments, self.starts.iterations);
+        let (segs, y, fit) = refine(self, model, sim, &self.segments, iterations);
         if let Some(k) = (0..y.ncols()).find(|&k| y.column(k).iter().any(|v| v.is_nan())) {
             let segment = segs
                 .iter()

@@ -60,17 +60,11 @@ pub fn applies(cmp: &Comparison, model: &Model) -> bool {
 /// The record's multiple-shooting error of `model`, start states refined
 /// for it over every segment (infinite when a simulation fails).
 fn score(cmp: &Comparison, model: &Model, sim: SimSettings) -> f64 {
-    match cmp.shoot(model, sim) {
-        Ok((y, _, _)) => {
-            let e = cmp.total_error(&y);
-            if e.is_finite() {
-                e
-            } else {
-                f64::INFINITY
-            }
-        }
-        Err(_) => f64::INFINITY,
-    }
+    cmp.shoot(model, sim)
+        .map(|(y, _, _)| cmp.total_error(&y))
+        .ok()
+        .filter(|e| e.is_finite())
+        .unwrap_or(f64::INFINITY)
 }
 
 /// The search (module docs) from `model`, stopped once the error is at

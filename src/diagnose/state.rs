@@ -185,33 +185,38 @@ impl<'a> Context<'a> {
     /// A model's multiple shooting (from its own reconstruction when it
     /// needs one) and the simulations run; the error is on the record.
     pub fn shoot(&self, model: &Model, sim: SimSettings) -> (Scored, usize) {
-        let own = self.own_prep(model, self.rec);
-        let own_cmp = own.as_ref().map_or(self.cmp(), |p| &p.comparison);
-        let shot = own_cmp.shoot(model, sim);
-        let n = shot_simulations(shot.as_ref().ok().and_then(|p| p.2.as_ref()), own_cmp);
-        let error = shot.as_ref().ok().map(|y| self.cmp().total_error(&y.0));
-        (Scored { own, shot, error }, n)
+        self.shoot_with(model, sim, None)
     }
 
     /// A model's multiple-shooting error on the record with the start
     /// states refined by `iterations` Gauss–Newton iterations
-    /// ([`super::starts::refine`]; from its own reconstruction when it
-    /// needs one), and the simulations run; None when a segment's
-    /// prediction is not finite.
+    /// ([`Context::shoot`] with them), and the simulations run; None when
+    /// a segment's prediction or the error is not finite.
     pub fn shoot_error(
         &self,
         model: &Model,
         sim: SimSettings,
         iterations: usize,
     ) -> (Option<f64>, usize) {
+        let (scored, n) = self.shoot_with(model, sim, Some(iterations));
+        (scored.error.filter(|e| e.is_finite()), n)
+    }
+
+    /// [`Context::shoot`] with `iterations` Gauss–Newton iterations of the
+    /// start states (None: the comparison's own).
+    fn shoot_with(
+        &self,
+        model: &Model,
+        sim: SimSettings,
+        iterations: Option<usize>,
+    ) -> (Scored, usize) {
         let own = self.own_prep(model, self.rec);
-        let cmp = own.as_ref().map_or(self.cmp(), |p| &p.comparison);
-        let (_, y, fit) = super::starts::refine(cmp, model, sim, &cmp.segments, iterations);
-        // as [`Comparison::shoot`]: a segment not predicted fails it
-        let failed = y.iter().any(|v| v.is_nan());
-        let error = self.cmp().total_error(&y);
-        let error = (!failed && error.is_finite()).then_some(error);
-        (error, fit.simulations)
+        let own_cmp = own.as_ref().map_or(self.cmp(), |p| &p.comparison);
+        let iterations = iterations.unwrap_or(own_cmp.starts.iterations);
+        let shot = own_cmp.shoot_refined(model, sim, super::starts::refine, iterations);
+        let n = shot_simulations(shot.as_ref().ok().and_then(|p| p.2.as_ref()), own_cmp);
+        let error = shot.as_ref().ok().map(|y| self.cmp().total_error(&y.0));
+        (Scored { own, shot, error }, n)
     }
 }
 

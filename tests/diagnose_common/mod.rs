@@ -50,18 +50,57 @@ pub fn assert_validation_at_noise(d: &Diagnosis) {
 /// A record of `truth` as these tests simulate it: `samples` samples,
 /// every output at `sensors`, 1 % noise (seed `seed`), 40 sub-steps.
 pub fn record(truth: &Model, sensors: &[usize], samples: usize, seed: u64) -> Record {
+    record_at(truth, sensors, samples, seed, 40)
+}
+
+/// [`record`] integrated at `substeps` sub-steps per sample.
+pub fn record_at(
+    truth: &Model,
+    sensors: &[usize],
+    samples: usize,
+    seed: u64,
+    substeps: usize,
+) -> Record {
     let spec = RecordSpec {
         samples,
         sensors: sensors.to_vec(),
         noise: 0.01,
         seed,
         settings: SimSettings {
-            substeps: 40,
+            substeps,
             ..Default::default()
         },
         ..Default::default()
     };
     simulate_record(truth, &spec).unwrap().0
+}
+
+/// A record of `truth` at `sensors` as `examples/imperfect_matrix.rs`
+/// simulates it: 4096 samples, 1 % noise (seed `seed`), 400 sub-steps per
+/// sample (standing for the continuous structure).
+pub fn matrix_record(truth: &Model, sensors: &[usize], seed: u64) -> Record {
+    record_at(truth, sensors, 4096, seed, 400)
+}
+
+/// The calibrated diagnosis of `rec` against lanl8dof without a linear
+/// record (default settings), validated on `val`; its calibration notes
+/// printed.
+pub fn calibrated_without_linear_record(rec: &Record, val: &Record) -> Diagnosis {
+    use tacit::diagnose::calibrated::{diagnose_calibrated, CalibratedSettings};
+    let d = diagnose_calibrated(
+        &lanl(),
+        rec,
+        Some(val),
+        &[],
+        None,
+        &DiagnoseSettings::default(),
+        &CalibratedSettings::default(),
+        &|_| {},
+    )
+    .unwrap();
+    let cal = d.calibration.as_ref().expect("calibrated");
+    eprintln!("{}\n{}", cal.refinement, cal.choice);
+    d
 }
 
 /// The record (seed `seed`) and the validation record (seed `seed + 1000`)
