@@ -82,7 +82,7 @@ pub fn ground_spring(
                 .into_par_iter()
                 .map(|dof| {
                     let mut m = linear.clone();
-                    m.springs.push(Spring {
+                    m.push_ground_spring(Spring {
                         dofs: vec![dof],
                         stiffness: k0,
                         name: Some(format!("ground{dof}")),

@@ -102,7 +102,7 @@ pub fn add(model: &mut Model, r: &RankedEffect) -> AddedEffect {
             )
         }
         EffectKind::GroundSpring => {
-            model.springs.push(Spring {
+            model.push_ground_spring(Spring {
                 dofs: vec![one(c.dofs[0])],
                 stiffness: val("stiffness"),
                 name: Some(format!("ground{}", one(c.dofs[0]))),
@@ -300,6 +300,11 @@ pub fn parameters(model: &Model, e: &AddedEffect) -> Result<Vec<Parameter>> {
 /// coefficient or contact (clearance) stiffness to zero (a gap stays).
 pub fn without(model: &Model, e: &AddedEffect) -> Model {
     let mut m = model.clone();
+    // a spring to ground switched off gives the structure its rigid-body
+    // mode back: the flexible modes keep their per-mode ratios
+    let before = (e.candidate.kind == EffectKind::GroundSpring)
+        .then(|| crate::model::flexible_frequencies(model).ok())
+        .flatten();
     for t in &e.targets {
         let off = match (e.candidate.kind, t) {
             (_, Target::ContactGap(_) | Target::ClearanceGap(_)) => continue,
@@ -308,7 +313,17 @@ pub fn without(model: &Model, e: &AddedEffect) -> Model {
         };
         t.set(&mut m, off);
     }
+    if let Some(b) = before {
+        realign(&mut m, &b);
+    }
     m
+}
+
+/// [`crate::model::keep_modal_ratios`] from the flexible frequencies
+/// `before`; a model whose modes cannot be computed is left as it is (the
+/// same eigenproblem fails, and is reported, where it is simulated).
+pub(crate) fn realign(model: &mut Model, before: &[f64]) {
+    crate::model::keep_modal_ratios(model, before).ok();
 }
 
 /// `model` without the effect `e`, which must be the last one added (its

@@ -333,6 +333,20 @@ impl Model {
         }
     }
 
+    /// Push the spring to ground `s`, the flexible modes keeping their
+    /// per-mode damping ratios ([`keep_modal_ratios`]: the former
+    /// rigid-body mode takes a ratio of its own instead of every mode
+    /// taking its lower neighbour's). A model whose modes cannot be
+    /// computed gets the spring alone (the same eigenproblem fails, and is
+    /// reported, where the model is used).
+    pub fn push_ground_spring(&mut self, s: Spring) {
+        let before = flexible_frequencies(self).ok();
+        self.springs.push(s);
+        if let Some(b) = before {
+            keep_modal_ratios(self, &b).ok();
+        }
+    }
+
     /// True when a spring joins a DOF to ground.
     pub fn has_ground_spring(&self) -> bool {
         self.springs.iter().any(|s| s.dofs.len() == 1)
@@ -682,6 +696,75 @@ pub fn damping_matrix(d: &Damping, m: &DMatrix<f64>, k: &DMatrix<f64>) -> Result
     }
 }
 
+/// The circular frequencies of the flexible modes of `model`, ascending
+/// (rigid-body modes left out), rad/s.
+pub fn flexible_frequencies(model: &Model) -> Result<Vec<f64>> {
+    let modes = crate::modal::solve(&model.mass_matrix(), &model.stiffness_matrix())?;
+    Ok(modes
+        .omega
+        .iter()
+        .zip(&modes.rigid)
+        .filter(|(_, r)| !**r)
+        .map(|(w, _)| *w)
+        .collect())
+}
+
+/// Keep each flexible mode's own per-mode damping ratio across a change of
+/// `model`'s structure that added or took away one flexible mode (a spring
+/// to ground added to a free-free structure, or its stiffness set to zero);
+/// `before` are the flexible frequencies before the change
+/// ([`flexible_frequencies`]). Per-mode ratios go to the flexible modes in
+/// ascending frequency ([`modal_ratio_index`]): without this every mode
+/// above the new one would take its lower neighbour's ratio. The mode
+/// added (taken away) is the one whose removal from the longer list leaves
+/// frequencies nearest the shorter one (least sum of squared log ratios);
+/// an added mode takes its upper neighbour's ratio. Nothing changes unless
+/// the model has one ratio per flexible mode before the change and the
+/// count moved by one.
+pub fn keep_modal_ratios(model: &mut Model, before: &[f64]) -> Result<()> {
+    let per_mode = matches!(&model.damping, Damping::Modal { ratio: None, ratios } if ratios.len() == before.len() && !ratios.is_empty());
+    if !per_mode {
+        return Ok(());
+    }
+    let after = flexible_frequencies(model)?;
+    let Damping::Modal { ratios, .. } = &mut model.damping else {
+        return Ok(());
+    };
+    if after.len() == before.len() + 1 {
+        let j = odd_one_out(&after, before);
+        let z = ratios[j.min(ratios.len() - 1)];
+        ratios.insert(j, z);
+    } else if after.len() + 1 == before.len() && ratios.len() > 1 {
+        ratios.remove(odd_one_out(before, &after));
+    }
+    Ok(())
+}
+
+/// The index of `longer` (one more than `shorter`, both ascending) whose
+/// removal leaves the list nearest `shorter` (least sum of squared log
+/// ratios; a zero frequency counts as the smallest positive one).
+fn odd_one_out(longer: &[f64], shorter: &[f64]) -> usize {
+    let floor = longer
+        .iter()
+        .chain(shorter)
+        .copied()
+        .filter(|w| *w > 0.0)
+        .fold(f64::INFINITY, f64::min)
+        .min(1.0);
+    let ln = |w: f64| w.max(floor).ln();
+    (0..longer.len())
+        .map(|j| {
+            let rest = longer.iter().enumerate().filter(|(i, _)| *i != j);
+            let cost: f64 = rest
+                .zip(shorter)
+                .map(|((_, a), b)| (ln(*a) - ln(*b)).powi(2))
+                .sum();
+            (j, cost)
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(0, |(j, _)| j)
+}
+
 /// Which of `count` per-mode damping ratios the flexible mode `flex`
 /// (from 0) takes: its own, the last one beyond them, None without ratios.
 pub fn modal_ratio_index(flex: usize, count: usize) -> Option<usize> {
@@ -763,5 +846,57 @@ beta = 0.001
         let bad = format!("{CHAIN}\n[[friction]]\ndof = 1\nlevel = 0.3\nvelocty = 1e-3\n");
         let e = Model::from_toml_str(&bad, "t").unwrap_err().to_string();
         assert!(e.contains("velocty"), "{e}");
+    }
+    /// The modal damping ratio mode `r` of `model` carries: `φᵀ C φ / 2ω`
+    /// with mass-normalized φ.
+    fn modal_ratio(model: &Model, r: usize) -> f64 {
+        let modes = crate::modal::solve(&model.mass_matrix(), &model.stiffness_matrix()).unwrap();
+        let phi = modes.shapes.column(r);
+        let c = model.damping_matrix().unwrap();
+        (phi.transpose() * c * phi)[(0, 0)] / (2.0 * modes.omega[r])
+    }
+
+    /// A spring to ground added to a free-free chain with per-mode ratios
+    /// turns its rigid-body mode into the lowest flexible one: the modes
+    /// above keep their own ratios (without [`keep_modal_ratios`] the
+    /// second flexible mode would take the first's 1 %), and taking the
+    /// spring away again restores the ratios.
+    #[test]
+    fn a_spring_to_ground_keeps_every_mode_its_ratio() {
+        let free = "name = \"free\"\nmasses = [1.0, 2.0, 1.5]\n[[spring]]\ndofs = [1, 2]\nstiffness = 1e4\n[[spring]]\ndofs = [2, 3]\nstiffness = 2e4\n[damping]\nkind = \"modal\"\nratios = [0.01, 0.03]\n";
+        let mut m = Model::from_toml_str(free, "t").unwrap();
+        let before = flexible_frequencies(&m).unwrap();
+        assert_eq!(before.len(), 2);
+        m.springs.push(Spring {
+            dofs: vec![3],
+            stiffness: 10.0,
+            name: None,
+        });
+        keep_modal_ratios(&mut m, &before).unwrap();
+        let Damping::Modal { ratios, .. } = &m.damping else {
+            panic!("modal")
+        };
+        assert_eq!(ratios, &vec![0.01, 0.01, 0.03]);
+        // the former flexible modes are now modes 2 and 3 (0-based 1, 2)
+        assert!((modal_ratio(&m, 1) - 0.01).abs() < 1e-9);
+        assert!((modal_ratio(&m, 2) - 0.03).abs() < 1e-9);
+        let grounded = flexible_frequencies(&m).unwrap();
+        m.springs[2].stiffness = 0.0;
+        keep_modal_ratios(&mut m, &grounded).unwrap();
+        let Damping::Modal { ratios, .. } = &m.damping else {
+            panic!("modal")
+        };
+        assert_eq!(ratios, &vec![0.01, 0.03]);
+        assert!((modal_ratio(&m, 2) - 0.03).abs() < 1e-9);
+    }
+
+    /// A spring to ground stiffer than the structure's own springs adds a
+    /// mode above the others: the ratio goes in at its place.
+    #[test]
+    fn a_stiff_spring_to_ground_adds_its_mode_in_frequency_order() {
+        let before = [10.0, 100.0];
+        assert_eq!(odd_one_out(&[0.5, 10.0, 100.0], &before), 0);
+        assert_eq!(odd_one_out(&[10.2, 99.0, 400.0], &before), 2);
+        assert_eq!(odd_one_out(&[10.1, 50.0, 100.5], &before), 1);
     }
 }
