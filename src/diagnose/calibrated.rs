@@ -1764,12 +1764,19 @@ fn corrections(
     std: &[Estimated],
     s: &CalibrationSettings,
 ) -> Vec<LinearCorrection> {
+    // a spring to ground added as an effect gave the former rigid-body
+    // mode a ratio of its own: the declared modes' ratios moved up by one
+    let added = crate::model::added_mode(&calibration.model, model);
     calibration
         .corrections
         .iter()
         .map(|c| {
-            let value = c.parameter.get(model).unwrap_or(c.calibrated);
-            let target = c.parameter.target();
+            let parameter = match (c.parameter, added) {
+                (LinearParam::ModalRatio(r), Some(j)) if r >= j => LinearParam::ModalRatio(r + 1),
+                (p, _) => p,
+            };
+            let value = parameter.get(model).unwrap_or(c.calibrated);
+            let target = parameter.target();
             let se = std
                 .iter()
                 .find(|(p, _)| p.target == target)

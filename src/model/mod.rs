@@ -740,6 +740,28 @@ pub fn keep_modal_ratios(model: &mut Model, before: &[f64]) -> Result<()> {
     Ok(())
 }
 
+/// The flexible mode of `after` that `before` does not have, when
+/// `after` has one flexible mode more and a per-mode ratio for it
+/// ([`keep_modal_ratios`]: a spring to ground added): its index among
+/// `after`'s flexible modes (ascending frequency). A per-mode ratio `r`
+/// of `before` is ratio `r + 1` of `after` from that index on. None
+/// otherwise, or when the modes cannot be computed.
+pub fn added_mode(before: &Model, after: &Model) -> Option<usize> {
+    let count = |m: &Model| match &m.damping {
+        Damping::Modal {
+            ratio: None,
+            ratios,
+        } => ratios.len(),
+        _ => 0,
+    };
+    let (b, a) = (
+        flexible_frequencies(before).ok()?,
+        flexible_frequencies(after).ok()?,
+    );
+    (a.len() == b.len() + 1 && count(before) == b.len() && count(after) == a.len())
+        .then(|| odd_one_out(&a, &b))
+}
+
 /// The index of `longer` (one more than `shorter`, both ascending) whose
 /// removal leaves the list nearest `shorter` (least sum of squared log
 /// ratios; a zero frequency counts as the smallest positive one).
@@ -877,6 +899,9 @@ beta = 0.001
             panic!("modal")
         };
         assert_eq!(ratios, &vec![0.01, 0.01, 0.03]);
+        let free_model = Model::from_toml_str(free, "t").unwrap();
+        assert_eq!(added_mode(&free_model, &m), Some(0));
+        assert_eq!(added_mode(&m, &free_model), None);
         // the former flexible modes are now modes 2 and 3 (0-based 1, 2)
         assert!((modal_ratio(&m, 1) - 0.01).abs() < 1e-9);
         assert!((modal_ratio(&m, 2) - 0.03).abs() < 1e-9);
