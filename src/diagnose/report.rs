@@ -531,7 +531,7 @@ fn noise_section(s: &mut String, d: &Diagnosis) {
     };
     let _ = writeln!(
         s,
-        "\n## Noise\n\nNoise measured on the record from what remains after the force reconstruction (the median over {} frequency bands; a band far above the median holds model error, not noise): {}. {}\n",
+        "\n## Noise\n\nNoise measured on the record from what remains after the force reconstruction (the lower quartile of {} frequency bands' levels, scaled by what white noise alone gives, so that model error confined to fewer than three bands in four does not raise it; a band far above the median holds model error, not noise): {}. {}\n",
         n.bands,
         n.summary(),
         thresholds(n)
