@@ -1,0 +1,170 @@
+#!/usr/bin/env python3
+"""Records outside the imperfect matrix: places, kinds and sensor sets the
+matrix (examples/imperfect_matrix.rs) does not use, made with `tacit
+simulate` from lanl8dof.toml departed from as real tests do, and diagnosed
+with `tacit diagnose` as a user would. Prints the Markdown table of
+docs/diagnose.md ("Records outside the matrix").
+
+    python3 scripts/outside_matrix.py [--tacit target/release/tacit] [--out out/outside]
+    python3 scripts/outside_matrix.py --table-only   # the table from the reports already written
+
+Standard library only. Springs are drawn within ±pct of nominal with
+Python's random.Random(seed) (the same numbers on every platform).
+"""
+
+import argparse
+import json
+import os
+import random
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DECLARED = os.path.join(ROOT, "data", "lanl8dof.toml")
+
+
+def friction_everywhere(level):
+    return "".join(f"[[friction]]\ndof = {d}\nlevel = {level}\n" for d in range(1, 9))
+
+
+# name: (spring seed, spring spread, damping table, effects, truth in words)
+MODELS = {
+    "p1": (101, 0.04, '[damping]\nkind = "rayleigh"\nalpha = 2.0\nbeta = 6e-5\n',
+           "[[cubic]]\ndofs = [4, 5]\nk3 = 1e12\n", "cubic 4–5 k3 1e12 N/m³"),
+    "p2": (202, 0.03, '[damping]\nkind = "modal"\nratio = 0.03\n',
+           "[[contact]]\ndofs = [1, 2]\ngap = 3e-4\nstiffness = 2e6\n",
+           "contact 1→2 gap 0.3 mm, 2e6 N/m"),
+    "p3": (303, 0.05, '[damping]\nkind = "modal"\nratio = 0.025\n',
+           "[[relative_friction]]\ndofs = [3, 4]\nlevel = 0.8\n" + friction_everywhere(0.15),
+           "relative friction 3–4 0.8 N + friction 0.15 N on every mass"),
+    "p4": (404, 0.04, '[damping]\nkind = "modal"\nratio = 0.02\n',
+           "[[contact]]\ndofs = [6, 7]\ngap = 2.5e-4\nstiffness = 1.5e6\n[[cubic]]\ndofs = [2]\nk3 = 3e11\n",
+           "contact 6→7 gap 0.25 mm, 1.5e6 N/m + cubic 2 to ground k3 3e11 N/m³"),
+    "p4c": (404, 0.04, '[damping]\nkind = "modal"\nratio = 0.02\n',
+            "[[cubic]]\ndofs = [2]\nk3 = 3e11\n", "cubic 2 to ground k3 3e11 N/m³"),
+}
+
+# record: (model, sensors, noise, samples made, kept range, seeds (record, validation, linear))
+RECORDS = {
+    "p1": ("p1", "1,3,5,7", 0.02, 4096, None, (11, 12, 13)),
+    "p2": ("p2", None, 0.005, 5120, "1024..5120", (21, 22, 23)),
+    "p3": ("p3", None, 0.01, 4096, None, (31, 32, None)),
+    "p4": ("p4", "1,2,6,7,8", 0.015, 4096, None, (41, 42, 43)),
+    "p4c": ("p4c", "1,2,6,7,8", 0.015, 4096, None, (41, 42, None)),
+}
+
+DIAGNOSES = [("p1", False), ("p2", False), ("p3", False), ("p4", False), ("p4c", False),
+             ("p1", True), ("p2", True), ("p4", True)]
+
+
+def model_text(name, linear):
+    seed, spread, damping, effects, _ = MODELS[name]
+    rng = random.Random(seed)
+    lines = []
+    for line in open(DECLARED).read().splitlines():
+        if line.startswith('name = "lanl8dof"'):
+            line = f'name = "{name}"'
+        elif line.startswith("stiffness = 56700.0"):
+            line = f"stiffness = {56700 * (1 + rng.uniform(-spread, spread)):.1f}"
+        lines.append(line)
+    text = "\n".join(lines)
+    text = text[: text.index("[damping]")] + damping + "\n"
+    return text if linear else text + effects
+
+
+def run(cmd, log):
+    with open(log, "a") as f:
+        f.write("$ " + " ".join(cmd) + "\n")
+        f.flush()
+        subprocess.run(cmd, check=True, stdout=f, stderr=subprocess.STDOUT)
+
+
+def simulate(tacit, out, rec):
+    model, sensors, noise, samples, _, seeds = RECORDS[rec]
+    log = os.path.join(out, "log.txt")
+    for linear in (False, True):
+        path = os.path.join(out, f"{model}{'-lin' if linear else ''}.toml")
+        with open(path, "w") as f:
+            f.write(model_text(model, linear))
+    base = [tacit, "simulate", "--input", "random", "--band", "5,200", "--fs", "512",
+            "--noise", str(noise)]
+    if sensors:
+        base += ["--sensors", sensors]
+    m = os.path.join(out, model + ".toml")
+    for seed, kind in zip(seeds, ("rec", "val", "lin")):
+        if seed is None:
+            continue
+        target = os.path.join(out, f"{rec}-{kind}.h5")
+        if kind == "lin":
+            cmd = base + ["--model", os.path.join(out, model + "-lin.toml"), "--rms", "5",
+                          "--samples", "4096"]
+        else:
+            cmd = base + ["--model", m, "--rms", "20",
+                          "--samples", str(samples if kind == "rec" else 4096)]
+        run(cmd + ["--seed", str(seed), "-o", target], log)
+
+
+def diagnose(tacit, out, rec, linear):
+    _, sensors, _, _, kept, _ = RECORDS[rec]
+    cmd = [tacit, "diagnose", "--model", DECLARED, "--force",
+           "--record", os.path.join(out, f"{rec}-rec.h5"),
+           "--validate", os.path.join(out, f"{rec}-val.h5")]
+    if sensors:
+        cmd += ["--sensors", sensors]
+    if kept:
+        cmd += ["--samples", kept]
+    if linear:
+        cmd += ["--linear-record", os.path.join(out, f"{rec}-lin.h5")]
+    report = os.path.join(out, f"{rec}-{'yes' if linear else 'no'}")
+    t = time.time()
+    run(cmd + ["-o", report], os.path.join(out, "log.txt"))
+    with open(os.path.join(report, "wall.txt"), "w") as f:
+        f.write(f"{time.time() - t:.1f}\n")
+
+
+def pct(x):
+    return "—" if x is None else f"{100 * x:.2f} %"
+
+
+def row(out, rec, linear):
+    model, sensors, noise, samples, kept, _ = RECORDS[rec]
+    d = os.path.join(out, f"{rec}-{'yes' if linear else 'no'}")
+    r = json.load(open(os.path.join(d, "report.json")))
+    wall = open(os.path.join(d, "wall.txt")).read().strip() if os.path.exists(
+        os.path.join(d, "wall.txt")) else "—"
+    params = "; ".join(
+        e["label"] + ": " + ", ".join(f"{k} {v:.4e}" for k, v in e["parameters"].items())
+        for e in r["effects"]) or "none"
+    level = (r.get("noise") or {}).get("level")
+    corr = (r.get("calibration") or {}).get("corrections", [])
+    sig = ", ".join(f"{c['name']} {100 * c['change']:+.1f} %" for c in corr if c.get("significant"))
+    start = f", samples {kept} of {samples} (a running test)" if kept else ""
+    return (f"| {rec} | {MODELS[model][4]} | {sensors or '1–8'}{start} | "
+            f"{100 * noise:.1f} % ({pct(level)}) | {'yes' if linear else 'no'} | {params} | "
+            f"{pct(r['before'].get('relative_error'))} → {pct(r['after'].get('relative_error'))} | "
+            f"{pct(r['validation']['before'].get('relative_error'))} → "
+            f"{pct(r['validation']['after'].get('relative_error'))} | {sig or '—'} | {wall} s |")
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--tacit", default=os.path.join(ROOT, "target", "release", "tacit"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "out", "outside"))
+    ap.add_argument("--table-only", action="store_true")
+    a = ap.parse_args()
+    os.makedirs(a.out, exist_ok=True)
+    if not a.table_only:
+        for rec in RECORDS:
+            simulate(a.tacit, a.out, rec)
+        for rec, linear in DIAGNOSES:
+            diagnose(a.tacit, a.out, rec, linear)
+    print("| record | truth | sensors | noise (measured) | linear record | found | "
+          "error before → after | validation before → after | corrections significant | time |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for rec, linear in DIAGNOSES:
+        print(row(a.out, rec, linear))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
