@@ -5,7 +5,6 @@
 //! relative change to first order.
 
 use crate::error::Result;
-use crate::modal;
 use crate::model::{Damping, Model};
 use serde::{Deserialize, Serialize};
 
@@ -91,8 +90,7 @@ impl LinearParam {
 
 /// Number of flexible modes of the model's linear part.
 pub fn flexible_modes(model: &Model) -> Result<usize> {
-    let modes = modal::solve(&model.mass_matrix(), &model.stiffness_matrix())?;
-    Ok(modes.rigid.iter().filter(|r| !**r).count())
+    Ok(crate::model::flexible_frequencies(model)?.len())
 }
 
 /// The model with modal damping written as one ratio per flexible mode
@@ -189,15 +187,13 @@ pub fn select(model: &Model, freedom: &Freedom) -> Vec<LinearParam> {
     out
 }
 
-/// `model` with every parameter at `p_0 e^{q}`, a damping ratio at most
-/// its ceiling ([`Target::physical_ceiling`]: below critical; the log
-/// parameter is unbounded above).
+/// `model` with every parameter at `p_0 e^{q}` (a damping ratio at most
+/// its ceiling, as [`crate::update::Target::set`] keeps it: the log parameter is
+/// unbounded above).
 pub fn apply(model: &Model, params: &[LinearParam], p0: &[f64], q: &[f64]) -> Model {
     let mut m = model.clone();
     for ((p, v0), qi) in params.iter().zip(p0).zip(q) {
-        let v = v0 * qi.exp();
-        let v = p.target().physical_ceiling().map_or(v, |c| v.min(c));
-        p.set(&mut m, v);
+        p.set(&mut m, v0 * qi.exp());
     }
     m
 }

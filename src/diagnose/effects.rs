@@ -313,17 +313,12 @@ pub fn without(model: &Model, e: &AddedEffect) -> Model {
         };
         t.set(&mut m, off);
     }
+    // a model whose modes cannot be computed is left as it is (the same
+    // eigenproblem fails, and is reported, where it is simulated)
     if let Some(b) = before {
-        realign(&mut m, &b);
+        crate::model::keep_modal_ratios(&mut m, &b).ok();
     }
     m
-}
-
-/// [`crate::model::keep_modal_ratios`] from the flexible frequencies
-/// `before`; a model whose modes cannot be computed is left as it is (the
-/// same eigenproblem fails, and is reported, where it is simulated).
-pub(crate) fn realign(model: &mut Model, before: &[f64]) {
-    crate::model::keep_modal_ratios(model, before).ok();
 }
 
 /// `model` without the effect `e`, which must be the last one added (its
