@@ -4,8 +4,12 @@
 //! of a contact's or clearance's gap and stiffness (the cost is rough in
 //! the gap, see docs/theory.md; a clearance's scan is scored on start
 //! states refined for each scanned model); a short race of Levenberg–Marquardt from every start
-//! ([`crate::update::race`]); the best carried on with the
-//! segment start states ([`super::polish`]).
+//! ([`crate::update::race`]), on the reconstructed start states or on
+//! those fitted for the model without the new effect when the trial
+//! scores far lower there; the best carried on with the
+//! segment start states ([`super::polish`]). A friction level beside
+//! freed damping may reach the level that dissipates what the damping
+//! does.
 
 use super::effects::{self, AddedEffect};
 use super::errors::Comparison;
@@ -19,6 +23,7 @@ use crate::error::Result;
 use crate::integrate::SimSettings;
 use crate::model::Model;
 use crate::trace::{Candidate, EffectKind};
+use crate::update::cost::Evaluator;
 use crate::update::optimize::FitSettings;
 use crate::update::shooting::Segment;
 use crate::update::{Parameter, Problem, Target};
@@ -68,15 +73,17 @@ pub(super) fn spread(all: &[Segment], k: usize) -> Vec<Segment> {
 
 /// Fit the parameters of all added effects jointly (module docs), the
 /// fit segments' start states corrected along the hidden trajectories by
-/// `correction` (2n × N) when given, with the joint linearization's
-/// `predicted` values as further starts.
+/// `correction` (2n × N) when given, or taken from `fitted` (the start
+/// states fitted for the model without the new effect) when the trial
+/// scores lower on those ([`closer_start_states`]), with the joint
+/// linearization's `predicted` values as further starts.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn fit_effects(
     trial: &Model,
     all: &[AddedEffect],
     cmp: &Comparison,
     states: &DMatrix<f64>,
-    correction: Option<&DMatrix<f64>>,
+    (correction, fitted): (Option<&DMatrix<f64>>, Option<&[Segment]>),
     predicted: Option<&[Vec<f64>]>,
     fs: f64,
     settings: &DiagnoseSettings,
@@ -95,6 +102,7 @@ pub(super) fn fit_effects(
     for e in all {
         params.extend(effects::parameters(trial, e)?);
     }
+    raise_friction_bounds(trial, all, &mut params, states, settings.fit.friction_upper);
     let mut segments = spread(&cmp.segments, settings.segments.fit_segments);
     let corrected;
     let states = match correction {
@@ -148,8 +156,106 @@ pub(super) fn fit_effects(
     problem.sim = resolved(&starts.stiffest, fs, settings, states);
     if let Some(segs) = starts.segments.take() {
         problem.segments = segs;
+    } else if let Some(f) = fitted {
+        starts.simulations += closer_start_states(&mut problem, f, settings.fit.fitted_states_gain);
     }
     race_and_polish(trial, cmp, &problem, starts, settings)
+}
+
+/// The fit segments' start states: those fitted for the model without
+/// the new effect (`fitted`, the last kept round's fit) in place of the
+/// reconstructed ones when the trial at its start (scaled changes 0)
+/// scores lower on them per sample covered by at least `gain`
+/// ([`super::settings::FitGroup::fitted_states_gain`]). Returns the
+/// segment simulations spent.
+fn closer_start_states(problem: &mut Problem, fitted: &[Segment], gain: f64) -> usize {
+    if fitted.is_empty() || fitted == problem.segments.as_slice() {
+        return 0;
+    }
+    let x0 = vec![0.0; problem.parameters.len()];
+    let per_sample = |p: &Problem| -> (f64, usize) {
+        let mut ev = Evaluator::new(p);
+        let cost = ev.residual(&x0).map_or(f64::INFINITY, |r| r.norm_squared());
+        let covered: usize = p.segments.iter().map(|s| s.len).sum();
+        (cost / covered.max(1) as f64, ev.counters().simulations)
+    };
+    let (own, n1) = per_sample(problem);
+    let mut other = problem.clone();
+    other.segments = fitted.to_vec();
+    let (on_fitted, n2) = per_sample(&other);
+    if gain * on_fitted < own {
+        problem.segments = other.segments;
+    }
+    n1 + n2
+}
+
+/// The upper bound of a friction level beside freed damping (an effect's
+/// damping nuisance parameters, or a damping change found before) raised
+/// to at least `factor` × the level that dissipates, along the
+/// reconstructed `states`, what the model's damping does
+/// ([`super::settings::FitGroup::friction_upper`]); the DOFs of one
+/// friction effect share that level. Nothing changes when the damping
+/// matrix cannot be formed.
+fn raise_friction_bounds(
+    trial: &Model,
+    all: &[AddedEffect],
+    params: &mut [Parameter],
+    states: &DMatrix<f64>,
+    factor: f64,
+) {
+    let freed = all
+        .iter()
+        .any(|e| !e.nuisance.is_empty() || e.candidate.kind == EffectKind::Damping);
+    let n = trial.ndof();
+    if !freed || states.nrows() < 2 * n || states.ncols() == 0 {
+        return;
+    }
+    let Ok(c) = trial.damping_matrix() else {
+        return;
+    };
+    // (every `stride`-th sample: a mean)
+    let stride = states.ncols().div_ceil(1024);
+    let samples: Vec<usize> = (0..states.ncols()).step_by(stride).collect();
+    let v = |k: usize| states.view((n, k), (n, 1));
+    let dissipated: f64 = samples.iter().map(|&k| v(k).dot(&(&c * v(k)))).sum();
+    let rate = |t: &Target| -> f64 {
+        let dofs: Vec<usize> = match *t {
+            Target::FrictionLevel(i) => vec![trial.frictions[i].dof - 1],
+            Target::RelativeFrictionLevel(i) => trial.relative_frictions[i]
+                .dofs
+                .iter()
+                .map(|d| d - 1)
+                .collect(),
+            _ => return 0.0,
+        };
+        let sign = |j: usize| if j == 0 { 1.0 } else { -1.0 };
+        samples
+            .iter()
+            .map(|&k| {
+                let dv: f64 = dofs
+                    .iter()
+                    .enumerate()
+                    .map(|(j, &d)| sign(j) * states[(n + d, k)])
+                    .sum();
+                dv.abs()
+            })
+            .sum()
+    };
+    for e in all {
+        let total: f64 = e.targets.iter().map(rate).sum();
+        if !(total > 0.0 && dissipated > 0.0) {
+            continue;
+        }
+        let level = factor * dissipated / total;
+        for p in params.iter_mut().filter(|p| e.targets.contains(&p.target)) {
+            if matches!(
+                p.target,
+                Target::FrictionLevel(_) | Target::RelativeFrictionLevel(_)
+            ) {
+                p.upper = p.upper.max(level);
+            }
+        }
+    }
 }
 
 /// What a contact scan runs on.
@@ -552,4 +658,56 @@ fn max_delta(c: &Candidate, states: &DMatrix<f64>) -> f64 {
     (0..states.ncols())
         .map(|k| c.delta(states, k))
         .fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Damping;
+    use crate::trace::{Candidate, RankedEffect};
+
+    /// Friction on every mass beside freed Rayleigh damping (`C = α M`):
+    /// with every velocity `±v` alternating, the damping dissipates
+    /// `α Σ m_i v²` per sample and the friction `F n v`, so the bound is
+    /// `factor · α Σ m_i v / n` (above the traced bound, 11 × 0.01 N);
+    /// held damping leaves the traced bound.
+    #[test]
+    fn friction_beside_freed_damping_may_take_what_the_damping_dissipates() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let mut model = Model::from_file(std::path::Path::new(p)).unwrap();
+        let alpha = 3.0;
+        model.damping = Damping::Rayleigh { alpha, beta: 0.0 };
+        let n = model.ndof();
+        let c = Candidate::new(EffectKind::Friction, (0..n).collect());
+        let ranked = RankedEffect::for_test(c, &[("level", 0.01)]);
+        let mut trial = model.clone();
+        let mut e = effects::add(&mut trial, &ranked);
+        let v = 0.1;
+        let states = DMatrix::from_fn(2 * n, 3000, |i, k| match (i >= n, k % 2) {
+            (false, _) => 0.0,
+            (true, 0) => v,
+            (true, _) => -v,
+        });
+        let bound = |e: &AddedEffect| {
+            let mut params = effects::parameters(&trial, e).unwrap();
+            raise_friction_bounds(&trial, std::slice::from_ref(e), &mut params, &states, 2.0);
+            params
+                .iter()
+                .filter(|p| matches!(p.target, Target::FrictionLevel(_)))
+                .map(|p| p.upper)
+                .collect::<Vec<_>>()
+        };
+        let held = bound(&e);
+        assert_eq!(held.len(), n);
+        assert!(
+            held.iter().all(|&u| (u / 0.11 - 1.0).abs() < 1e-12),
+            "{held:?}"
+        );
+        e.nuisance = effects::damping_targets(&trial);
+        let mass: f64 = model.masses.iter().sum();
+        let want = 2.0 * alpha * mass * v / n as f64;
+        for u in bound(&e) {
+            assert!((u / want - 1.0).abs() < 1e-9, "{u} against {want}");
+        }
+    }
 }

@@ -13,24 +13,26 @@ use super::substeps::resolved;
 use crate::error::Result;
 use crate::model::Model;
 use crate::trace::{self, RankedEffect, TraceInput, TraceResult};
+use crate::update::Segment;
 use nalgebra::DMatrix;
 use std::time::Instant;
 
 /// Fit the effects `all` on `trial`: a trial with a spring to ground
 /// is fitted from states reconstructed with its own linear part (as it
 /// is scored), not from the declared reconstruction corrected along
-/// the hidden trajectories.
+/// the hidden trajectories; otherwise the start states fitted for the
+/// current model (`fitted`) are offered to the fit.
 fn fit_trial(
     ctx: &Context<'_>,
     trial: &Model,
     all: &[AddedEffect],
-    correction: Option<&DMatrix<f64>>,
+    (correction, fitted): (Option<&DMatrix<f64>>, Option<&[Segment]>),
     predicted: Option<&[Vec<f64>]>,
 ) -> Result<EffectFit> {
     let own = ctx.own_prep(trial, ctx.rec);
-    let (cmp, states, correction) = match &own {
-        Some(o) => (&o.comparison, &o.recon.states, None),
-        None => (ctx.cmp(), &ctx.prep.recon.states, correction),
+    let (cmp, states, correction, fitted) = match &own {
+        Some(o) => (&o.comparison, &o.recon.states, None, None),
+        None => (ctx.cmp(), &ctx.prep.recon.states, correction, fitted),
     };
     let fs = ctx.rec.fs;
     fit_effects(
@@ -38,7 +40,7 @@ fn fit_trial(
         all,
         cmp,
         states,
-        correction,
+        (correction, fitted),
         predicted,
         fs,
         ctx.settings,
@@ -60,7 +62,8 @@ pub(super) fn fit_scored(
         t.set(&mut model, v);
     }
     let t = Instant::now();
-    let fit = fit_trial(ctx, &model, &all, correction, predicted)?;
+    let fitted = st.fitted.as_ref().map(|(s, _)| s.as_slice());
+    let fit = fit_trial(ctx, &model, &all, (correction, fitted), predicted)?;
     st.simulations += fit.simulations;
     add_time(&mut st.timings, "fit", t);
     ctx.tolerated

@@ -426,6 +426,25 @@ pub struct FitGroup {
     /// reconstructed relative displacement (default 1.2; ≥ 1). Reason:
     /// beyond it the contact never closes.
     pub gap_upper: f64,
+    /// A friction level's upper bound beside freed damping (the damping's
+    /// nuisance parameters, or a damping change found before), at least
+    /// this multiple of the level that dissipates along the reconstructed
+    /// states what the model's damping does (default 2; ≥ 1). Reason: a
+    /// damping calibrated on a record with friction has taken the
+    /// friction's share, so the trace rates the friction at a tenth of its
+    /// level and a bound at 11 × the traced level can exclude the truth;
+    /// freed, the damping gives that share back, at most all it dissipates.
+    pub friction_upper: f64,
+    /// The fit runs on the start states fitted for the model without the
+    /// new effect when the trial at its start scores lower on them than on
+    /// the reconstructed ones by at least this factor, per sample covered
+    /// (default 3; ≥ 1). Reason: with a nonlinear effect kept, the
+    /// reconstruction from the linear model leaves its error in the start
+    /// states (10 to 40 × the fitted ones' cost beside a cubic spring),
+    /// and a race on them drives a small effect such as friction to a
+    /// bound; when the two are close (1.14 × beside a contact) the
+    /// reconstructed ones fit the new effect better.
+    pub fitted_states_gain: f64,
     /// Clearance stiffnesses of the scan, as multiples of the stiffest
     /// spring at the pair (default [3, 5.5, 10, 18, 30]; > 0). Reason: a
     /// clearance's stiffness is of the order of the spring it works
@@ -495,6 +514,8 @@ impl Default for FitGroup {
             contact_stiffnesses: vec![10.0, 40.0],
             gap_quantiles: vec![0.8, 0.88, 0.93, 0.96, 0.98, 0.99, 0.995],
             gap_upper: 1.2,
+            friction_upper: 2.0,
+            fitted_states_gain: 3.0,
             clearance_stiffnesses: vec![3.0, 5.5, 10.0, 18.0, 30.0],
             clearance_gap_quantiles: vec![0.2, 0.35, 0.5, 0.6, 0.7, 0.8, 0.9],
             clearance_refined_scan: true,
@@ -981,6 +1002,18 @@ impl DiagnoseSettings {
             f.gap_upper,
             "must be ≥ 1",
         )?;
+        rule(
+            f.friction_upper >= 1.0 && f.friction_upper.is_finite(),
+            "fit.friction_upper",
+            f.friction_upper,
+            "must be ≥ 1",
+        )?;
+        rule(
+            f.fitted_states_gain >= 1.0 && f.fitted_states_gain.is_finite(),
+            "fit.fitted_states_gain",
+            f.fitted_states_gain,
+            "must be ≥ 1",
+        )?;
         let z = &f.zero_starts;
         rule(positive(z.gap), "fit.zero_starts.gap", z.gap, "must be > 0")?;
         let k = z.contact_stiffness;
@@ -1146,6 +1179,8 @@ mod tests {
                 s.fit.clearance_stiffnesses = vec![-1.0]
             }),
             ("fit.gap_upper", |s| s.fit.gap_upper = 0.9),
+            ("fit.friction_upper", |s| s.fit.friction_upper = f64::NAN),
+            ("fit.fitted_states_gain", |s| s.fit.fitted_states_gain = 0.5),
             ("starts.alternation_gain", |s| {
                 s.starts.alternation_gain = 1.0
             }),
