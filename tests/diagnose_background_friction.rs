@@ -150,15 +150,17 @@ fn friction_beside_a_bumper_is_fitted_far_above_the_noise() {
 /// "friction 0.1" --variants no`): lanl8dof with springs within ±3 %
 /// (seeded), Rayleigh damping (3 s⁻¹, 4e-5 s), the friction and the cubic,
 /// records integrated at 400 sub-steps; the calibrated diagnosis without a
-/// linear record. The friction fitted beside the cubic on the refined
-/// linear part scores 1.67 % against 1.90 % without it on the loop's start
-/// states (3 Gauss–Newton iterations from the reconstruction; measured
-/// noise 1.16 %), too little to keep; on start states refined to
-/// convergence 1.33 % against 1.72 %. It must be named, and the
-/// validation error end at the noise (with the friction withdrawn it
-/// ended at 1.96 %).
+/// linear record. Raced on the start states reconstructed with the linear
+/// model, the friction fitted beside the cubic on the refined linear part
+/// scored 1.67 % against 1.90 % without it on the loop's start states (3
+/// Gauss–Newton iterations; measured noise 1.16 %), too little to keep,
+/// and was kept only when judged on start states refined to convergence
+/// (1.33 % against 1.72 %); raced on the start states fitted for the cubic
+/// model it scores 1.50 % against 2.09 % and is kept in its round. It
+/// must be named and kept, and the validation error end at the noise
+/// (with the friction withdrawn it ended at 1.96 %).
 #[test]
-fn friction_beside_a_cubic_is_judged_on_converged_start_states() {
+fn friction_beside_a_cubic_is_kept_without_a_linear_record() {
     let seed = 15833;
     let truth = with_friction_and_cubic(imperfect_with(seed + 8, 0.03, 0.0));
     let all: Vec<usize> = (1..=8).collect();
@@ -179,17 +181,9 @@ fn friction_beside_a_cubic_is_judged_on_converged_start_states() {
     assert!((k3 / 3e12 - 1.0).abs() <= 0.1, "k3 {k3}");
     let f = named(&d, "friction");
     assert_eq!(f.dofs, (1..=8).collect::<Vec<_>>());
-    // kept on the converged start states, where the loop's own would have
-    // withdrawn it
     let kept = d.rounds.iter().any(|r| {
         r.proposed.as_deref() == Some(f.label.as_str())
-            && matches!(
-                r.decision,
-                Decision::Kept {
-                    confirmed: Some(_),
-                    ..
-                }
-            )
+            && matches!(r.decision, Decision::Kept { .. })
     });
     assert!(kept, "the friction's round: {:?}", d.rounds);
     assert_validation_at_noise(&d);
