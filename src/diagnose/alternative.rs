@@ -3,12 +3,14 @@
 //! far from the noise is refitted as the cubic spring on the same pair,
 //! from the `k3` whose equivalent linearization is the change, and
 //! replaces it when it scores better (the screen's regression on states
-//! the sensors fix poorly can prefer the linear change).
+//! the sensors fix poorly can prefer the linear change). A spring to
+//! ground is refitted the same way as the cubic spring to ground at its
+//! DOF.
 
 use super::effects::{self, AddedEffect};
 use crate::model::Model;
 use crate::trace::regress::sorted_pair;
-use crate::trace::{EffectKind, RankedEffect};
+use crate::trace::{Candidate, EffectKind, RankedEffect};
 use nalgebra::DMatrix;
 
 /// The cubic spring on the pair of a stiffness change of more than
@@ -26,6 +28,9 @@ pub(super) fn cubic_alternative(
 ) -> Option<RankedEffect> {
     if best.candidate.kind == EffectKind::Cubic {
         return effects::clearance_alternative(best, ranking);
+    }
+    if best.candidate.kind == EffectKind::GroundSpring {
+        return ground_cubic(best, eff, fitted, states);
     }
     if best.candidate.kind != EffectKind::Stiffness || best.candidate.dofs.len() != 2 {
         return None;
@@ -57,10 +62,47 @@ pub(super) fn cubic_alternative(
     Some(alt)
 }
 
+/// The cubic spring to ground at the DOF of a fitted spring to ground
+/// `best` (at any stiffness), with the k3 whose equivalent linearization
+/// `3 k3 ⟨u²⟩` (u the DOF's displacement in `states`, which must be the
+/// spring's own reconstruction: the declared free-free one wanders) is the
+/// fitted stiffness. The trace regresses no law against ground (it cannot
+/// on the wandering states), so it takes such a cubic for its
+/// linearization (a cubic from mass 2 to ground beside a contact 6→7 seen
+/// from sensors 1, 2, 6, 7, 8, without a linear record: ground_spring @2).
+fn ground_cubic(
+    best: &RankedEffect,
+    eff: &AddedEffect,
+    fitted: &Model,
+    states: &DMatrix<f64>,
+) -> Option<RankedEffect> {
+    let &[d] = best.candidate.dofs.as_slice() else {
+        return None;
+    };
+    let k = effects::values(fitted, eff)
+        .into_iter()
+        .find(|v| v.0 == "stiffness")?
+        .1;
+    let ns = states.ncols().max(1);
+    let msq = states.row(d).iter().map(|u| u * u).sum::<f64>() / ns as f64;
+    let k3 = k / (3.0 * msq.max(f64::MIN_POSITIVE));
+    if !(k3.is_finite() && k3 > 0.0) {
+        return None;
+    }
+    let candidate = Candidate::new(EffectKind::Cubic, vec![d]);
+    Some(RankedEffect {
+        label: candidate.label(),
+        candidate,
+        parameters: vec![("k3".into(), k3)],
+        std_errors: vec![],
+        hidden: vec![],
+        ..best.clone()
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::trace::Candidate;
 
     fn ranked(c: Candidate, parameters: Vec<(&str, f64)>) -> RankedEffect {
         RankedEffect::for_test(c, &parameters)
@@ -119,5 +161,33 @@ mod tests {
         let mut fitted = model.clone();
         let eff = effects::add(&mut fitted, &contact);
         assert!(cubic_alternative(&contact, &eff, &fitted, &[cubic], &states, 0.5).is_none());
+    }
+
+    /// The cubic to ground in place of a spring to ground at the same DOF:
+    /// `k3` from `3 k3 ⟨u²⟩ = k`, whatever the stiffness.
+    #[test]
+    fn a_spring_to_ground_offers_the_cubic_to_ground_with_its_equivalent_k3() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let model = Model::from_file(std::path::Path::new(p)).unwrap();
+        let mut spring = Candidate::new(EffectKind::GroundSpring, vec![1]);
+        spring.nominal = 0.0;
+        // displacement of mass 2 alternating ±3e-4 m: ⟨u²⟩ = 9e-8
+        let states = DMatrix::from_fn(16, 100, |i, k| match (i, k % 2) {
+            (1, 0) => 3e-4,
+            (1, _) => -3e-4,
+            _ => 1e-2,
+        });
+        for k in [1.1e5, 2e3] {
+            let best = ranked(spring.clone(), vec![("stiffness", k)]);
+            let mut fitted = model.clone();
+            let eff = effects::add(&mut fitted, &best);
+            let alt = cubic_alternative(&best, &eff, &fitted, &[], &states, 0.5).unwrap();
+            assert_eq!(alt.candidate.kind, EffectKind::Cubic);
+            assert_eq!(alt.candidate.dofs, vec![1]);
+            assert_eq!(alt.label, "cubic @2");
+            let k3 = alt.parameters.iter().find(|p| p.0 == "k3").unwrap().1;
+            let want = k / (3.0 * 9e-8);
+            assert!((k3 / want - 1.0).abs() < 1e-9, "{k3} vs {want}");
+        }
     }
 }

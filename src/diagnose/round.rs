@@ -12,7 +12,7 @@ use super::state::{add_time, add_to, Context, KeptEffect, State, Trial};
 use super::substeps::resolved;
 use crate::error::Result;
 use crate::model::Model;
-use crate::trace::{self, RankedEffect, TraceInput, TraceResult};
+use crate::trace::{self, EffectKind, RankedEffect, TraceInput, TraceResult};
 use crate::update::Segment;
 use nalgebra::DMatrix;
 use std::time::Instant;
@@ -298,8 +298,15 @@ pub(super) fn try_cubic(
     let s = &ctx.settings.screen;
     let floor = s.alternative_floor * ctx.settings.noise_floor();
     let far = trial.scored.error.is_some_and(|e| e > floor);
-    let states = &ctx.prep.recon.states;
     let (best, eff, fitted) = (&trial.best, &trial.effect, &trial.fit.model);
+    // a spring to ground: its own reconstruction (the declared free-free
+    // one wanders)
+    let own = (far && best.candidate.kind == EffectKind::GroundSpring)
+        .then(|| ctx.own_prep(fitted, ctx.rec))
+        .flatten();
+    let states = own
+        .as_ref()
+        .map_or(&ctx.prep.recon.states, |o| &o.recon.states);
     let alt = match cubic_alternative(best, eff, fitted, ranking, states, s.alternative_change) {
         Some(alt) if far => alt,
         _ => return Ok((trial, None)),
