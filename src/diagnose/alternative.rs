@@ -47,15 +47,7 @@ pub(super) fn cubic_alternative(
         .iter()
         .find(|e| e.candidate.kind == EffectKind::Cubic && sorted_pair(&e.candidate) == pair)?
         .clone();
-    let ns = states.ncols().max(1);
-    let msq = (0..states.ncols())
-        .map(|k| best.candidate.delta(states, k).powi(2))
-        .sum::<f64>()
-        / ns as f64;
-    let k3 = delta * eff.nominal / (3.0 * msq.max(f64::MIN_POSITIVE));
-    if !(k3.is_finite() && k3 > 0.0) {
-        return None;
-    }
+    let k3 = equivalent_k3(&best.candidate, states, delta * eff.nominal)?;
     for p in alt.parameters.iter_mut().filter(|p| p.0 == "k3") {
         p.1 = k3;
     }
@@ -83,12 +75,7 @@ fn ground_cubic(
         .into_iter()
         .find(|v| v.0 == "stiffness")?
         .1;
-    let ns = states.ncols().max(1);
-    let msq = states.row(d).iter().map(|u| u * u).sum::<f64>() / ns as f64;
-    let k3 = k / (3.0 * msq.max(f64::MIN_POSITIVE));
-    if !(k3.is_finite() && k3 > 0.0) {
-        return None;
-    }
+    let k3 = equivalent_k3(&best.candidate, states, k)?;
     let candidate = Candidate::new(EffectKind::Cubic, vec![d]);
     Some(RankedEffect {
         label: candidate.label(),
@@ -98,6 +85,20 @@ fn ground_cubic(
         hidden: vec![],
         ..best.clone()
     })
+}
+
+/// The cubic spring's `k3` whose equivalent linearization `3 k3 ⟨δ²⟩`
+/// (δ the candidate's relative displacement, or displacement to ground,
+/// in `states`) is the linear stiffness `k`; None unless finite and
+/// positive.
+fn equivalent_k3(c: &Candidate, states: &DMatrix<f64>, k: f64) -> Option<f64> {
+    let ns = states.ncols().max(1);
+    let msq = (0..states.ncols())
+        .map(|i| c.delta(states, i).powi(2))
+        .sum::<f64>()
+        / ns as f64;
+    let k3 = k / (3.0 * msq.max(f64::MIN_POSITIVE));
+    (k3.is_finite() && k3 > 0.0).then_some(k3)
 }
 
 #[cfg(test)]

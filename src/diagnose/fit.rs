@@ -206,54 +206,37 @@ fn raise_friction_bounds(
     let freed = all
         .iter()
         .any(|e| !e.nuisance.is_empty() || e.candidate.kind == EffectKind::Damping);
+    let friction = |e: &&AddedEffect| {
+        matches!(
+            e.candidate.kind,
+            EffectKind::Friction | EffectKind::RelativeFriction
+        )
+    };
     let n = trial.ndof();
-    if !freed || states.nrows() < 2 * n || states.ncols() == 0 {
+    if !freed || !all.iter().any(|e| friction(&e)) || states.nrows() < 2 * n {
         return;
     }
     let Ok(c) = trial.damping_matrix() else {
         return;
     };
     // (every `stride`-th sample: a mean)
-    let stride = states.ncols().div_ceil(1024);
+    let stride = states.ncols().div_ceil(1024).max(1);
     let samples: Vec<usize> = (0..states.ncols()).step_by(stride).collect();
     let v = |k: usize| states.view((n, k), (n, 1));
     let dissipated: f64 = samples.iter().map(|&k| v(k).dot(&(&c * v(k)))).sum();
-    let rate = |t: &Target| -> f64 {
-        let dofs: Vec<usize> = match *t {
-            Target::FrictionLevel(i) => vec![trial.frictions[i].dof - 1],
-            Target::RelativeFrictionLevel(i) => trial.relative_frictions[i]
-                .dofs
-                .iter()
-                .map(|d| d - 1)
-                .collect(),
-            _ => return 0.0,
-        };
-        let sign = |j: usize| if j == 0 { 1.0 } else { -1.0 };
-        samples
-            .iter()
-            .map(|&k| {
-                let dv: f64 = dofs
-                    .iter()
-                    .enumerate()
-                    .map(|(j, &d)| sign(j) * states[(n + d, k)])
-                    .sum();
-                dv.abs()
-            })
-            .sum()
+    // the friction's sliding speed summed over its DOFs (one level each)
+    let speed = |c: &Candidate, k: usize| match c.kind {
+        EffectKind::Friction => c.dofs.iter().map(|&d| states[(n + d, k)].abs()).sum(),
+        _ => c.delta_rate(states, n, k).abs(),
     };
-    for e in all {
-        let total: f64 = e.targets.iter().map(rate).sum();
+    for e in all.iter().filter(friction) {
+        let total: f64 = samples.iter().map(|&k| speed(&e.candidate, k)).sum();
         if !(total > 0.0 && dissipated > 0.0) {
             continue;
         }
         let level = factor * dissipated / total;
         for p in params.iter_mut().filter(|p| e.targets.contains(&p.target)) {
-            if matches!(
-                p.target,
-                Target::FrictionLevel(_) | Target::RelativeFrictionLevel(_)
-            ) {
-                p.upper = p.upper.max(level);
-            }
+            p.upper = p.upper.max(level);
         }
     }
 }
