@@ -602,6 +602,11 @@ fn main() {
         settings.substeps.min = n;
         settings.substeps.max = settings.substeps.max.max(n);
     }
+    // `--stop-multiple X`: the loop's stop at X × the measured noise
+    // (`noise.stop_multiple`)
+    if let Some(x) = arg("--stop-multiple").map(|s| s.parse::<f64>().expect("--stop-multiple X")) {
+        settings.noise.stop_multiple = x;
+    }
     println!("| record | truth | sensors | noise (measured) | linear record | found | parameters | error before → after | validation before → after | corrections significant | checks | time |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (i, c) in cases(seed).into_iter().enumerate() {

@@ -15,7 +15,7 @@ use super::effects::{self, AddedEffect};
 use super::errors::Comparison;
 use super::outcome::ToleratedFailure;
 use super::polish::{noise_cost, polish, Polished};
-use super::settings::ZeroStarts;
+use super::settings::{FitGroup, ZeroStarts};
 use super::starts;
 use super::substeps::resolved;
 use super::DiagnoseSettings;
@@ -45,9 +45,13 @@ pub(super) struct EffectFit {
     pub stages: [(&'static str, f64); 3],
     /// Failures the fit went on past.
     pub failures: Vec<ToleratedFailure>,
+    /// The polished fit's cost on its fit segments (infinite when no
+    /// start was carried on).
+    pub cost: f64,
 }
 
 /// The starts of a fit being gathered.
+#[derive(Clone)]
 struct Starts {
     /// Scaled parameter vectors.
     list: Vec<Vec<f64>>,
@@ -157,20 +161,92 @@ pub(super) fn fit_effects(
     if let Some(segs) = starts.segments.take() {
         problem.segments = segs;
     } else if let Some(f) = fitted {
-        starts.simulations += closer_start_states(&mut problem, f, settings.fit.fitted_states_gain);
+        let (choice, ratio, sims) = closer_start_states(&problem, f, &settings.fit);
+        starts.simulations += sims;
+        let mut fit = match choice {
+            StartStates::Reconstructed => race_and_polish(trial, cmp, &problem, starts, settings)?,
+            StartStates::Fitted => {
+                problem.segments = f.to_vec();
+                race_and_polish(trial, cmp, &problem, starts, settings)?
+            }
+            StartStates::Both => race_on_both(trial, cmp, &problem, f, starts, settings)?,
+        };
+        fit.note = format!(
+            "{}; the trial at its start scored {ratio:.3} × lower per sample on the start states fitted without it ({choice:?})",
+            fit.note
+        );
+        return Ok(fit);
     }
     race_and_polish(trial, cmp, &problem, starts, settings)
+}
+
+/// Which start states a fit runs on ([`closer_start_states`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum StartStates {
+    /// The reconstructed ones (corrected when a correction is given).
+    Reconstructed,
+    /// Those fitted for the model without the new effect.
+    Fitted,
+    /// Both, the fit that ends lower kept ([`race_on_both`]).
+    Both,
+}
+
+/// Race and polish on the problem's start states and on `fitted`, and
+/// keep the fit whose polished cost is lower (both polishes refine the
+/// start states of the same segments jointly with the parameters, so
+/// their costs compare); the simulations and times of both are counted.
+fn race_on_both(
+    trial: &Model,
+    cmp: &Comparison,
+    problem: &Problem,
+    fitted: &[Segment],
+    starts: Starts,
+    settings: &DiagnoseSettings,
+) -> Result<EffectFit> {
+    let again = Starts {
+        simulations: 0,
+        scan_secs: 0.0,
+        ..starts.clone()
+    };
+    let own = race_and_polish(trial, cmp, problem, starts, settings)?;
+    let mut other = problem.clone();
+    other.segments = fitted.to_vec();
+    let theirs = race_and_polish(trial, cmp, &other, again, settings)?;
+    let costs = format!(
+        "polished cost {:.4e} on the reconstructed start states, {:.4e} on the fitted ones",
+        own.cost, theirs.cost
+    );
+    let (mut kept, dropped, on) = if theirs.cost < own.cost {
+        (theirs, own, "fitted")
+    } else {
+        (own, theirs, "reconstructed")
+    };
+    kept.simulations += dropped.simulations;
+    for (k, d) in kept.stages.iter_mut().zip(dropped.stages) {
+        k.1 += d.1;
+    }
+    kept.note = format!(
+        "{}; raced on both start states, the {on} kept ({costs})",
+        kept.note
+    );
+    Ok(kept)
 }
 
 /// The fit segments' start states: those fitted for the model without
 /// the new effect (`fitted`, the last kept round's fit) in place of the
 /// reconstructed ones when the trial at its start (scaled changes 0)
-/// scores lower on them per sample covered by at least `gain`
-/// ([`super::settings::FitGroup::fitted_states_gain`]). Returns the
+/// scores lower on them per sample covered by at least
+/// [`super::settings::FitGroup::fitted_states_gain`], both from
+/// [`super::settings::FitGroup::fitted_states_both`] on. Returns the
+/// choice, the ratio of the costs (reconstructed over fitted) and the
 /// segment simulations spent.
-fn closer_start_states(problem: &mut Problem, fitted: &[Segment], gain: f64) -> usize {
+fn closer_start_states(
+    problem: &Problem,
+    fitted: &[Segment],
+    fit: &FitGroup,
+) -> (StartStates, f64, usize) {
     if fitted.is_empty() || fitted == problem.segments.as_slice() {
-        return 0;
+        return (StartStates::Reconstructed, 1.0, 0);
     }
     let x0 = vec![0.0; problem.parameters.len()];
     let per_sample = |p: &Problem| -> (f64, usize) {
@@ -183,10 +259,21 @@ fn closer_start_states(problem: &mut Problem, fitted: &[Segment], gain: f64) -> 
     let mut other = problem.clone();
     other.segments = fitted.to_vec();
     let (on_fitted, n2) = per_sample(&other);
-    if gain * on_fitted < own {
-        problem.segments = other.segments;
+    (start_choice(own, on_fitted, fit), own / on_fitted, n1 + n2)
+}
+
+/// The start states for per-sample costs `own` (reconstructed) and
+/// `on_fitted` ([`closer_start_states`]).
+fn start_choice(own: f64, on_fitted: f64, fit: &FitGroup) -> StartStates {
+    if fit.fitted_states_gain * on_fitted < own {
+        StartStates::Fitted
+    } else if fit.fitted_states_both < fit.fitted_states_gain
+        && fit.fitted_states_both * on_fitted < own
+    {
+        StartStates::Both
+    } else {
+        StartStates::Reconstructed
     }
-    n1 + n2
 }
 
 /// The upper bound of a friction level beside freed damping (an effect's
@@ -477,6 +564,7 @@ fn race_and_polish(
             fitted: None,
             stages,
             failures,
+            cost: f64::INFINITY,
         });
     };
     stages[2].1 += t.elapsed().as_secs_f64();
@@ -487,6 +575,7 @@ fn race_and_polish(
         fitted: Some((k.segments, problem.sim)),
         stages,
         failures,
+        cost: k.cost,
     })
 }
 
@@ -648,6 +737,35 @@ mod tests {
     use super::*;
     use crate::model::Damping;
     use crate::trace::{Candidate, RankedEffect};
+
+    /// The fitted start states from `fitted_states_gain` × lower on, both
+    /// from `fitted_states_both` × on, the reconstructed ones below; both
+    /// never when the two factors are equal.
+    #[test]
+    fn the_start_states_follow_the_ratio_of_their_costs() {
+        let fit = FitGroup::default();
+        let (both, gain) = (fit.fitted_states_both, fit.fitted_states_gain);
+        assert!(both < gain);
+        let choice = |ratio: f64, fit: &FitGroup| start_choice(ratio * 1e-4, 1e-4, fit);
+        assert_eq!(choice(1.14, &fit), StartStates::Reconstructed);
+        assert_eq!(choice(0.5 * (both + gain), &fit), StartStates::Both);
+        assert_eq!(choice(1.01 * gain, &fit), StartStates::Fitted);
+        assert_eq!(choice(0.99 * both, &fit), StartStates::Reconstructed);
+        let single = FitGroup {
+            fitted_states_both: gain,
+            ..fit.clone()
+        };
+        assert_eq!(
+            choice(0.5 * (both + gain), &single),
+            StartStates::Reconstructed
+        );
+        // a trial that fails on the fitted states (infinite cost) keeps
+        // the reconstructed ones
+        assert_eq!(
+            start_choice(1e-4, f64::INFINITY, &fit),
+            StartStates::Reconstructed
+        );
+    }
 
     /// Friction on every mass beside freed Rayleigh damping (`C = α M`):
     /// with every velocity `±v` alternating, the damping dissipates
