@@ -454,12 +454,11 @@ pub struct FitGroup {
     /// sets of start states, and the one whose polished fit ends lower
     /// (on start states refined jointly with the parameters, the same
     /// segments) is kept (default 2; ≥ 1, ≤ `fitted_states_gain`; equal
-    /// to it: never both). Reason: one factor cannot tell the two cases
-    /// apart; a stop of mass 8 with friction on every mass scored 3 to 8 ×
-    /// lower on the fitted start states and its race there ended short of
-    /// the noise, where the friction beside a contact (4.7 ×) needs the
-    /// reconstructed ones. Each fit in the band costs two races and two
-    /// polishes.
+    /// to it: never both). Reason: the ratios measured beside a contact
+    /// (1.14, 2.33, 4.7) and beside a cubic (10.3, 43) leave no factor
+    /// with a margin on both sides; in between, the polished cost decides
+    /// rather than the cost at the start. Each fit in the band costs two
+    /// races and two polishes.
     pub fitted_states_both: f64,
     /// Clearance stiffnesses of the scan, as multiples of the stiffest
     /// spring at the pair (default [3, 5.5, 10, 18, 30]; > 0). Reason: a
