@@ -161,21 +161,23 @@ pub(super) fn fit_effects(
     if let Some(segs) = starts.segments.take() {
         problem.segments = segs;
     } else if let Some(f) = fitted {
-        let (choice, ratio, sims) = closer_start_states(&problem, f, &settings.fit);
-        starts.simulations += sims;
-        let mut fit = match choice {
-            StartStates::Reconstructed => race_and_polish(trial, cmp, &problem, starts, settings)?,
-            StartStates::Fitted => {
-                problem.segments = f.to_vec();
-                race_and_polish(trial, cmp, &problem, starts, settings)?
-            }
-            StartStates::Both => race_on_both(trial, cmp, &problem, f, starts, settings)?,
-        };
-        fit.note = format!(
-            "{}; the trial at its start scored {ratio:.3} × lower per sample on the start states fitted without it ({choice:?})",
-            fit.note
-        );
-        return Ok(fit);
+        if let Some((choice, ratio, sims)) = closer_start_states(&problem, f, &settings.fit) {
+            starts.simulations += sims;
+            let mut fit = match choice {
+                StartStates::Both => race_on_both(trial, cmp, &problem, f, starts, settings)?,
+                _ => {
+                    if choice == StartStates::Fitted {
+                        problem.segments = f.to_vec();
+                    }
+                    race_and_polish(trial, cmp, &problem, starts, settings)?
+                }
+            };
+            fit.note = format!(
+                "{}; the trial at its start scored {ratio:.3} × lower per sample on the start states fitted without it ({choice:?})",
+                fit.note
+            );
+            return Ok(fit);
+        }
     }
     race_and_polish(trial, cmp, &problem, starts, settings)
 }
@@ -239,14 +241,15 @@ fn race_on_both(
 /// [`super::settings::FitGroup::fitted_states_gain`], both from
 /// [`super::settings::FitGroup::fitted_states_both`] on. Returns the
 /// choice, the ratio of the costs (reconstructed over fitted) and the
-/// segment simulations spent.
+/// segment simulations spent; None when there is nothing to compare
+/// (`fitted` empty or the problem's own start states).
 fn closer_start_states(
     problem: &Problem,
     fitted: &[Segment],
     fit: &FitGroup,
-) -> (StartStates, f64, usize) {
+) -> Option<(StartStates, f64, usize)> {
     if fitted.is_empty() || fitted == problem.segments.as_slice() {
-        return (StartStates::Reconstructed, 1.0, 0);
+        return None;
     }
     let x0 = vec![0.0; problem.parameters.len()];
     let per_sample = |p: &Problem| -> (f64, usize) {
@@ -259,7 +262,7 @@ fn closer_start_states(
     let mut other = problem.clone();
     other.segments = fitted.to_vec();
     let (on_fitted, n2) = per_sample(&other);
-    (start_choice(own, on_fitted, fit), own / on_fitted, n1 + n2)
+    Some((start_choice(own, on_fitted, fit), own / on_fitted, n1 + n2))
 }
 
 /// The start states for per-sample costs `own` (reconstructed) and
