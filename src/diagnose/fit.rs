@@ -306,29 +306,41 @@ fn raise_friction_bounds(
     if !freed || !all.iter().any(|e| friction(&e)) || states.nrows() < 2 * n {
         return;
     }
-    let Ok(c) = trial.damping_matrix() else {
-        return;
-    };
-    // (every `stride`-th sample: a mean)
-    let stride = states.ncols().div_ceil(1024).max(1);
-    let samples: Vec<usize> = (0..states.ncols()).step_by(stride).collect();
-    let v = |k: usize| states.view((n, k), (n, 1));
-    let dissipated: f64 = samples.iter().map(|&k| v(k).dot(&(&c * v(k)))).sum();
-    // the friction's sliding speed summed over its DOFs (one level each)
-    let speed = |c: &Candidate, k: usize| match c.kind {
-        EffectKind::Friction => c.dofs.iter().map(|&d| states[(n + d, k)].abs()).sum(),
-        _ => c.delta_rate(states, n, k).abs(),
-    };
     for e in all.iter().filter(friction) {
-        let total: f64 = samples.iter().map(|&k| speed(&e.candidate, k)).sum();
-        if !(total > 0.0 && dissipated > 0.0) {
+        let Some((dissipated, total)) = dissipation(trial, &e.candidate, states) else {
             continue;
-        }
+        };
         let level = factor * dissipated / total;
         for p in params.iter_mut().filter(|p| e.targets.contains(&p.target)) {
             p.upper = p.upper.max(level);
         }
     }
+}
+
+/// What `model`'s viscous damping dissipates along the reconstructed
+/// `states` (`[u; v]`, 2n × N) and the sliding speed of the friction `c`
+/// (ground or relative) summed over its DOFs, both summed over the same
+/// samples: their ratio is the friction level (one at each DOF) that
+/// dissipates what the damping does. None without damping, sliding or a
+/// damping matrix.
+pub(super) fn dissipation(
+    model: &Model,
+    c: &Candidate,
+    states: &DMatrix<f64>,
+) -> Option<(f64, f64)> {
+    let n = model.ndof();
+    let damping = model.damping_matrix().ok()?;
+    // (every `stride`-th sample: a mean)
+    let stride = states.ncols().div_ceil(1024).max(1);
+    let samples: Vec<usize> = (0..states.ncols()).step_by(stride).collect();
+    let v = |k: usize| states.view((n, k), (n, 1));
+    let dissipated: f64 = samples.iter().map(|&k| v(k).dot(&(&damping * v(k)))).sum();
+    let speed = |k: usize| match c.kind {
+        EffectKind::Friction => c.dofs.iter().map(|&d| states[(n + d, k)].abs()).sum(),
+        _ => c.delta_rate(states, n, k).abs(),
+    };
+    let total: f64 = samples.iter().map(|&k| speed(k)).sum();
+    (total > 0.0 && dissipated > 0.0).then_some((dissipated, total))
 }
 
 /// What a contact scan runs on.

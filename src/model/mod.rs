@@ -78,6 +78,23 @@ pub enum Damping {
     },
 }
 
+impl Damping {
+    /// The same damping with every ratio or coefficient times `f`.
+    pub fn scaled(&self, f: f64) -> Damping {
+        match self {
+            Damping::None => Damping::None,
+            Damping::Modal { ratio, ratios } => Damping::Modal {
+                ratio: ratio.map(|z| z * f),
+                ratios: ratios.iter().map(|z| z * f).collect(),
+            },
+            Damping::Rayleigh { alpha, beta } => Damping::Rayleigh {
+                alpha: alpha * f,
+                beta: beta * f,
+            },
+        }
+    }
+}
+
 /// A structural model.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
