@@ -645,7 +645,8 @@ impl Context<'_> {
 
     /// Friction on every mass added to `current`'s model when `current` is
     /// left above the noise without friction, in a lumped model of several
-    /// DOFs that declares none: a damping refined on a record with
+    /// DOFs (not from matrices, whose DOFs need not be masses' translations)
+    /// that declares none: a damping refined on a record with
     /// friction takes the friction's dissipation (velocity-proportional for
     /// amplitude-independent: the validation record at another amplitude
     /// misses it), and beside the linear part's error the trace need not
@@ -663,7 +664,7 @@ impl Context<'_> {
             && self.declared.frictions.is_empty()
             && self.declared.relative_frictions.is_empty()
             && self.declared.free.is_none()
-            && !self.declared.calibrated_by_scales()
+            && self.declared.matrices.is_none()
             && d0.model.frictions.is_empty()
             && d0.model.relative_frictions.is_empty()
             && !self.at_noise(d0);
