@@ -146,6 +146,17 @@ fn friction_beside_a_bumper_is_fitted_far_above_the_noise() {
 }
 
 /// The imperfect matrix's cubic 1–2 with 0.1 N of friction on every mass
+/// on `seed` (lanl8dof with springs within ±3 % seeded by the row, the
+/// records at 400 sub-steps), diagnosed calibrated without a linear record.
+fn matrix_row_diagnosed(seed: u64) -> Diagnosis {
+    let truth = with_friction_and_cubic(imperfect_with(seed + 8, 0.03, 0.0));
+    let all: Vec<usize> = (1..=8).collect();
+    let rec = matrix_record(&truth, &all, seed * 10 + 1);
+    let val = matrix_record(&truth, &all, seed * 10 + 2);
+    calibrated_without_linear_record(&rec, &val)
+}
+
+/// The imperfect matrix's cubic 1–2 with 0.1 N of friction on every mass
 /// (`cargo run --release --example imperfect_matrix -- --seed 15833 --only
 /// "friction 0.1" --variants no`): lanl8dof with springs within ±3 %
 /// (seeded), Rayleigh damping (3 s⁻¹, 4e-5 s), the friction and the cubic,
@@ -161,12 +172,7 @@ fn friction_beside_a_bumper_is_fitted_far_above_the_noise() {
 /// (with the friction withdrawn it ended at 1.96 %).
 #[test]
 fn friction_beside_a_cubic_is_kept_without_a_linear_record() {
-    let seed = 15833;
-    let truth = with_friction_and_cubic(imperfect_with(seed + 8, 0.03, 0.0));
-    let all: Vec<usize> = (1..=8).collect();
-    let rec = matrix_record(&truth, &all, seed * 10 + 1);
-    let val = matrix_record(&truth, &all, seed * 10 + 2);
-    let d = calibrated_without_linear_record(&rec, &val);
+    let d = matrix_row_diagnosed(15833);
     let v = d.validation.as_ref().unwrap().after.relative_error;
     eprintln!(
         "{} | after {:?} | validation {v:?}",
@@ -202,12 +208,7 @@ fn friction_beside_a_cubic_is_kept_without_a_linear_record() {
 /// 0.1 N, and the validation error end at the noise.
 #[test]
 fn friction_the_trace_never_ranks_is_tried_after_the_refinement() {
-    let seed = 49529;
-    let truth = with_friction_and_cubic(imperfect_with(seed + 8, 0.03, 0.0));
-    let all: Vec<usize> = (1..=8).collect();
-    let rec = matrix_record(&truth, &all, seed * 10 + 1);
-    let val = matrix_record(&truth, &all, seed * 10 + 2);
-    let d = calibrated_without_linear_record(&rec, &val);
+    let d = matrix_row_diagnosed(49529);
     let refinement = &d.calibration.as_ref().unwrap().refinement;
     eprintln!("{} | after {:?}", d.verdict, d.after.relative_error);
     eprintln!("{refinement}");
