@@ -7,7 +7,8 @@
 //! structure at a level where it behaves linearly (`--linear-record`).
 //! Prints a Markdown table (docs/calibration.md holds the last run).
 //!
-//! `cargo run --release --example imperfect_matrix [-- --seed N] [--only TEXT] [--rows A-B] [--variants no|yes] [--progress] [--score-truth] [--calibration-only]`
+//! `cargo run --release --example imperfect_matrix -- --help` lists the options
+//! (`--seed N`, `--only TEXT`, `--rows A-B`, `--variants no|yes`, `--progress`, ...).
 
 mod matrix_common;
 
@@ -552,43 +553,63 @@ fn calibration_only(c: &Case, rec: &Record, low: &Record) {
     }
 }
 
+/// The imperfect-model matrix: which rows, which variants, what to print.
+#[derive(clap::Parser)]
+#[command(about = "Diagnoses of records whose structure departs from data/lanl8dof.toml as real tests do")]
+struct Args {
+    /// Seed of the perturbed structures, the records and the noise
+    #[arg(long, default_value_t = 9001)]
+    seed: u64,
+    /// Only the rows whose name contains this text
+    #[arg(long)]
+    only: Option<String>,
+    /// Only rows A to B (from 0, in the table's order), as A-B
+    #[arg(long, value_parser = parse_rows)]
+    rows: Option<(usize, usize)>,
+    /// Only the diagnoses without (no) or with (yes) the linear record
+    #[arg(long, value_parser = ["no", "yes"])]
+    variants: Option<String>,
+    /// Sub-steps per sample of the simulated records (they stand for a
+    /// continuous structure; the diagnosis integrates at its own, coarser
+    /// sub-steps)
+    #[arg(long, default_value_t = 400)]
+    record_substeps: usize,
+    /// The diagnosis's steps, its rounds and first ranking on stderr
+    #[arg(long)]
+    progress: bool,
+    /// Only the true model's errors on the record and the validation
+    /// record, per channel, on stderr (what the scoring gives an exact model)
+    #[arg(long)]
+    score_truth: bool,
+    /// Only the linear calibration on the record and on the linear record,
+    /// against the truth's springs
+    #[arg(long)]
+    calibration_only: bool,
+    /// The diagnosis's fewest sub-steps of a scored or fitted model
+    /// (`substeps.min`; the most raised to at least N)
+    #[arg(long)]
+    min_substeps: Option<usize>,
+    /// The loop's stop at X × the measured noise (`noise.stop_multiple`)
+    #[arg(long)]
+    stop_multiple: Option<f64>,
+}
+
+/// `A-B` as the pair of row indices, A ≤ B.
+fn parse_rows(s: &str) -> Result<(usize, usize), String> {
+    let bad = || format!("'{s}': expected A-B, row indices from 0 with A ≤ B");
+    let (a, b) = s.split_once('-').ok_or_else(bad)?;
+    let (a, b) = (a.parse().map_err(|_| bad())?, b.parse().map_err(|_| bad())?);
+    if a > b {
+        return Err(bad());
+    }
+    Ok((a, b))
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let arg = |k: &str| {
-        args.iter()
-            .position(|a| a == k)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
-    let seed: u64 = arg("--seed").and_then(|s| s.parse().ok()).unwrap_or(9001);
-    let only = arg("--only");
-    // `--rows A-B`: only the cases A to B (from 0, in the table's order)
-    let rows = arg("--rows").map(|r| {
-        let (a, b) = r.split_once('-').expect("--rows A-B");
-        (
-            a.parse::<usize>().expect("--rows A-B"),
-            b.parse::<usize>().expect("--rows A-B"),
-        )
-    });
-    // `--variants no` or `--variants yes`: only the diagnoses without or
-    // with the linear record
-    let variants = arg("--variants");
-    // `--record-substeps N`: sub-steps per sample of the simulated records
-    // (default 400: the records stand for a continuous structure; the
-    // diagnosis integrates at its own, coarser sub-steps)
-    let record_substeps: usize = arg("--record-substeps")
-        .map(|s| s.parse().expect("--record-substeps N"))
-        .unwrap_or(400);
-    // `--progress`: the diagnosis's steps, its rounds and first ranking on
-    // stderr
-    let verbose = args.iter().any(|a| a == "--progress");
-    // `--score-truth`: only the true model's errors on the record and the
-    // validation record, per channel and with the start-state refinement's
-    // account, on stderr (what the scoring gives an exact model)
-    let truth_only = args.iter().any(|a| a == "--score-truth");
-    // `--calibration-only`: only the linear calibration on the record and
-    // on the linear record, against the truth's springs
-    let calibration_only_run = args.iter().any(|a| a == "--calibration-only");
+    let args = <Args as clap::Parser>::parse();
+    let (seed, only, rows, variants) = (args.seed, args.only, args.rows, args.variants);
+    let (record_substeps, verbose) = (args.record_substeps, args.progress);
+    let (truth_only, calibration_only_run) = (args.score_truth, args.calibration_only);
     let t0 = std::time::Instant::now();
     let progress = |m: &str| {
         if verbose {
@@ -596,15 +617,11 @@ fn main() {
         }
     };
     let mut settings = DiagnoseSettings::default();
-    // `--min-substeps N`: the diagnosis's fewest sub-steps of a scored or
-    // fitted model (`substeps.min`; the most raised to at least N)
-    if let Some(n) = arg("--min-substeps").map(|s| s.parse::<usize>().expect("--min-substeps N")) {
+    if let Some(n) = args.min_substeps {
         settings.substeps.min = n;
         settings.substeps.max = settings.substeps.max.max(n);
     }
-    // `--stop-multiple X`: the loop's stop at X × the measured noise
-    // (`noise.stop_multiple`)
-    if let Some(x) = arg("--stop-multiple").map(|s| s.parse::<f64>().expect("--stop-multiple X")) {
+    if let Some(x) = args.stop_multiple {
         settings.noise.stop_multiple = x;
     }
     println!("| record | truth | sensors | noise (measured) | linear record | found | parameters | error before → after | validation before → after | corrections significant | checks | time |");
