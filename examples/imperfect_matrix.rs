@@ -555,7 +555,9 @@ fn calibration_only(c: &Case, rec: &Record, low: &Record) {
 
 /// The imperfect-model matrix: which rows, which variants, what to print.
 #[derive(clap::Parser)]
-#[command(about = "Diagnoses of records whose structure departs from data/lanl8dof.toml as real tests do")]
+#[command(
+    about = "Diagnoses of records whose structure departs from data/lanl8dof.toml as real tests do"
+)]
 struct Args {
     /// Seed of the perturbed structures, the records and the noise
     #[arg(long, default_value_t = 9001)]

@@ -113,17 +113,16 @@ fn friction_on_every_mass_behind_a_damping_that_took_it() {
 /// A contact 2→3 beside a spring of 1500 N/m from mass 8 to ground, on a
 /// structure with 3 % modal damping and springs within ±4 %, without a
 /// linear record: the row "contact 2→3 + ground spring at 8, modal 3 %"
-/// of `examples/imperfect_matrix.rs` on seed 93557 (its records, 4096
-/// samples). The free-free declared model cannot give the rigid-body
+/// of `examples/imperfect_matrix.rs` on matrix seed `seed` (its records,
+/// 4096 samples). The free-free declared model cannot give the rigid-body
 /// mode the spring's frequency, the force is located along pair 2–3 only,
-/// and the refinement with the contact alone leaves 8.3 % on the record.
+/// and the refinement with the contact alone leaves 8–11 % on the record.
 /// The spring to ground calibrated at each DOF and refined with the
 /// contact must be named at 8 with the contact, both within 10 %, and the
 /// validation error within 1.5 × the measured noise.
-#[test]
-fn a_contact_beside_a_spring_to_ground_without_a_linear_record() {
-    // the matrix's structure of row 6 on seed 93557
-    let mut truth = imperfect_with(93557 + 6, 0.04, 0.03);
+fn contact_beside_a_spring_to_ground(seed: u64) {
+    // the matrix's structure of row 6
+    let mut truth = imperfect_with(seed + 6, 0.04, 0.03);
     truth.contacts = vec![Contact {
         dofs: vec![2, 3],
         gap: 0.35e-3,
@@ -136,8 +135,8 @@ fn a_contact_beside_a_spring_to_ground_without_a_linear_record() {
     });
     let all: Vec<usize> = (1..=8).collect();
     let (rec, val) = (
-        record(&truth, &all, 4096, 935571),
-        record(&truth, &all, 4096, 935572),
+        record(&truth, &all, 4096, seed * 10 + 1),
+        record(&truth, &all, 4096, seed * 10 + 2),
     );
     let d = calibrated_without_linear_record(&rec, &val);
     assert_named_within(
@@ -150,6 +149,21 @@ fn a_contact_beside_a_spring_to_ground_without_a_linear_record() {
         ],
     );
     assert_validation_at_noise(&d);
+}
+
+/// Seed 93557: the spring to ground ranked first is at 8.
+#[test]
+fn a_contact_beside_a_spring_to_ground_without_a_linear_record() {
+    contact_beside_a_spring_to_ground(93557);
+}
+
+/// Seed 7543: the springs to ground at 5, 4, 8, 1, 3 and 6 lower the
+/// linear part's output error by 2–4 % each, 6 comes first after a quick
+/// refinement and is refined to 7.6 % only; the one at 8, tried next,
+/// reaches the noise.
+#[test]
+fn the_spring_to_ground_tried_second_reaches_the_noise() {
+    contact_beside_a_spring_to_ground(7543);
 }
 
 /// The structure of `examples/imperfect_matrix.rs`'s row "clearance 2–3,

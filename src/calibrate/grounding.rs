@@ -51,16 +51,30 @@ pub struct GroundSpring {
 /// The spring to ground at the DOF whose calibration (that spring and the
 /// damping free, every other spring held) leaves the lowest output error
 /// on `data`, when that error is at most [`MAX_RATIO`] of the error left
-/// by the damping alone; None otherwise, on a model that has a spring to
-/// ground already, or one without springs (a DOF whose calibration fails
-/// is left out).
+/// by the damping alone; None otherwise ([`ground_springs`]).
 pub fn ground_spring(
     linear: &Model,
     data: &[Data],
     settings: &CalibrationSettings,
 ) -> Result<Option<GroundSpring>> {
+    Ok(ground_springs(linear, data, settings)?.into_iter().next())
+}
+
+/// The spring to ground calibrated at each DOF (that spring and the
+/// damping free, every other spring held) whose output error on `data` is
+/// at most [`MAX_RATIO`] of the error left by the damping alone, the
+/// lowest error first; empty on a model that has a spring to ground
+/// already, or one without springs (a DOF whose calibration fails is left
+/// out). A soft spring to ground gives the rigid-body mode nearly the same
+/// frequency at any DOF, so the output error of the linear part on a
+/// record with a localized effect need not put the right DOF first.
+pub fn ground_springs(
+    linear: &Model,
+    data: &[Data],
+    settings: &CalibrationSettings,
+) -> Result<Vec<GroundSpring>> {
     if linear.has_ground_spring() || linear.springs.is_empty() {
-        return Ok(None);
+        return Ok(vec![]);
     }
     let held = CalibrationSettings {
         freedom: Freedom {
@@ -95,21 +109,21 @@ pub fn ground_spring(
     // a calibration that fails (a trial spring so stiff or so soft that
     // the model's response is not finite) leaves that DOF out
     let Ok(without) = without else {
-        return Ok(None);
+        return Ok(vec![]);
     };
-    let mut best: Option<GroundSpring> = None;
-    for (dof, c) in tried.into_iter().flatten() {
-        if !c.status.usable() || best.as_ref().is_some_and(|b| b.error <= c.error_after) {
-            continue;
-        }
-        let stiffness = c.model.springs.last().map_or(0.0, |s| s.stiffness);
-        best = Some(GroundSpring {
+    let mut found: Vec<GroundSpring> = tried
+        .into_iter()
+        .flatten()
+        .filter(|(_, c)| c.status.usable() && c.error_after <= MAX_RATIO * without.error_after)
+        .map(|(dof, c)| GroundSpring {
             dof,
-            stiffness,
+            stiffness: c.model.springs.last().map_or(0.0, |s| s.stiffness),
             error: c.error_after,
             without: without.error_after,
             model: c.model,
-        });
-    }
-    Ok(best.filter(|b| b.stiffness.is_finite() && b.error <= MAX_RATIO * b.without))
+        })
+        .filter(|g| g.stiffness.is_finite())
+        .collect();
+    found.sort_by(|a, b| a.error.total_cmp(&b.error));
+    Ok(found)
 }
