@@ -608,10 +608,18 @@ fn parse_rows(s: &str) -> Result<(usize, usize), String> {
 }
 
 fn main() {
-    let args = <Args as clap::Parser>::parse();
-    let (seed, only, rows, variants) = (args.seed, args.only, args.rows, args.variants);
-    let (record_substeps, verbose) = (args.record_substeps, args.progress);
-    let (truth_only, calibration_only_run) = (args.score_truth, args.calibration_only);
+    let Args {
+        seed,
+        only,
+        rows,
+        variants,
+        record_substeps,
+        progress: verbose,
+        score_truth: truth_only,
+        calibration_only: calibration_only_run,
+        min_substeps,
+        stop_multiple,
+    } = <Args as clap::Parser>::parse();
     let t0 = std::time::Instant::now();
     let progress = |m: &str| {
         if verbose {
@@ -619,11 +627,11 @@ fn main() {
         }
     };
     let mut settings = DiagnoseSettings::default();
-    if let Some(n) = args.min_substeps {
+    if let Some(n) = min_substeps {
         settings.substeps.min = n;
         settings.substeps.max = settings.substeps.max.max(n);
     }
-    if let Some(x) = args.stop_multiple {
+    if let Some(x) = stop_multiple {
         settings.noise.stop_multiple = x;
     }
     println!("| record | truth | sensors | noise (measured) | linear record | found | parameters | error before → after | validation before → after | corrections significant | checks | time |");

@@ -4,12 +4,12 @@
 //! seen; a spring from one DOF to ground gives that motion a frequency
 //! (the whole mass on the spring), which no spring between DOFs and no
 //! damping ratio produces. When the diagnosis on a free-free model leaves
-//! the record above the noise, [`ground_spring`] calibrates the linear
+//! the record above the noise, [`ground_springs`] calibrates the linear
 //! part with a spring to ground opened at each DOF in turn (the damping
-//! free beside it, the other springs held) and gives the DOF whose spring
-//! lowers the linear model's output error most
-//! ([`crate::diagnose::calibrated`] then refines it with the effects found
-//! and keeps it when it pays).
+//! free beside it, the other springs held) and gives the DOFs whose
+//! spring lowers the linear model's output error enough, the lowest error
+//! first ([`crate::diagnose::calibrated`] then ranks them with the effects
+//! found, refines the first few and keeps the best when it pays).
 
 use super::{calibrate, CalibrationSettings, Data, Freedom};
 use crate::error::Result;
@@ -32,7 +32,7 @@ pub const START_FRACTION: f64 = 0.01;
 /// at 8.
 pub const MAX_RATIO: f64 = 0.98;
 
-/// The best spring to ground ([`ground_spring`]).
+/// A spring to ground calibrated at one DOF ([`ground_springs`]).
 #[derive(Debug, Clone)]
 pub struct GroundSpring {
     /// DOF, from 1.
@@ -46,18 +46,6 @@ pub struct GroundSpring {
     pub error: f64,
     /// Relative output error without it, the damping calibrated alike.
     pub without: f64,
-}
-
-/// The spring to ground at the DOF whose calibration (that spring and the
-/// damping free, every other spring held) leaves the lowest output error
-/// on `data`, when that error is at most [`MAX_RATIO`] of the error left
-/// by the damping alone; None otherwise ([`ground_springs`]).
-pub fn ground_spring(
-    linear: &Model,
-    data: &[Data],
-    settings: &CalibrationSettings,
-) -> Result<Option<GroundSpring>> {
-    Ok(ground_springs(linear, data, settings)?.into_iter().next())
 }
 
 /// The spring to ground calibrated at each DOF (that spring and the

@@ -687,12 +687,12 @@ impl Context<'_> {
     /// joint refinement of every parameter on the diagnosis's segments
     /// ([`quick_refined_error`]; one whose fit fails last). The linear
     /// part's output error puts the DOFs nearly level (the rigid-body mode
-    /// on a soft spring has almost the same frequency wherever it is); so
-    /// does the diagnosed model's error with the spring added, its linear
-    /// part refined without it, and the quick refinement only partly
-    /// separates them (seed 7543's contact 2→3 with 1500 N/m at 8: the
+    /// on a soft spring has almost the same frequency wherever it is), and
+    /// neither the diagnosed model's error with the spring added, its
+    /// linear part refined without it, nor the quick refinement puts the
+    /// right one first (seed 7543's contact 2→3 with 1500 N/m at 8: the
     /// output error ranks DOF 8 third of six, the diagnosed model's error
-    /// third, the quick refinement second, after DOF 6; refined fully, 8
+    /// and the quick refinement second, after DOF 6; refined fully, 8
     /// reaches the noise and 6 stops at 7.6 %).
     fn ranked_ground_springs(
         &self,
@@ -702,9 +702,7 @@ impl Context<'_> {
         let mut scored: Vec<_> = found
             .into_par_iter()
             .map(|g| {
-                let mut t = with_ground_spring(d, &g);
-                let (after, pred) = t.prepared.comparison.errors(&t.model, sim_of(&t));
-                (t.after, t.predictions.1) = (after, pred);
+                let t = scored_as_is(with_ground_spring(d, &g));
                 let quick = quick_refined_error(&t, self.cal, self.settings);
                 (g, t, quick)
             })
@@ -766,7 +764,7 @@ impl Context<'_> {
         let level = FRICTION_SHARE * dissipated / total;
         let mut t = d0.clone();
         t.model.damping = t.model.damping.scaled(1.0 - FRICTION_SHARE);
-        let t = with_effect(t, candidate, vec![("level".into(), level)]);
+        let t = scored_as_is(with_effect(t, candidate, vec![("level".into(), level)]));
         let what = format!(
             "friction on every mass from {level:.4e} N ({FRICTION_SHARE} of the level dissipating what the damping does), the damping scaled by {}",
             1.0 - FRICTION_SHARE
@@ -775,8 +773,8 @@ impl Context<'_> {
         self.refined_with_added(current, t, &linear, &what)
     }
 
-    /// `t`, `current`'s diagnosis with one effect added (`what`), refined
-    /// ([`Self::try_added`]); the refined path when it pays, else
+    /// `t`, `current`'s diagnosis with one effect added (`what`) and
+    /// scored ([`scored_as_is`]), refined ([`Self::try_added`]); the refined path when it pays, else
     /// `current`; the note says which.
     fn refined_with_added(
         &self,
@@ -798,8 +796,9 @@ impl Context<'_> {
         })
     }
 
-    /// `t`, `current`'s diagnosis with one effect added (`what`), scored
-    /// and refined with every parameter ([`Self::refined`]): the refined
+    /// `t`, `current`'s diagnosis with one effect added (`what`) and
+    /// scored ([`scored_as_is`]), refined with every parameter
+    /// ([`Self::refined`]): the refined
     /// path (its own note) when the effect is still named and removes more
     /// than the screen's `companion_improvement` of the squared error
     /// above the squared noise level (as an effect fitted below the screen
@@ -807,7 +806,7 @@ impl Context<'_> {
     fn try_added(
         &self,
         current: &RefinedPath,
-        mut t: Diagnosis,
+        t: Diagnosis,
         linear: &Model,
         what: &str,
     ) -> Result<(Option<RefinedPath>, String)> {
@@ -818,8 +817,6 @@ impl Context<'_> {
             "refine with {}",
             t.added.last().map_or("", |a| &a.label)
         ));
-        let (after, pred) = t.prepared.comparison.errors(&t.model, sim_of(&t));
-        (t.after, t.predictions.1) = (after, pred);
         let mut next = self.refined(t, linear)?;
         let d0 = &current.d;
         let (a, b) = (d0.after.relative_error, next.d.after.relative_error);
@@ -1066,6 +1063,14 @@ fn with_ground_spring(d: &Diagnosis, g: &calibrate::grounding::GroundSpring) -> 
     with_effect(t, candidate, vec![("stiffness".into(), g.stiffness)])
 }
 
+/// `t` with its errors on the record and its predictions those of its
+/// model as it stands (an effect just added, not yet refined).
+fn scored_as_is(mut t: Diagnosis) -> Diagnosis {
+    let (after, pred) = t.prepared.comparison.errors(&t.model, sim_of(&t));
+    (t.after, t.predictions.1) = (after, pred);
+    t
+}
+
 /// `t` with the effect `candidate` added to its model at `parameters` and
 /// reported as found (scored later: no trace figures).
 fn with_effect(
@@ -1258,19 +1263,13 @@ fn refine(
     progress: &dyn Fn(&str),
 ) -> Result<Refined> {
     let cal = &cs.calibration;
-    let model = params::per_mode(&d.model)?;
     let sim = sim_of(d);
     let cmp = &d.prepared.comparison;
-    // the start states refined for the model ([`super::starts`]: from the
-    // reconstruction, with continuity and growing horizons against a start
-    // on the wrong side of an impact)
-    let starts = starts_of(cmp, &cmp.shoot(&model, sim));
     progress("joint refinement on the diagnosis's segments");
-    let (problem, jf) =
-        match joint_fit(d, &model, spread(&starts, cs.refine_segments), cs, settings)? {
-            Ok(f) => f,
-            Err(e) => return Ok(Refined::NotKept(format!("not refined: {e}"))),
-        };
+    let (problem, jf) = match first_joint_fit(d, cs, settings)? {
+        Ok(f) => f,
+        Err(e) => return Ok(Refined::NotKept(format!("not refined: {e}"))),
+    };
     let refined = problem.model_at(&jf.x);
     progress("score the refined model");
     let prepared = owned(&refined, base);
@@ -1524,15 +1523,27 @@ fn quick_refined_error(
     cs: &CalibratedSettings,
     settings: &DiagnoseSettings,
 ) -> Option<f64> {
-    let model = params::per_mode(&d.model).ok()?;
-    let sim = sim_of(d);
-    let cmp = &d.prepared.comparison;
-    let starts = starts_of(cmp, &cmp.shoot(&model, sim));
-    let (problem, jf) = joint_fit(d, &model, spread(&starts, cs.refine_segments), cs, settings)
-        .ok()?
-        .ok()?;
+    let (problem, jf) = first_joint_fit(d, cs, settings).ok()?.ok()?;
     let refined = problem.model_at(&jf.x);
-    scored(cmp, &refined, sim).1.relative_error
+    scored(&d.prepared.comparison, &refined, sim_of(d))
+        .1
+        .relative_error
+}
+
+/// The first joint refinement of [`refine`]: `d`'s model with modal
+/// ratios per mode, on `cs.refine_segments` of the segments whose start
+/// states were refined for it ([`super::starts`]: from the reconstruction,
+/// with continuity and growing horizons against a start on the wrong side
+/// of an impact), spread over the record ([`joint_fit`]).
+fn first_joint_fit(
+    d: &Diagnosis,
+    cs: &CalibratedSettings,
+    settings: &DiagnoseSettings,
+) -> Result<std::result::Result<(crate::update::Problem, joint::JointFit), joint::JointError>> {
+    let model = params::per_mode(&d.model)?;
+    let cmp = &d.prepared.comparison;
+    let starts = starts_of(cmp, &cmp.shoot(&model, sim_of(d)));
+    joint_fit(d, &model, spread(&starts, cs.refine_segments), cs, settings)
 }
 
 /// The joint refinement of `model`'s linear parameters and `d`'s effects
