@@ -3,21 +3,21 @@
 //! diagnosed with the declared linear model: the kind, the place and the
 //! parameters within 10 %, the error 5× lower on both records.
 //!
-//! The quadratic spring, the quadratic damper and the friction between
-//! two DOFs pass. Three cases are not found yet and are kept, ignored,
-//! with what they give (run them with `-- --ignored`):
-//! - the cubic spring to ground at 1: traced as a stiffness change of
-//!   spring 1–2 (+42 %, error 78 → 70 %); the grounded cubic is evaluated
-//!   on reconstructed absolute displacements, which carry the free-free
-//!   model's unobservable rigid-body drift;
-//! - the cubic damper 2–3: traced and fitted as a quadratic damper 2–3
-//!   (c2 292, error 24.5 → 5.2 %, validation 4.7 %): on the linear
-//!   model's states the regression prefers ν|ν| to ν³;
-//! - the clearance 6–7 (±0.2 mm, 2e6 N/m; error before 81 %): the cubic
-//!   6–7 is proposed first (34.8 % of the residual against 33.8 % for
-//!   the clearance) and fitted to 62 %; the clearance, fitted as its
-//!   alternative from the trace's gap 0.14 mm and 3.4e5 N/m and the gap
-//!   scan, ends at 70 %.
+//! The quadratic spring, the quadratic damper, the friction between two
+//! DOFs, the cubic spring from mass 1 to ground (first taken for a spring
+//! to ground and refitted as the cubic) and the cubic damper 2–3 (first
+//! fitted as a quadratic damper, c2 297 N s²/m² with 5.19 % left, then
+//! refitted as the cubic) pass. One case is not found and is kept,
+//! ignored, with what it gives (run it with `-- --ignored`): the
+//! clearance 6–7 (±0.2 mm, 2e6 N/m, engaged a quarter of the time, up to
+//! 0.15 mm past the gap). The cubic 6–7 is fitted first and leaves
+//! 63.2 %; the clearance, fitted as its alternative, 64.4 %. On this
+//! record the true model itself scores 57.4 % over the default 0.1 s
+//! segments (start states refined for it), 21.9 % over 0.05 s and 6.2 %
+//! over 0.025 s: the impacts make a segment's motion so sensitive to its
+//! start state that the start-state refinement does not reach the
+//! truth's. With `segments.seconds = 0.025` the clearance is found (gap
+//! +2.5 %, stiffness −2.6 %, 72.5 → 5.2 %, validation 3.9 %).
 
 mod diagnose_common;
 
@@ -40,11 +40,12 @@ fn run(truth: &Model, seed: u64) -> Diagnosis {
     }
     for r in &d.rounds {
         eprintln!(
-            "  round {:?} kept {}: {} | fit: {:?}",
+            "  round {:?} kept {}: {} | fit: {:?} | alternative: {:?}",
             r.proposed,
             r.kept(),
             tacit::diagnose::report::note(&r.decision),
-            r.fit
+            r.fit,
+            r.alternative
         );
     }
     d
@@ -65,7 +66,6 @@ fn check(d: &Diagnosis, kind: &str, dofs: &[usize], truth: &[(&str, f64)]) {
 }
 
 #[test]
-#[ignore = "not found yet: traced as a stiffness change of spring 1-2"]
 fn cubic_spring_to_ground_at_1() {
     let mut truth = lanl();
     truth.cubics = vec![Cubic {
@@ -99,7 +99,6 @@ fn quadratic_damper_3_4() {
 }
 
 #[test]
-#[ignore = "not found yet: fitted as a quadratic damper 2-3"]
 fn cubic_damper_2_3() {
     let mut truth = lanl();
     truth.cubic_dampers = vec![CubicDamper {
@@ -111,7 +110,7 @@ fn cubic_damper_2_3() {
 }
 
 #[test]
-#[ignore = "not found yet: the cubic 6-7 and the clearance fits stall at 62 and 70 %"]
+#[ignore = "not found: the true model scores 57 % over 0.1 s segments; the cubic 6-7 is kept at 63 %"]
 fn clearance_6_7() {
     let mut truth = lanl();
     truth.clearances = vec![Clearance {

@@ -5,7 +5,10 @@
 //! replaces it when it scores better (the screen's regression on states
 //! the sensors fix poorly can prefer the linear change). A spring to
 //! ground is refitted the same way as the cubic spring to ground at its
-//! DOF.
+//! DOF. A quadratic damper is refitted as the cubic damper on the same
+//! place and the other way round, from the coefficient that dissipates as
+//! much along the reconstructed motion (the regression on reconstructed
+//! velocities, smoothed at the peaks, can prefer `ν|ν|` to `ν³`).
 
 use super::effects::{self, AddedEffect};
 use crate::model::Model;
@@ -13,12 +16,15 @@ use crate::trace::regress::sorted_pair;
 use crate::trace::{Candidate, EffectKind, RankedEffect};
 use nalgebra::DMatrix;
 
-/// The cubic spring on the pair of a stiffness change of more than
-/// `min_change` (relative),
-/// with the k3 whose equivalent linearization `3 k3 ⟨δ²⟩` (δ the
-/// reconstructed relative displacement) is the fitted change; None for any
-/// other effect or when the trace did not rank that cubic.
-pub(super) fn cubic_alternative(
+/// The law to fit in place of `best`: the cubic spring on the pair of a
+/// stiffness change of more than `min_change` (relative), with the k3
+/// whose equivalent linearization `3 k3 ⟨δ²⟩` (δ the reconstructed
+/// relative displacement) is the fitted change; the clearance in place of
+/// a cubic spring ([`effects::clearance_alternative`]); the cubic to
+/// ground in place of a spring to ground ([`ground_cubic`]); the other
+/// damper law ([`other_damper`]). None for any other effect or when the
+/// trace did not rank the alternative.
+pub(super) fn alternative_law(
     best: &RankedEffect,
     eff: &AddedEffect,
     fitted: &Model,
@@ -31,6 +37,12 @@ pub(super) fn cubic_alternative(
     }
     if best.candidate.kind == EffectKind::GroundSpring {
         return ground_cubic(best, eff, fitted, states);
+    }
+    if matches!(
+        best.candidate.kind,
+        EffectKind::QuadraticDamping | EffectKind::CubicDamping
+    ) {
+        return other_damper(best, eff, fitted, ranking, states);
     }
     if best.candidate.kind != EffectKind::Stiffness || best.candidate.dofs.len() != 2 {
         return None;
@@ -87,6 +99,47 @@ fn ground_cubic(
     })
 }
 
+/// The other velocity law (quadratic ↔ cubic damper) at the place of a
+/// fitted damper `best`, when the trace ranked it, with the coefficient
+/// that dissipates the same energy along the relative velocity ν in
+/// `states`: `c3 ⟨ν⁴⟩ = c2 ⟨|ν|³⟩`.
+fn other_damper(
+    best: &RankedEffect,
+    eff: &AddedEffect,
+    fitted: &Model,
+    ranking: &[RankedEffect],
+    states: &DMatrix<f64>,
+) -> Option<RankedEffect> {
+    let (kind, name) = match best.candidate.kind {
+        EffectKind::QuadraticDamping => (EffectKind::CubicDamping, "c3"),
+        _ => (EffectKind::QuadraticDamping, "c2"),
+    };
+    let place = sorted_pair(&best.candidate);
+    let mut alt = ranking
+        .iter()
+        .find(|e| e.candidate.kind == kind && sorted_pair(&e.candidate) == place)?
+        .clone();
+    let c = effects::values(fitted, eff).first()?.1;
+    let n = states.nrows() / 2;
+    let moment = |p: i32| {
+        (0..states.ncols())
+            .map(|k| best.candidate.delta_rate(states, n, k).abs().powi(p))
+            .sum::<f64>()
+    };
+    let (m3, m4) = (moment(3), moment(4));
+    let value = match kind {
+        EffectKind::CubicDamping => c * m3 / m4,
+        _ => c * m4 / m3,
+    };
+    if !(value.is_finite() && value > 0.0) {
+        return None;
+    }
+    for p in alt.parameters.iter_mut().filter(|p| p.0 == name) {
+        p.1 = value;
+    }
+    Some(alt)
+}
+
 /// The cubic spring's `k3` whose equivalent linearization `3 k3 ⟨δ²⟩`
 /// (δ the candidate's relative displacement, or displacement to ground,
 /// in `states`) is the linear stiffness `k`; None unless finite and
@@ -138,7 +191,7 @@ mod tests {
             let best = ranked(stiff.clone(), vec![("delta", delta)]);
             let mut fitted = model.clone();
             let eff = effects::add(&mut fitted, &best);
-            let got = cubic_alternative(
+            let got = alternative_law(
                 &best,
                 &eff,
                 &fitted,
@@ -161,7 +214,7 @@ mod tests {
         );
         let mut fitted = model.clone();
         let eff = effects::add(&mut fitted, &contact);
-        assert!(cubic_alternative(&contact, &eff, &fitted, &[cubic], &states, 0.5).is_none());
+        assert!(alternative_law(&contact, &eff, &fitted, &[cubic], &states, 0.5).is_none());
     }
 
     /// The cubic to ground in place of a spring to ground at the same DOF:
@@ -182,13 +235,49 @@ mod tests {
             let best = ranked(spring.clone(), vec![("stiffness", k)]);
             let mut fitted = model.clone();
             let eff = effects::add(&mut fitted, &best);
-            let alt = cubic_alternative(&best, &eff, &fitted, &[], &states, 0.5).unwrap();
+            let alt = alternative_law(&best, &eff, &fitted, &[], &states, 0.5).unwrap();
             assert_eq!(alt.candidate.kind, EffectKind::Cubic);
             assert_eq!(alt.candidate.dofs, vec![1]);
             assert_eq!(alt.label, "cubic @2");
             let k3 = alt.parameters.iter().find(|p| p.0 == "k3").unwrap().1;
             let want = k / (3.0 * 9e-8);
             assert!((k3 / want - 1.0).abs() < 1e-9, "{k3} vs {want}");
+        }
+    }
+
+    /// A quadratic damper offers the cubic damper ranked on its place with
+    /// the coefficient that dissipates as much, `c3 ⟨ν⁴⟩ = c2 ⟨|ν|³⟩`, and
+    /// the cubic damper the quadratic one the other way; none when the
+    /// trace did not rank the other law there.
+    #[test]
+    fn a_damper_offers_the_other_law_dissipating_as_much() {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/data/lanl8dof.toml");
+        let model = Model::from_file(std::path::Path::new(p)).unwrap();
+        // relative velocity of masses 3–4 cycling 0.1, −0.3 m/s:
+        // ⟨|ν|³⟩ = 0.014, ⟨ν⁴⟩ = 0.0041
+        let states = DMatrix::from_fn(16, 100, |i, k| match (i, k % 2) {
+            (10, 0) => 0.1,
+            (10, _) => -0.3,
+            _ => 0.0,
+        });
+        let ratio = 0.014 / 0.0041;
+        let quadratic = Candidate::new(EffectKind::QuadraticDamping, vec![2, 3]);
+        let cubic = Candidate::new(EffectKind::CubicDamping, vec![3, 2]);
+        for (from, to, value, name, want) in [
+            (&quadratic, &cubic, 200.0, "c3", 200.0 * ratio),
+            (&cubic, &quadratic, 2000.0, "c2", 2000.0 / ratio),
+        ] {
+            let own = if name == "c3" { "c2" } else { "c3" };
+            let best = ranked(from.clone(), vec![(own, value)]);
+            let other = ranked(to.clone(), vec![(name, 1.0)]);
+            let mut fitted = model.clone();
+            let eff = effects::add(&mut fitted, &best);
+            let ranking = [best.clone(), other];
+            let alt = alternative_law(&best, &eff, &fitted, &ranking, &states, 0.5).unwrap();
+            assert_eq!(alt.candidate.kind, to.kind);
+            let got = alt.parameters.iter().find(|p| p.0 == name).unwrap().1;
+            assert!((got / want - 1.0).abs() < 1e-9, "{name} {got} vs {want}");
+            assert!(alternative_law(&best, &eff, &fitted, &ranking[..1], &states, 0.5).is_none());
         }
     }
 }

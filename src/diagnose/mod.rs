@@ -37,7 +37,9 @@
 //!      (contact scans, cubic brackets), the best carried on with the
 //!      segment start states fitted too ([`joint::fit`]); a large
 //!      stiffness change far from the noise is also fitted as the cubic
-//!      spring on its pair (`alternative`);
+//!      spring on its pair, a cubic as the clearance, a spring to ground
+//!      as the cubic to ground, a damper as the other damper law
+//!      (`alternative`);
 //!    - *decide* (`decide`): keep the effect when it removes enough of the
 //!      squared error, else withdraw it ([`Decision`]).
 //! 6. **Score after**: the errors of the final model, the fitted values

@@ -119,8 +119,8 @@ pub struct Round {
     pub decision: Decision,
     /// How the fit of the effect proposed ended (if fitted).
     pub fit: Option<String>,
-    /// The cubic spring tried in place of a large stiffness change
-    /// ([`super::alternative`]), if it was.
+    /// The law tried in place of the one fitted
+    /// ([`super::alternative`]), if one was.
     pub alternative: Option<AlternativeTried>,
     /// Simulations spent by the fit (by the screen when nothing was fitted).
     pub simulations: usize,
@@ -338,11 +338,12 @@ pub enum Decision {
     },
 }
 
-/// The cubic spring tried in place of a stiffness change (or the
-/// clearance in place of a cubic spring).
+/// Another law tried in place of the one fitted ([`super::alternative`]):
+/// the cubic spring in place of a stiffness change or a spring to ground,
+/// the clearance in place of a cubic spring, the other damper law.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct AlternativeTried {
-    /// The cubic spring's label.
+    /// The alternative's label.
     pub label: String,
     /// Its start: parameter names and values, SI (a cubic's k3 is the
     /// change's equivalent).

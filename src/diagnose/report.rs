@@ -851,7 +851,7 @@ fn on_converged(iterations: Option<usize>) -> String {
     })
 }
 
-/// How a round's fit ended, with the cubic alternative when one was tried.
+/// How a round's fit ended, with the alternative law when one was tried.
 pub fn fit_note(r: &Round) -> Option<String> {
     let fit = r.fit.as_ref()?;
     let Some(a) = &r.alternative else {

@@ -1,8 +1,9 @@
 //! One round of the loop: trace the residual to a candidate effect,
-//! screen it, fit it (and the cubic alternative of a large stiffness
-//! change), decide whether it stays.
+//! screen it, fit it (and another law in its place when it leaves the
+//! error far from the noise: [`super::alternative`]), decide whether it
+//! stays.
 
-use super::alternative::cubic_alternative;
+use super::alternative::alternative_law;
 use super::decide;
 use super::effects::AddedEffect;
 use super::fit::{fit_effects, EffectFit};
@@ -145,7 +146,7 @@ pub(super) fn run(
     )?;
     let fit_sims = trial.fit.simulations;
     let (trial, alternative) = if screened {
-        try_cubic(ctx, st, trial, &tr.ranking, progress)?
+        try_alternative(ctx, st, trial, &tr.ranking, progress)?
     } else {
         (trial, None)
     };
@@ -285,10 +286,11 @@ fn apply(st: &mut State, trial: Trial, judged: decide::Judged) -> Next {
     Next::Stop
 }
 
-/// Try the cubic spring in place of a large stiffness change
-/// ([`super::alternative`]); returns the trial
-/// that scores better and what was tried, if anything.
-pub(super) fn try_cubic(
+/// Try another law in place of the one fitted ([`super::alternative`]:
+/// the cubic spring in place of a large stiffness change, …) when the fit
+/// leaves the error far from the noise; returns the trial that scores
+/// better and what was tried, if anything.
+pub(super) fn try_alternative(
     ctx: &Context<'_>,
     st: &mut State,
     trial: Trial,
@@ -296,9 +298,19 @@ pub(super) fn try_cubic(
     progress: &dyn Fn(&str),
 ) -> Result<(Trial, Option<AlternativeTried>)> {
     let s = &ctx.settings.screen;
-    let floor = s.alternative_floor * ctx.settings.noise_floor();
-    let far = trial.scored.error.is_some_and(|e| e > floor);
     let (best, eff, fitted) = (&trial.best, &trial.effect, &trial.fit.model);
+    // the other damper law costs one fit of one coefficient: tried whenever
+    // the loop would go on
+    let damper = matches!(
+        best.candidate.kind,
+        EffectKind::QuadraticDamping | EffectKind::CubicDamping
+    );
+    let floor = if damper {
+        stop_floor(ctx)
+    } else {
+        s.alternative_floor * ctx.settings.noise_floor()
+    };
+    let far = trial.scored.error.is_some_and(|e| e > floor);
     // a spring to ground: its own reconstruction (the declared free-free
     // one wanders)
     let own = (far && best.candidate.kind == EffectKind::GroundSpring)
@@ -307,7 +319,7 @@ pub(super) fn try_cubic(
     let states = own
         .as_ref()
         .map_or(&ctx.prep.recon.states, |o| &o.recon.states);
-    let alt = match cubic_alternative(best, eff, fitted, ranking, states, s.alternative_change) {
+    let alt = match alternative_law(best, eff, fitted, ranking, states, s.alternative_change) {
         Some(alt) if far => alt,
         _ => return Ok((trial, None)),
     };
