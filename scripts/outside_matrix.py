@@ -44,6 +44,19 @@ MODELS = {
            "contact 6→7 gap 0.25 mm, 1.5e6 N/m + cubic 2 to ground k3 3e11 N/m³"),
     "p4c": (404, 0.04, '[damping]\nkind = "modal"\nratio = 0.02\n',
             "[[cubic]]\ndofs = [2]\nk3 = 3e11\n", "cubic 2 to ground k3 3e11 N/m³"),
+    "p5": (505, 0.04, '[damping]\nkind = "rayleigh"\nalpha = 3.0\nbeta = 4e-5\n',
+           "[[quadratic]]\ndofs = [3, 4]\nk2 = 6e6\n", "quadratic spring 3–4 k2 6e6 N/m²"),
+    "p6": (606, 0.03, '[damping]\nkind = "modal"\nratio = 0.025\n',
+           "[[cubic_damper]]\ndofs = [4, 5]\nc3 = 2500\n" + friction_everywhere(0.1),
+           "cubic damper 4–5 c3 2500 N s³/m³ + friction 0.1 N on every mass"),
+    "p7": (707, 0.05, '[damping]\nkind = "modal"\nratio = 0.03\n',
+           "[[contact]]\ndofs = [4, 3]\ngap = 3e-4\nstiffness = 1.8e6\n"
+           "[[quadratic_damper]]\ndofs = [7, 8]\nc2 = 250\n",
+           "contact 4→3 gap 0.3 mm, 1.8e6 N/m + quadratic damper 7–8 c2 250 N s²/m²"),
+    "p8": (808, 0.03, '[damping]\nkind = "modal"\nratio = 0.02\n',
+           "[[clearance]]\ndofs = [3, 4]\ngap = 5e-4\nstiffness = 5e5\n"
+           "[[relative_friction]]\ndofs = [5, 6]\nlevel = 0.5\n",
+           "clearance 3–4 ±0.5 mm, 5e5 N/m + relative friction 5–6 0.5 N"),
 }
 
 # record: (model, sensors, noise, samples made, kept range, seeds (record, validation, linear))
@@ -53,10 +66,15 @@ RECORDS = {
     "p3": ("p3", None, 0.01, 4096, None, (31, 32, None)),
     "p4": ("p4", "1,2,6,7,8", 0.015, 4096, None, (41, 42, 43)),
     "p4c": ("p4c", "1,2,6,7,8", 0.015, 4096, None, (41, 42, None)),
+    "p5": ("p5", "1,3,4,6,8", 0.02, 4096, None, (51, 52, 53)),
+    "p6": ("p6", None, 0.01, 5120, "1024..5120", (61, 62, 63)),
+    "p7": ("p7", "2,3,4,7,8", 0.01, 4096, None, (71, 72, 73)),
+    "p8": ("p8", None, 0.005, 4096, None, (81, 82, 83)),
 }
 
 DIAGNOSES = [("p1", False), ("p2", False), ("p3", False), ("p4", False), ("p4c", False),
-             ("p1", True), ("p2", True), ("p4", True)]
+             ("p1", True), ("p2", True), ("p4", True),
+             ("p5", False), ("p6", False), ("p7", False), ("p8", False)]
 
 
 def model_text(name, linear):
