@@ -57,6 +57,19 @@ MODELS = {
            "[[clearance]]\ndofs = [3, 4]\ngap = 5e-4\nstiffness = 5e5\n"
            "[[relative_friction]]\ndofs = [5, 6]\nlevel = 0.5\n",
            "clearance 3–4 ±0.5 mm, 5e5 N/m + relative friction 5–6 0.5 N"),
+    "p9": (909, 0.04, '[damping]\nkind = "modal"\nratio = 0.02\n',
+           "[[relative_friction]]\ndofs = [2, 3]\nlevel = 1.0\n",
+           "relative friction 2–3 1.0 N"),
+    "p10": (1010, 0.03, '[damping]\nkind = "rayleigh"\nalpha = 2.5\nbeta = 5e-5\n',
+            "[[cubic]]\ndofs = [1, 2]\nk3 = 5e11\n"
+            "[[contact]]\ndofs = [8, 7]\ngap = 2e-4\nstiffness = 1.2e6\n",
+            "cubic 1–2 k3 5e11 N/m³ + contact 8→7 gap 0.2 mm, 1.2e6 N/m"),
+    "p11": (1111, 0.05, '[damping]\nkind = "modal"\nratio = 0.04\n',
+            "[[contact]]\ndofs = [3, 2]\ngap = 3.5e-4\nstiffness = 2.5e6\n"
+            "[[cubic_damper]]\ndofs = [6, 7]\nc3 = 3000\n",
+            "contact 3→2 gap 0.35 mm, 2.5e6 N/m + cubic damper 6–7 c3 3000 N s³/m³"),
+    "p12": (1212, 0.05, '[damping]\nkind = "rayleigh"\nalpha = 4.0\nbeta = 8e-5\n',
+            "", "none (springs ±5 %, Rayleigh damping)"),
 }
 
 # record: (model, sensors, noise, samples made, kept range, seeds (record, validation, linear))
@@ -70,11 +83,16 @@ RECORDS = {
     "p6": ("p6", None, 0.01, 5120, "1024..5120", (61, 62, 63)),
     "p7": ("p7", "2,3,4,7,8", 0.01, 4096, None, (71, 72, 73)),
     "p8": ("p8", None, 0.005, 4096, None, (81, 82, 83)),
+    "p9": ("p9", "2,3,6", 0.01, 4096, None, (91, 92, 93)),
+    "p10": ("p10", "1,2,7,8", 0.03, 5120, "1024..5120", (101, 102, 103)),
+    "p11": ("p11", None, 0.003, 4096, None, (111, 112, 113)),
+    "p12": ("p12", "1,4,8", 0.03, 4096, None, (121, 122, None)),
 }
 
 DIAGNOSES = [("p1", False), ("p2", False), ("p3", False), ("p4", False), ("p4c", False),
              ("p1", True), ("p2", True), ("p4", True),
-             ("p5", False), ("p6", False), ("p7", False), ("p8", False)]
+             ("p5", False), ("p6", False), ("p7", False), ("p8", False),
+             ("p9", False), ("p10", False), ("p11", False), ("p12", False)]
 
 
 def model_text(name, linear):
@@ -142,6 +160,58 @@ def diagnose(tacit, out, rec, linear):
         f.write(f"{time.time() - t:.1f}\n")
 
 
+KIND_LABEL = {"contact": "contact", "cubic": "cubic", "quadratic": "quadratic",
+              "quadratic_damper": "quadratic_damping", "cubic_damper": "cubic_damping",
+              "clearance": "clearance", "relative_friction": "relative_friction"}
+
+
+def expected(model):
+    """The localized effects of a model's truth: (label as tacit writes it,
+    {parameter: value}); friction on every mass is background, allowed but
+    not required."""
+    import tomllib
+    table = tomllib.loads(MODELS[model][3])
+    want = []
+    for kind, label in KIND_LABEL.items():
+        for e in table.get(kind, []):
+            d = e["dofs"]
+            if len(d) == 1:
+                place = f" @{d[0]}"
+            elif kind == "contact":
+                place = f" {d[0]}→{d[1]}"
+            else:
+                place = f" {min(d)}–{max(d)}"
+            params = {k: v for k, v in e.items() if k not in ("dofs", "velocity")}
+            want.append((label + place, params))
+    return want
+
+
+def check(r, model, noise):
+    """The matrix's checks: every localized effect named at its place with
+    its parameters within 10 %, nothing else named but friction on every
+    mass, the validation error at most 1.5 × the noise (the lower of the
+    simulated and the measured level)."""
+    found = {e["label"]: e["parameters"] for e in r["effects"]}
+    fails = []
+    for label, params in expected(model):
+        if label not in found:
+            fails.append(f"{label} not named")
+            continue
+        for k, v in params.items():
+            got = found[label].get(k)
+            if got is None or abs(got / v - 1) > 0.1:
+                fails.append(f"{label} {k} {100 * (got / v - 1):+.1f} %" if got else f"{label} {k} missing")
+    wanted = {label for label, _ in expected(model)}
+    extra = [l for l in found if l not in wanted and not l.startswith("friction @1,2,3,4,5,6,7,8")]
+    fails += [f"{l} named" for l in extra]
+    level = (r.get("noise") or {}).get("level") or noise
+    bound = 1.5 * min(noise, level)
+    v = r["validation"]["after"].get("relative_error")
+    if v is None or v > bound:
+        fails.append(f"validation {pct(v)} > {100 * bound:.2f} %")
+    return "pass" if not fails else "**fail**: " + "; ".join(fails)
+
+
 def pct(x):
     return "—" if x is None else f"{100 * x:.2f} %"
 
@@ -163,7 +233,8 @@ def row(out, rec, linear):
             f"{100 * noise:.1f} % ({pct(level)}) | {'yes' if linear else 'no'} | {params} | "
             f"{pct(r['before'].get('relative_error'))} → {pct(r['after'].get('relative_error'))} | "
             f"{pct(r['validation']['before'].get('relative_error'))} → "
-            f"{pct(r['validation']['after'].get('relative_error'))} | {sig or '—'} | {wall} s |")
+            f"{pct(r['validation']['after'].get('relative_error'))} | {sig or '—'} | "
+            f"{check(r, model, noise)} | {wall} s |")
 
 
 def main():
@@ -185,8 +256,8 @@ def main():
         for rec, linear in chosen:
             diagnose(a.tacit, a.out, rec, linear)
     print("| record | truth | sensors | noise (measured) | linear record | found | "
-          "error before → after | validation before → after | corrections significant | time |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "error before → after | validation before → after | corrections significant | checks | time |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for rec, linear in chosen:
         print(row(a.out, rec, linear))
 

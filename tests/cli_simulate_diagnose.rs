@@ -187,6 +187,11 @@ fn diagnose_writes_the_report_on_a_linear_record() {
     let before = j["before"]["relative_error"].as_f64().unwrap();
     assert!(before < 0.05, "linear record, linear model: {before}");
     assert_eq!(j["effects"].as_array().unwrap().len(), 0);
+    // the exact model leaves white noise at about the 1 % simulated
+    let left = &j["remaining"];
+    assert_eq!(left["status"]["kind"], "white", "{left}");
+    let level = left["level"].as_f64().unwrap();
+    assert!((0.007..0.013).contains(&level), "{left}");
     assert!(out.join("report.md").exists() && out.join("residual.png").exists());
     // the figures, drawn (a blank 800×500 PNG is about 5 KB)
     for f in ["responses", "residual", "frf", "identified_force"] {

@@ -262,6 +262,135 @@ fn status_of(channels: &[ChannelNoise]) -> NoiseStatus {
     }
 }
 
+/// What a fitted model leaves on one channel ([`remaining`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelRemaining {
+    /// The channel's name in the record.
+    pub channel: String,
+    /// RMS of measured − predicted over the RMS of measured, on the
+    /// samples predicted.
+    pub fraction: f64,
+    /// The largest band's residual power over the median band's (1 =
+    /// white; above [`COLOURED`] the band holds model error).
+    pub colour: f64,
+    /// That band, Hz.
+    pub band_hz: (f64, f64),
+}
+
+/// What a fitted model leaves of the record: the residual of its segment
+/// predictions, per channel, and whether it is white. A white residual at
+/// the level of the noise says the model explains the record; a coloured
+/// one names the band where it does not. The level is an upper bound of
+/// the noise, tighter than [`NoiseEstimate`]'s when the reconstruction's
+/// residual is coloured (a force off the located directions).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Remaining {
+    /// Per channel.
+    pub channels: Vec<ChannelRemaining>,
+    /// RMS of the channels' fractions.
+    pub level: f64,
+    /// Frequency bands of the colour test.
+    pub bands: usize,
+    /// White, or the most coloured channel.
+    pub status: NoiseStatus,
+}
+
+impl Remaining {
+    /// One line for reports.
+    pub fn summary(&self) -> String {
+        let (lo, hi) = self
+            .channels
+            .iter()
+            .fold((f64::INFINITY, 0.0_f64), |(lo, hi), c| {
+                (lo.min(c.fraction), hi.max(c.fraction))
+            });
+        let colour = match &self.status {
+            NoiseStatus::White => "white: noise".to_string(),
+            NoiseStatus::Coloured {
+                channel,
+                band_hz,
+                ratio,
+            } => format!(
+                "coloured ({channel}: {:.0}–{:.0} Hz at {ratio:.1} × the median band: model error the fitted model leaves there)",
+                band_hz.0, band_hz.1
+            ),
+        };
+        format!(
+            "{:.3} % of RMS (channels {:.3}–{:.3} %), {colour}",
+            100.0 * self.level,
+            100.0 * lo,
+            100.0 * hi
+        )
+    }
+}
+
+/// What `predicted` (p × N segment predictions, NaN where a sample is not
+/// predicted) leaves of `measured` (p × N), per channel named by `names`,
+/// with its colour over `bands` frequency bands at `fs` (the samples not
+/// predicted count as zero residual). None when fewer than half the
+/// samples of a channel are predicted or a channel is zero.
+pub fn remaining(
+    measured: &DMatrix<f64>,
+    predicted: &DMatrix<f64>,
+    names: &[String],
+    fs: f64,
+    bands: usize,
+) -> Option<Remaining> {
+    let (p, n) = (measured.nrows(), measured.ncols().min(predicted.ncols()));
+    if p == 0 || bands == 0 || n < 2 * bands {
+        return None;
+    }
+    let width = 0.5 * fs / bands as f64;
+    let mut channels = Vec::with_capacity(p);
+    for c in 0..p {
+        let mut r = vec![0.0; n];
+        let (mut num, mut den, mut used) = (0.0, 0.0, 0);
+        for (k, rk) in r.iter_mut().enumerate() {
+            let (m, y) = (measured[(c, k)], predicted[(c, k)]);
+            if y.is_finite() && m.is_finite() {
+                *rk = m - y;
+                num += rk.powi(2);
+                den += m * m;
+                used += 1;
+            }
+        }
+        if 2 * used < n || den <= 0.0 {
+            return None;
+        }
+        let powers = band_powers(&r, bands);
+        let med = quantile(&powers, 0.5);
+        let (worst, &max) = powers
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))?;
+        channels.push(ChannelRemaining {
+            channel: names.get(c).cloned().unwrap_or_else(|| format!("#{c}")),
+            fraction: (num / den).sqrt(),
+            colour: if med > 0.0 { max / med } else { f64::INFINITY },
+            band_hz: (worst as f64 * width, (worst + 1) as f64 * width),
+        });
+    }
+    let level = (channels.iter().map(|c| c.fraction.powi(2)).sum::<f64>() / p as f64).sqrt();
+    let status = match channels
+        .iter()
+        .filter(|c| c.colour > COLOURED)
+        .max_by(|a, b| a.colour.total_cmp(&b.colour))
+    {
+        None => NoiseStatus::White,
+        Some(c) => NoiseStatus::Coloured {
+            channel: c.channel.clone(),
+            band_hz: c.band_hz,
+            ratio: c.colour,
+        },
+    };
+    Some(Remaining {
+        channels,
+        level,
+        bands,
+        status,
+    })
+}
+
 /// Seeded white noise with exactly each row's RMS of `measured` (so the
 /// smoother weighs it as it weighs the data): its weighted standard
 /// deviation is `1/assumed`.
@@ -419,6 +548,49 @@ mod tests {
         let p = band_powers(&sine, 16);
         assert!(p[6] / m > 50.0, "{}", p[6] / m);
         assert!((quantile(&p, 0.5) / m - 1.0).abs() < 0.1);
+    }
+
+    /// A prediction that leaves white noise of 2 % of the signal's RMS is
+    /// white at 2 %, with gaps (samples not predicted) between segments;
+    /// one that also misses a 60 Hz line is coloured in the band of 60 Hz.
+    #[test]
+    fn what_a_model_leaves_is_white_noise_or_names_its_band() {
+        let mut g = crate::signal::rng(5);
+        let (n, fs) = (4096, 512.0);
+        let signal: Vec<f64> = (0..n)
+            .map(|k| (2.0 * std::f64::consts::PI * 20.0 * k as f64 / fs).sin())
+            .collect();
+        let rms = (0.5_f64).sqrt();
+        let measured = DMatrix::from_fn(2, n, |c, k| (1.0 + c as f64) * signal[k]);
+        let noise: Vec<f64> = (0..2 * n)
+            .map(|_| {
+                let z: f64 = StandardNormal.sample(&mut g);
+                0.02 * rms * z
+            })
+            .collect();
+        let predicted = |line: f64| {
+            DMatrix::from_fn(2, n, |c, k| {
+                if k % 51 == 50 {
+                    return f64::NAN;
+                }
+                let miss = line * (2.0 * std::f64::consts::PI * 60.0 * k as f64 / fs).sin();
+                (1.0 + c as f64) * (signal[k] - noise[c * n + k] - miss)
+            })
+        };
+        let names = ["a".to_string(), "b".to_string()];
+        let white = remaining(&measured, &predicted(0.0), &names, fs, 16).unwrap();
+        assert_eq!(white.status, NoiseStatus::White, "{}", white.summary());
+        assert!((white.level / 0.02 - 1.0).abs() < 0.05, "{}", white.level);
+        let line = remaining(&measured, &predicted(0.05), &names, fs, 16).unwrap();
+        match line.status {
+            NoiseStatus::Coloured { band_hz, .. } => assert_eq!(band_hz, (48.0, 64.0)),
+            s => panic!("{s:?}"),
+        }
+        // half the samples unpredicted: no verdict
+        let sparse = DMatrix::from_fn(2, n, |_, k| if k % 2 == 0 { f64::NAN } else { 0.0 });
+        assert!(remaining(&measured, &sparse, &names, fs, 16).is_some());
+        let sparser = DMatrix::from_fn(2, n, |_, k| if k % 3 == 0 { 0.0 } else { f64::NAN });
+        assert!(remaining(&measured, &sparser, &names, fs, 16).is_none());
     }
 
     /// The quartile of white-noise band ratios over white noise, by

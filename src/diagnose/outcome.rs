@@ -251,6 +251,16 @@ impl Diagnosis {
     pub fn noise_floor(&self, settings: &super::DiagnoseSettings) -> f64 {
         settings.noise.floor_multiple * self.noise_level(settings)
     }
+
+    /// What the fitted model leaves of the record (its segment
+    /// predictions' residual, [`super::noise::remaining`]) over `bands`
+    /// frequency bands; None without predictions.
+    pub fn remaining(&self, bands: usize) -> Option<super::noise::Remaining> {
+        let cmp = &self.prepared.comparison;
+        let predicted = self.predictions.1.as_ref()?;
+        let names: Vec<String> = cmp.observations.iter().map(|o| o.name()).collect();
+        super::noise::remaining(&cmp.measured(), predicted, &names, cmp.fs, bands)
+    }
 }
 
 /// A candidate below the trace's screen that was considered anyway.

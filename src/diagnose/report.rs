@@ -6,7 +6,7 @@
 //! SVG, `super::figures`); and the words for the loop's typed decisions
 //! ([`note`], [`fit_note`]).
 
-use super::noise::{NoiseEstimate, NoiseStatus};
+use super::noise::{NoiseEstimate, NoiseStatus, Remaining};
 use super::EffectReport;
 use super::{BelowScreen, Decision, Diagnosis, Round, WithdrawReason};
 use crate::io::{ensure_dir, write_json, write_string};
@@ -41,6 +41,8 @@ struct Doc<'a> {
     meta: &'a Meta,
     #[serde(flatten)]
     diagnosis: &'a Diagnosis,
+    /// What the fitted model leaves of the record.
+    remaining: Option<&'a Remaining>,
     settings: &'a super::DiagnoseSettings,
 }
 
@@ -54,11 +56,13 @@ pub fn write(
     ensure_dir(dir)?;
     let mut out = vec![];
     let json = dir.join("report.json");
+    let remaining = d.remaining(settings.noise.bands);
     write_json(
         &json,
         &Doc {
             meta,
             diagnosis: d,
+            remaining: remaining.as_ref(),
             settings,
         },
     )?;
@@ -71,7 +75,7 @@ pub fn write(
     out.push(toml);
     let figs = super::figures::write(dir, d)?;
     let md = dir.join("report.md");
-    write_string(&md, &markdown(meta, d, &figs))?;
+    write_string(&md, &markdown(meta, d, remaining.as_ref(), &figs))?;
     out.push(md);
     out.extend(figs);
     Ok(out)
@@ -92,7 +96,7 @@ const OPEN_LOOP_RATIO: f64 = 3.0;
 /// Window of the open-loop error's growth over time, s.
 const DRIFT_WINDOW_S: f64 = 0.5;
 
-fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
+fn markdown(meta: &Meta, d: &Diagnosis, remaining: Option<&Remaining>, figs: &[PathBuf]) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# tacit diagnosis\n");
     let _ = writeln!(
@@ -113,6 +117,7 @@ fn markdown(meta: &Meta, d: &Diagnosis, figs: &[PathBuf]) -> String {
         linear_corrections(&mut s, c);
     }
     noise_section(&mut s, d);
+    remaining_section(&mut s, d, remaining);
     figures_section(&mut s, figs);
     appendix(&mut s, d);
     s
@@ -547,6 +552,47 @@ fn noise_section(s: &mut String, d: &Diagnosis) {
             c.channel,
             c.std,
             c.unit,
+            100.0 * c.fraction,
+            c.colour,
+            c.band_hz.0,
+            c.band_hz.1
+        );
+    }
+}
+
+/// What the fitted model leaves of the record, and what that says of the
+/// noise measured on the reconstruction.
+fn remaining_section(s: &mut String, d: &Diagnosis, r: Option<&Remaining>) {
+    let Some(r) = r else {
+        return;
+    };
+    let _ = writeln!(
+        s,
+        "\n## What the fitted model leaves\n\nThe residual of the fitted model's segment predictions (measured − predicted over the samples predicted; {} frequency bands): {}.",
+        r.bands,
+        r.summary()
+    );
+    let coloured_before = d
+        .noise
+        .as_ref()
+        .filter(|n| matches!(n.status, NoiseStatus::Coloured { .. }) && n.level > r.level);
+    if let (NoiseStatus::White, Some(n)) = (&r.status, coloured_before) {
+        let _ = writeln!(
+            s,
+            "\nIt is white and below the {:.3} % measured on the reconstruction: the noise is at most {:.3} %, and the level measured above holds model error the reconstruction left (a force off the located directions).",
+            100.0 * n.level,
+            100.0 * r.level
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n| channel | left, % of RMS | worst band / median |\n|---|---|---|"
+    );
+    for c in &r.channels {
+        let _ = writeln!(
+            s,
+            "| {} | {:.3} % | {:.1} ({:.0}–{:.0} Hz) |",
+            c.channel,
             100.0 * c.fraction,
             c.colour,
             c.band_hz.0,
