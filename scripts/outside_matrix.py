@@ -70,6 +70,10 @@ MODELS = {
             "contact 3→2 gap 0.35 mm, 2.5e6 N/m + cubic damper 6–7 c3 3000 N s³/m³"),
     "p12": (1212, 0.05, '[damping]\nkind = "rayleigh"\nalpha = 4.0\nbeta = 8e-5\n',
             "", "none (springs ±5 %, Rayleigh damping)"),
+    "p13": (1313, 0.04, '[damping]\nkind = "rayleigh"\nalpha = 2.0\nbeta = 7e-5\n',
+            "[[contact]]\ndofs = [2, 1]\ngap = 3e-4\nstiffness = 1.5e6\n"
+            "[[contact]]\ndofs = [7, 8]\ngap = 2.5e-4\nstiffness = 2e6\n",
+            "contact 2→1 gap 0.3 mm, 1.5e6 N/m + contact 7→8 gap 0.25 mm, 2e6 N/m"),
 }
 
 # record: (model, sensors, noise, samples made, kept range, seeds (record, validation, linear))
@@ -87,12 +91,14 @@ RECORDS = {
     "p10": ("p10", "1,2,7,8", 0.03, 5120, "1024..5120", (101, 102, 103)),
     "p11": ("p11", None, 0.003, 4096, None, (111, 112, 113)),
     "p12": ("p12", "1,4,8", 0.03, 4096, None, (121, 122, None)),
+    "p13": ("p13", "1,2,7,8", 0.02, 4096, None, (131, 132, 133)),
 }
 
 DIAGNOSES = [("p1", False), ("p2", False), ("p3", False), ("p4", False), ("p4c", False),
              ("p1", True), ("p2", True), ("p4", True),
              ("p5", False), ("p6", False), ("p7", False), ("p8", False),
-             ("p9", False), ("p10", False), ("p11", False), ("p12", False)]
+             ("p9", False), ("p10", False), ("p11", False), ("p12", False),
+             ("p13", False)]
 
 
 def model_text(name, linear):

@@ -102,7 +102,7 @@ fn ground_cubic(
 /// The other velocity law (quadratic ↔ cubic damper) at the place of a
 /// fitted damper `best`, when the trace ranked it, with the coefficient
 /// that dissipates the same energy along the relative velocity ν in
-/// `states`: `c3 ⟨ν⁴⟩ = c2 ⟨|ν|³⟩`.
+/// `states`, `c3 ⟨ν⁴⟩ = c2 ⟨|ν|³⟩` ([`super::laws::other_law_start`]).
 fn other_damper(
     best: &RankedEffect,
     eff: &AddedEffect,
@@ -111,7 +111,7 @@ fn other_damper(
     states: &DMatrix<f64>,
 ) -> Option<RankedEffect> {
     let c = effects::values(fitted, eff).first()?.1;
-    let (kind, name, value) = other_damper_law(&best.candidate, c, states)?;
+    let (kind, name, value) = super::laws::other_law_start(&best.candidate, c, states)?;
     let place = sorted_pair(&best.candidate);
     let mut alt = ranking
         .iter()
@@ -121,35 +121,6 @@ fn other_damper(
         p.1 = value;
     }
     Some(alt)
-}
-
-/// The other damper law for the damper `c` (quadratic or cubic) of
-/// coefficient `value`: its kind, its coefficient's name and the
-/// coefficient that dissipates the same energy along the relative
-/// velocity ν in `states` (`c3 ⟨ν⁴⟩ = c2 ⟨|ν|³⟩`); None for another kind
-/// or no motion.
-pub(super) fn other_damper_law(
-    c: &Candidate,
-    value: f64,
-    states: &DMatrix<f64>,
-) -> Option<(EffectKind, &'static str, f64)> {
-    let (kind, name) = match c.kind {
-        EffectKind::QuadraticDamping => (EffectKind::CubicDamping, "c3"),
-        EffectKind::CubicDamping => (EffectKind::QuadraticDamping, "c2"),
-        _ => return None,
-    };
-    let n = states.nrows() / 2;
-    let moment = |p: i32| {
-        (0..states.ncols())
-            .map(|k| c.delta_rate(states, n, k).abs().powi(p))
-            .sum::<f64>()
-    };
-    let (m3, m4) = (moment(3), moment(4));
-    let other = match kind {
-        EffectKind::CubicDamping => value * m3 / m4,
-        _ => value * m4 / m3,
-    };
-    (other.is_finite() && other > 0.0).then_some((kind, name, other))
 }
 
 /// The cubic spring's `k3` whose equivalent linearization `3 k3 ⟨δ²⟩`

@@ -779,7 +779,7 @@ impl Context<'_> {
     /// The one damper the rounds named (quadratic or cubic in the relative
     /// velocity) replaced by the other law, from the coefficient that
     /// dissipates as much along the reconstructed states
-    /// ([`super::alternative::other_damper_law`]), every parameter refined
+    /// ([`super::laws::swap_at`]), every parameter refined
     /// with the effects; kept as the spring to ground is, when `current`
     /// is left above the noise. The rounds compare the two laws while the
     /// linear part is still off, and a viscous damping the declared model
@@ -799,39 +799,20 @@ impl Context<'_> {
         let (&[i], false) = (dampers.as_slice(), self.at_noise(d0)) else {
             return Ok(current);
         };
-        let a = &d0.added[i];
-        // the damper is its kind's only element (its removal leaves every
-        // other effect's targets in place)
-        let (ours, theirs) = match a.candidate.kind {
-            EffectKind::QuadraticDamping => (
-                d0.model.quadratic_dampers.len(),
-                d0.model.cubic_dampers.len(),
-            ),
-            _ => (
-                d0.model.cubic_dampers.len(),
-                d0.model.quadratic_dampers.len(),
-            ),
-        };
-        let Some(&(_, value)) = effects::values(&d0.model, a).first() else {
-            return Ok(current);
-        };
-        let states = &d0.prepared.recon.states;
-        let other = super::alternative::other_damper_law(&a.candidate, value, states);
-        let (Some((kind, name, start)), 1, 0) = (other, ours, theirs) else {
+        let Some(alt) = super::laws::swap_at(d0, i) else {
             return Ok(current);
         };
         let mut t = d0.clone();
-        match a.candidate.kind {
-            EffectKind::QuadraticDamping => t.model.quadratic_dampers.clear(),
-            _ => t.model.cubic_dampers.clear(),
+        (t.model, t.added, t.effects) = (alt.model, alt.added, alt.effects);
+        // the law tried last, as an effect just added is
+        let a = t.added.remove(i);
+        t.added.push(a);
+        if i < t.effects.len() {
+            let e = t.effects.remove(i);
+            t.effects.push(e);
         }
-        let label = t.added.remove(i).label;
-        t.effects.retain(|e| e.label != label);
-        let candidate = Candidate::new(kind, a.candidate.dofs.clone());
-        let t = scored_as_is(with_effect(t, candidate, vec![(name.into(), start)]));
-        let what = format!("{label} replaced by the other law from {name} {start:.4e}");
         let linear = d0.model.linear_part();
-        self.refined_with_added(current, t, &linear, &what)
+        self.refined_with_added(current, scored_as_is(t), &linear, &alt.what)
     }
 
     /// `t`, `current`'s diagnosis with one effect added (`what`) and

@@ -19,7 +19,7 @@ use super::{Diagnosis, EffectReport};
 use crate::error::Result;
 use crate::model::elements::{CubicDamper, QuadraticDamper};
 use crate::model::Model;
-use crate::trace::EffectKind;
+use crate::trace::{Candidate, EffectKind};
 use crate::update::Target;
 use nalgebra::DMatrix;
 
@@ -39,7 +39,7 @@ pub(super) struct Swapped {
 /// `d` with its effect `i` in the other law when it is a nonlinear damper
 /// (module docs); None for another effect or when the reconstructed
 /// velocities there are zero.
-fn swap_at(d: &Diagnosis, i: usize) -> Option<Swapped> {
+pub(super) fn swap_at(d: &Diagnosis, i: usize) -> Option<Swapped> {
     swap(&d.model, &d.added, &d.effects, i, &d.prepared.recon.states)
 }
 
@@ -92,6 +92,29 @@ fn equal_power(coef: f64, from: i32, to: i32, nu: &[f64]) -> Option<f64> {
     Some(c).filter(|c| c.is_finite() && *c > 0.0)
 }
 
+/// The other law of the nonlinear damper `c` of coefficient `coef`: its
+/// kind, its coefficient's name and the coefficient that dissipates the
+/// same mean power on the relative velocities in `states`
+/// ([`equal_power`]); None for another kind or no motion.
+pub(super) fn other_law_start(
+    c: &Candidate,
+    coef: f64,
+    states: &DMatrix<f64>,
+) -> Option<(EffectKind, &'static str, f64)> {
+    let (kind, from, to) = other(c.kind)?;
+    let n = states.nrows() / 2;
+    let nu: Vec<f64> = (0..states.ncols())
+        .map(|k| c.delta_rate(states, n, k))
+        .collect();
+    let start = equal_power(coef, from, to, &nu)?;
+    let name = if kind == EffectKind::CubicDamping {
+        "c3"
+    } else {
+        "c2"
+    };
+    Some((kind, name, start))
+}
+
 /// `model` with effect `i` of `added` (a nonlinear damper) in the other
 /// law, or None for any other effect.
 fn swap(
@@ -102,14 +125,9 @@ fn swap(
     states: &DMatrix<f64>,
 ) -> Option<Swapped> {
     let e = &added[i];
-    let (kind, from, to) = other(e.candidate.kind)?;
     let target = *e.targets.first()?;
     let coef = target.get(model).ok()?;
-    let n = states.nrows() / 2;
-    let nu: Vec<f64> = (0..states.ncols())
-        .map(|k| e.candidate.delta_rate(states, n, k))
-        .collect();
-    let start = equal_power(coef, from, to, &nu)?;
+    let (kind, name, start) = other_law_start(&e.candidate, coef, states)?;
     let mut m = model.clone();
     let mut added = added.to_vec();
     let dofs: Vec<usize> = e.candidate.dofs.iter().map(|d| d + 1).collect();
@@ -128,11 +146,6 @@ fn swap(
             Target::DamperC3(m.cubic_dampers.len() - 1)
         }
         _ => return None,
-    };
-    let name = if kind == EffectKind::CubicDamping {
-        "c3"
-    } else {
-        "c2"
     };
     let old_label = e.label.clone();
     let a = &mut added[i];
