@@ -788,7 +788,8 @@ impl Context<'_> {
     /// damping declared at 1 % (outside-the-matrix record p11 of
     /// docs/diagnose.md), the quadratic scored 18.10 % against the
     /// cubic's 18.29 % in the round and was kept, leaving 2.94 % at 0.3 %
-    /// noise once the damping was refined.
+    /// noise once the damping was refined. Not with the open-loop
+    /// refinement, which tries both laws of every damper itself.
     fn damper_law_alternative(&self, current: RefinedPath) -> Result<RefinedPath> {
         let d0 = &current.d;
         let is_damper =
@@ -796,7 +797,9 @@ impl Context<'_> {
         let dampers: Vec<usize> = (0..d0.added.len())
             .filter(|&i| is_damper(d0.added[i].candidate.kind))
             .collect();
-        let (&[i], false) = (dampers.as_slice(), self.at_noise(d0)) else {
+        // (the open-loop refinement tries both laws itself, [`super::laws`])
+        let skip = self.at_noise(d0) || self.cal.open_loop;
+        let (&[i], false) = (dampers.as_slice(), skip) else {
             return Ok(current);
         };
         let Some(alt) = super::laws::swap_at(d0, i) else {
