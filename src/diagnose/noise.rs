@@ -248,16 +248,21 @@ fn channel_noise(
 }
 
 fn status_of(channels: &[ChannelNoise]) -> NoiseStatus {
+    worst_colour(channels.iter().map(|c| (&c.channel, c.colour, c.band_hz)))
+}
+
+/// White when every channel's (name, colour, band) has its colour at or
+/// below [`COLOURED`], else the most coloured one.
+fn worst_colour<'a>(channels: impl Iterator<Item = (&'a String, f64, (f64, f64))>) -> NoiseStatus {
     match channels
-        .iter()
-        .filter(|c| c.colour > COLOURED)
-        .max_by(|a, b| a.colour.total_cmp(&b.colour))
+        .filter(|c| c.1 > COLOURED)
+        .max_by(|a, b| a.1.total_cmp(&b.1))
     {
         None => NoiseStatus::White,
-        Some(c) => NoiseStatus::Coloured {
-            channel: c.channel.clone(),
-            band_hz: c.band_hz,
-            ratio: c.colour,
+        Some((channel, ratio, band_hz)) => NoiseStatus::Coloured {
+            channel: channel.clone(),
+            band_hz,
+            ratio,
         },
     }
 }
@@ -371,18 +376,7 @@ pub fn remaining(
         });
     }
     let level = (channels.iter().map(|c| c.fraction.powi(2)).sum::<f64>() / p as f64).sqrt();
-    let status = match channels
-        .iter()
-        .filter(|c| c.colour > COLOURED)
-        .max_by(|a, b| a.colour.total_cmp(&b.colour))
-    {
-        None => NoiseStatus::White,
-        Some(c) => NoiseStatus::Coloured {
-            channel: c.channel.clone(),
-            band_hz: c.band_hz,
-            ratio: c.colour,
-        },
-    };
+    let status = worst_colour(channels.iter().map(|c| (&c.channel, c.colour, c.band_hz)));
     Some(Remaining {
         channels,
         level,
