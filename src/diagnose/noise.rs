@@ -223,15 +223,9 @@ fn channel_noise(
     assumed: f64,
     rms: f64,
 ) -> ChannelNoise {
-    let med = quantile(ratios, 0.5);
     let lines = input.measured.ncols() / 2 / ratios.len().max(1);
     let level = quantile(ratios, 0.25) / quartile_of_white(ratios.len(), lines);
-    let (worst, &max) = ratios
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))
-        .unwrap_or((0, &f64::NAN));
-    let width = 0.5 * input.fs / ratios.len() as f64;
+    let (colour, band_hz) = worst_band(ratios, input.fs);
     let fraction = assumed * level.sqrt();
     ChannelNoise {
         channel: input
@@ -242,9 +236,23 @@ fn channel_noise(
         std: fraction * rms,
         unit: input.channels[c].0.si_unit().to_string(),
         fraction,
-        colour: if med > 0.0 { max / med } else { f64::INFINITY },
-        band_hz: (worst as f64 * width, (worst + 1) as f64 * width),
+        colour,
+        band_hz,
     }
+}
+
+/// The largest of `bands` (equal bands of the one-sided spectrum at `fs`)
+/// over their median, and that band in Hz.
+fn worst_band(bands: &[f64], fs: f64) -> (f64, (f64, f64)) {
+    let med = quantile(bands, 0.5);
+    let (worst, &max) = bands
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .unwrap_or((0, &f64::NAN));
+    let width = 0.5 * fs / bands.len().max(1) as f64;
+    let colour = if med > 0.0 { max / med } else { f64::INFINITY };
+    (colour, (worst as f64 * width, (worst + 1) as f64 * width))
 }
 
 fn status_of(channels: &[ChannelNoise]) -> NoiseStatus {
@@ -345,7 +353,6 @@ pub fn remaining(
     if p == 0 || bands == 0 || n < 2 * bands {
         return None;
     }
-    let width = 0.5 * fs / bands as f64;
     let mut channels = Vec::with_capacity(p);
     for c in 0..p {
         let mut r = vec![0.0; n];
@@ -362,17 +369,12 @@ pub fn remaining(
         if 2 * used < n || den <= 0.0 {
             return None;
         }
-        let powers = band_powers(&r, bands);
-        let med = quantile(&powers, 0.5);
-        let (worst, &max) = powers
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))?;
+        let (colour, band_hz) = worst_band(&band_powers(&r, bands), fs);
         channels.push(ChannelRemaining {
             channel: names.get(c).cloned().unwrap_or_else(|| format!("#{c}")),
             fraction: (num / den).sqrt(),
-            colour: if med > 0.0 { max / med } else { f64::INFINITY },
-            band_hz: (worst as f64 * width, (worst + 1) as f64 * width),
+            colour,
+            band_hz,
         });
     }
     let level = (channels.iter().map(|c| c.fraction.powi(2)).sum::<f64>() / p as f64).sqrt();
@@ -580,7 +582,7 @@ mod tests {
             NoiseStatus::Coloured { band_hz, .. } => assert_eq!(band_hz, (48.0, 64.0)),
             s => panic!("{s:?}"),
         }
-        // half the samples unpredicted: no verdict
+        // half the samples predicted: still a verdict; a third: none
         let sparse = DMatrix::from_fn(2, n, |_, k| if k % 2 == 0 { f64::NAN } else { 0.0 });
         assert!(remaining(&measured, &sparse, &names, fs, 16).is_some());
         let sparser = DMatrix::from_fn(2, n, |_, k| if k % 3 == 0 { 0.0 } else { f64::NAN });
