@@ -227,12 +227,13 @@ fn print_calibration(d: &Diagnosis) {
     }
     if let Some(f) = &d.after.starts {
         eprintln!(
-            "starts after: {} iterations, {} simulations, {} continued, {} grown, {} rescued, {} stuck, {} stalled",
+            "starts after: {} iterations, {} simulations, {} continued, {} grown, {} rescued, {} split, {} stuck, {} stalled",
             f.iterations,
             f.simulations,
             f.continued,
             f.grown,
             f.rescued,
+            f.split,
             f.stuck.len(),
             f.stalled
         );

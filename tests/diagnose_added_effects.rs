@@ -5,19 +5,12 @@
 //!
 //! The quadratic spring, the quadratic damper, the friction between two
 //! DOFs, the cubic spring from mass 1 to ground (first taken for a spring
-//! to ground and refitted as the cubic) and the cubic damper 2–3 (first
+//! to ground and refitted as the cubic), the cubic damper 2–3 (first
 //! fitted as a quadratic damper, c2 297 N s²/m² with 5.19 % left, then
-//! refitted as the cubic) pass. One case is not found and is kept,
-//! ignored, with what it gives (run it with `-- --ignored`): the
-//! clearance 6–7 (±0.2 mm, 2e6 N/m, engaged a quarter of the time, up to
-//! 0.15 mm past the gap). The cubic 6–7 is fitted first and leaves
-//! 63.2 %; the clearance, fitted as its alternative, 64.4 %. On this
-//! record the true model itself scores 57.4 % over the default 0.1 s
-//! segments (start states refined for it), 21.9 % over 0.05 s and 6.2 %
-//! over 0.025 s: the impacts make a segment's motion so sensitive to its
-//! start state that the start-state refinement does not reach the
-//! truth's. With `segments.seconds = 0.025` the clearance is found (gap
-//! +2.5 %, stiffness −2.6 %, 72.5 → 5.2 %, validation 3.9 %).
+//! refitted as the cubic) and the clearance 6–7 (±0.2 mm, 2e6 N/m,
+//! engaged a quarter of the time, up to 0.15 mm past the gap: the exact
+//! model's segments lose their start states unless split,
+//! `src/diagnose/starts/split.rs`) pass.
 
 mod diagnose_common;
 
@@ -110,7 +103,6 @@ fn cubic_damper_2_3() {
 }
 
 #[test]
-#[ignore = "not found: the true model scores 57 % over 0.1 s segments; the cubic 6-7 is kept at 63 %"]
 fn clearance_6_7() {
     let mut truth = lanl();
     truth.clearances = vec![Clearance {

@@ -55,7 +55,9 @@ pub(super) fn polish(
     let mut cost = cost0;
     let mut sims = 0;
     let mut rounds = 0;
-    let mut tried = vec![false; problem.segments.len()];
+    // segments already run in, by first sample (a refinement may split
+    // segments, [`starts`])
+    let mut tried = std::collections::BTreeSet::new();
     let mut run_ins = 0;
     let mut failures = vec![];
     let fit_settings = settings.fit_settings();
@@ -98,11 +100,14 @@ pub(super) fn polish(
         cost = j.cost.1;
         // a segment far above the others is likely started in a wrong
         // basin: run it in from the segment before it
-        let picks = starts::outliers(&j.segment_costs, &tried, cmp.starts.outlier)
+        let was: Vec<bool> = (problem.segments.iter())
+            .map(|s| tried.contains(&s.start))
+            .collect();
+        let picks = starts::outliers(&j.segment_costs, &was, cmp.starts.outlier)
             .into_iter()
             .filter_map(|i| {
-                tried[i] = true;
                 let start = problem.segments[i].start;
+                tried.insert(start);
                 let k = cmp.segments.iter().position(|s| s.start == start)?;
                 let before = cmp.segments.get(k.checked_sub(1)?)?.clone();
                 Some((i, before, j.segment_costs[i]))

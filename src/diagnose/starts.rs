@@ -49,6 +49,7 @@
 
 mod arrival;
 mod rescue;
+mod split;
 mod sweep;
 
 use super::comparison::{segment_residual, Comparison};
@@ -74,6 +75,8 @@ pub struct StartFit {
     /// Segments whose start came from a long run-in or an arrival
     /// ([`rescue`]).
     pub rescued: usize,
+    /// Segments split in two, each half with its own start ([`split`]).
+    pub split: usize,
     /// Segments left above [`super::settings::StartSettings::outlier`] ×
     /// the median cost after every start tried (in a wrong basin, or not
     /// predicted by the model), each with its cost; their costs stay in
@@ -156,6 +159,10 @@ impl Jacobians {
         self.pinv.get(&len)
     }
 }
+
+/// A segment's weighted residual and cost (None where its prediction
+/// failed).
+type Evaluation = Option<(DVector<f64>, f64)>;
 
 /// Weighted residual of a segment (rows sample-major: `k p + c`) and its
 /// squared norm; `None` when the prediction is not finite.
@@ -299,7 +306,40 @@ pub fn refine(
     segments: &[Segment],
     iterations: usize,
 ) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
-    refine_with(cmp, model, sim, segments, (iterations, true))
+    let refined = refine_with(cmp, model, sim, segments, (iterations, true));
+    with_splits(cmp, model, sim, refined, (iterations, true))
+}
+
+/// The segments of a refinement split where their starts are not found
+/// ([`split`]), for a nonlinear model; the refinements after each split
+/// with the rescues or without (`(iterations, with_rescue)`, as the
+/// refinement's).
+fn with_splits(
+    cmp: &Comparison,
+    model: &Model,
+    sim: SimSettings,
+    (mut segs, mut y, mut fit): (Vec<Segment>, DMatrix<f64>, StartFit),
+    (iterations, with_rescue): (usize, bool),
+) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
+    if !model.is_nonlinear() || iterations == 0 || cmp.starts.split_passes == 0 {
+        return (segs, y, fit);
+    }
+    let mut res: Vec<Evaluation> = segs.iter().map(|s| residual(cmp, s, &y)).collect();
+    let at = split::Split {
+        segs: &mut segs,
+        y: &mut y,
+        res: &mut res,
+    };
+    let (count, n) = split::split(cmp, model, sim, at, (iterations, with_rescue));
+    if count > 0 {
+        fit.split += count;
+        fit.simulations += n;
+        fit.stuck = stuck(&segs, &segment_costs(&res), cmp.starts.outlier);
+        fit.cost.1 = res.iter().flatten().map(|r| r.1).sum();
+    } else {
+        fit.simulations += n;
+    }
+    (segs, y, fit)
 }
 
 /// [`refine`] without the sweep ([`sweep`]), the long run-ins and the
@@ -313,7 +353,8 @@ pub fn refine_for_fit(
     segments: &[Segment],
     iterations: usize,
 ) -> (Vec<Segment>, DMatrix<f64>, StartFit) {
-    refine_with(cmp, model, sim, segments, (iterations, false))
+    let refined = refine_with(cmp, model, sim, segments, (iterations, false));
+    with_splits(cmp, model, sim, refined, (iterations, false))
 }
 
 /// [`refine`] along two paths when `model` is nonlinear and the record
@@ -333,10 +374,10 @@ pub fn refine_both(
     }
     let deep = iterations.max(WEAKLY_OBSERVED_ITERATIONS);
     let (a, b) = rayon::join(
-        || refine(cmp, model, sim, segments, iterations),
-        || refine(cmp, model, sim, segments, deep),
+        || refine_with(cmp, model, sim, segments, (iterations, true)),
+        || refine_with(cmp, model, sim, segments, (deep, true)),
     );
-    better_of(cmp, a, b)
+    with_splits(cmp, model, sim, better_of(cmp, a, b), (iterations, true))
 }
 
 /// Whether the record measures fewer distinct DOFs than `model` has
@@ -377,6 +418,7 @@ fn better_of(
     fit.continued += fit_b.continued;
     fit.grown += fit_b.grown;
     fit.rescued += fit_b.rescued;
+    fit.split += fit_b.split;
     fit.simulations += fit_b.simulations;
     fit.stalled = fit.stalled.min(fit_b.stalled);
     fit.stuck = stuck(&segs, &segment_costs(&res), cmp.starts.outlier);
@@ -1083,6 +1125,7 @@ fn refine_local(
             continued: 0,
             grown: 0,
             rescued: 0,
+            split: 0,
             stuck: vec![],
             stalled: segs.len(),
             note: "the linear part of the model could not be sampled; start states kept".into(),
@@ -1155,6 +1198,7 @@ fn refine_local(
         continued,
         grown: 0,
         rescued: 0,
+        split: 0,
         stuck: vec![],
         simulations: run.sims,
         cost: (run.cost0, cost1),

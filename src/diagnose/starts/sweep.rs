@@ -37,11 +37,11 @@
 //! −12.66 % to −12.58 %, outside the test's tolerance (docs/calibration.md,
 //! "A grazing contact under three sensors").
 
-use super::{carried, copy_segment, refine_local, residual, segment_costs, Comparison};
+use super::{carried, copy_segment, refine_local, residual, segment_costs, Comparison, Evaluation};
 use crate::integrate::{Integrator, SimSettings};
 use crate::model::Model;
 use crate::update::shooting::Segment;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 /// The quantile of the segment costs taken as the floor.
@@ -86,10 +86,6 @@ pub(super) fn sweep(
     }
     (changed.len(), n)
 }
-
-/// A segment's weighted residual and cost (None where its prediction
-/// failed).
-type Evaluation = Option<(DVector<f64>, f64)>;
 
 /// A segment's new start, its prediction (p × len) and cost.
 type Found = Option<(Segment, DMatrix<f64>, f64)>;
