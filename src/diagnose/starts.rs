@@ -339,13 +339,11 @@ fn with_splits(
         res: &mut res,
     };
     let (count, n) = split::split(cmp, model, sim, at, (iterations, with_rescue));
+    fit.simulations += n;
     if count > 0 {
         fit.split += count;
-        fit.simulations += n;
         fit.stuck = stuck(&segs, &segment_costs(&res), cmp.starts.outlier);
         fit.cost.1 = res.iter().flatten().map(|r| r.1).sum();
-    } else {
-        fit.simulations += n;
     }
     (segs, y, fit)
 }

@@ -104,7 +104,7 @@ pub(super) fn rescue(
 }
 
 /// The median of `costs` (infinite for none).
-fn median(costs: &[f64]) -> f64 {
+pub(super) fn median(costs: &[f64]) -> f64 {
     let mut sorted = costs.to_vec();
     sorted.sort_by(f64::total_cmp);
     sorted

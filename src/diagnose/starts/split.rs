@@ -31,11 +31,8 @@ use crate::model::Model;
 use crate::update::shooting::Segment;
 use nalgebra::DMatrix;
 
-/// The quantile of the per-sample segment costs taken as the floor.
-const FLOOR: f64 = 0.125;
-
-/// A segment whose cost per sample is above this multiple of the floor is
-/// split.
+/// A segment whose cost per sample is above this multiple of the floor
+/// (the sweep's: the lowest eighth, [`super::sweep::floor`]) is split.
 const ABOVE: f64 = 2.0;
 
 /// Segments are split only when the median cost per sample is above this
@@ -115,12 +112,8 @@ fn picks(segs: &[Segment], res: &[Evaluation], shortest: usize, gated: bool) -> 
         .zip(res)
         .map(|(s, r)| r.as_ref().map_or(f64::INFINITY, |r| r.1 / s.len as f64))
         .collect();
-    let mut sorted = per.clone();
-    sorted.sort_by(f64::total_cmp);
-    let k = (FLOOR * sorted.len() as f64) as usize;
-    let (Some(&floor), Some(&median)) = (sorted.get(k), sorted.get(sorted.len() / 2)) else {
-        return vec![];
-    };
+    let floor = super::sweep::floor(&per);
+    let median = super::rescue::median(&per);
     if gated && !(median > MEDIAN_ABOVE * floor) {
         return vec![];
     }

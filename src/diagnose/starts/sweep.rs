@@ -61,7 +61,7 @@ pub(super) fn weakly_observed(cmp: &Comparison, model: &Model) -> bool {
 }
 
 /// The floor of `costs` ([`FLOOR`]; infinite for none).
-fn floor(costs: &[f64]) -> f64 {
+pub(super) fn floor(costs: &[f64]) -> f64 {
     let mut sorted = costs.to_vec();
     sorted.sort_by(f64::total_cmp);
     let k = (FLOOR * sorted.len() as f64) as usize;
