@@ -1,7 +1,8 @@
 //! End-to-end: records simulated from lanl8dof with one of the added
 //! element kinds at a place (8 sensors, 1 % noise, 2048 samples),
 //! diagnosed with the declared linear model: the kind, the place and the
-//! parameters within 10 %, the error 5× lower on both records.
+//! parameters within 10 %, the error 5× lower on both records and the
+//! validation error within 1.5 × the measured noise.
 //!
 //! The quadratic spring, the quadratic damper, the friction between two
 //! DOFs, the cubic spring from mass 1 to ground (first taken for a spring
@@ -45,7 +46,8 @@ fn run(truth: &Model, seed: u64) -> Diagnosis {
 }
 
 /// The one effect found is `kind` at `dofs` (from 1) with each parameter
-/// within 10 % of the truth; the error falls 5× on both records.
+/// within 10 % of the truth; the error falls 5× on both records and ends
+/// on the validation record within 1.5 × the noise measured.
 fn check(d: &Diagnosis, kind: &str, dofs: &[usize], truth: &[(&str, f64)]) {
     assert_eq!(d.effects.len(), 1, "{}", d.verdict);
     let e = &d.effects[0];
@@ -56,6 +58,9 @@ fn check(d: &Diagnosis, kind: &str, dofs: &[usize], truth: &[(&str, f64)]) {
         assert!((x / t - 1.0).abs() <= 0.1, "{name} {x} vs {t}");
     }
     assert_improved_by(d, 5.0, 5.0);
+    let noise = d.noise.as_ref().expect("noise measured").level;
+    let v = d.validation.as_ref().unwrap().after.relative_error.unwrap();
+    assert!(v <= 1.5 * noise, "validation {v} > 1.5 × noise {noise}");
 }
 
 #[test]
