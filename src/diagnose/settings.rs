@@ -570,7 +570,9 @@ pub struct StartSettings {
     /// its own start ([`super::starts`], split). Reason: a clearance
     /// between masses of lanl8dof engaged above the Nyquist frequency left
     /// the exact model at 63 % over 0.1 s segments, 1.47 % after two
-    /// passes, 1.01 % after three (1 % noise), 1.00 % after five.
+    /// passes, 1.01 % after three (1 % noise), 1.00 % after five. The
+    /// third pass costs time where the second keeps splits (the
+    /// background-friction tests: 547 s against 296 s with two).
     pub split_passes: usize,
     /// A split is kept when its halves cost at most this fraction of the
     /// segment (default 0.5; (0, 1]). Reason: a model that lacks the

@@ -18,8 +18,8 @@
 //! 0.99 % from the true start states; the rescues, which act on segments
 //! above [`crate::diagnose::settings::StartSettings::outlier`] × the
 //! median, see none of them. Over half a segment the cost is smooth
-//! enough: with three passes of splits the exact model scores 1.01 %. A model that
-//! lacks the effect gains little from a split (the linear part on the
+//! enough: with three passes of splits the exact model scores 1.01 %.
+//! A model that lacks the effect gains little from a split (the linear part on the
 //! same record: 80.7 % → 74.2 % with every split kept, its segments'
 //! costs falling by a tenth where the exact model's fall by orders),
 //! which is why a split must halve the cost to be kept. The scored
