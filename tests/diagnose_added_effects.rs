@@ -15,7 +15,7 @@
 
 mod diagnose_common;
 
-use diagnose_common::{assert_improved_by, lanl};
+use diagnose_common::{assert_improved_by, assert_validation_at_noise, lanl};
 use tacit::diagnose::Diagnosis;
 use tacit::model::{
     Clearance, Cubic, CubicDamper, Model, Quadratic, QuadraticDamper, RelativeFriction,
@@ -58,9 +58,7 @@ fn check(d: &Diagnosis, kind: &str, dofs: &[usize], truth: &[(&str, f64)]) {
         assert!((x / t - 1.0).abs() <= 0.1, "{name} {x} vs {t}");
     }
     assert_improved_by(d, 5.0, 5.0);
-    let noise = d.noise.as_ref().expect("noise measured").level;
-    let v = d.validation.as_ref().unwrap().after.relative_error.unwrap();
-    assert!(v <= 1.5 * noise, "validation {v} > 1.5 × noise {noise}");
+    assert_validation_at_noise(d);
 }
 
 #[test]
